@@ -1,0 +1,210 @@
+//! The one way volao gets a GPU device, used by the GUI, the CLI and the tests alike.
+//!
+//! We ask for the adapter's own limits (wgpu's defaults cap 3-D textures at 2048) and the
+//! optional features volume work needs. OpenGL adapters are refused: wgpu's GL backend
+//! silently writes 3-D storage textures to slice 0 only, which would corrupt every AO
+//! volume without an error.
+
+pub mod shaders;
+pub mod smoke;
+
+use std::time::Duration;
+
+/// What can go wrong getting or using the GPU.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error(
+        "no usable GPU adapter found ({tried}). On Linux without a GPU install Mesa's CPU Vulkan driver: \
+         sudo apt-get install -y mesa-vulkan-drivers libvulkan1"
+    )]
+    NoAdapter { tried: String },
+    #[error(
+        "only an OpenGL adapter was found ({name}); volao needs Vulkan, Metal or DX12 because wgpu's GL backend \
+         writes 3-D storage textures wrongly. On Linux: sudo apt-get install -y mesa-vulkan-drivers libvulkan1"
+    )]
+    OpenGlOnly { name: String },
+    #[error("the GPU adapter {name} refused to create a device: {source}")]
+    RequestDevice {
+        name: String,
+        source: wgpu::RequestDeviceError,
+    },
+    #[error("GPU validation error in {stage}: {message}")]
+    Validation { stage: String, message: String },
+    #[error("GPU did not finish {stage} within {seconds} s")]
+    Timeout { stage: String, seconds: u64 },
+    #[error("reading back {stage} from the GPU failed: {message}")]
+    Readback { stage: String, message: String },
+    #[error("shader {name}: {message}")]
+    Shader { name: String, message: String },
+}
+
+/// Features volao uses when the adapter offers them (lavapipe and desktop GPUs do):
+/// linear filtering of f32 textures, 16-bit normalised textures for CT, R8/R16 3-D
+/// storage textures, and timestamps for per-stage timings.
+pub fn wanted_features() -> wgpu::Features {
+    wgpu::Features::FLOAT32_FILTERABLE
+        | wgpu::Features::TEXTURE_FORMAT_16BIT_NORM
+        | wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES
+        | wgpu::Features::TIMESTAMP_QUERY
+}
+
+/// An adapter, its device and queue.
+#[derive(Debug)]
+pub struct Gpu {
+    pub instance: wgpu::Instance,
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+}
+
+impl Gpu {
+    /// One line naming the adapter, e.g. `llvmpipe (LLVM 15.0.6, 256 bits) — Vulkan, Cpu`.
+    pub fn describe(&self) -> String {
+        describe(&self.info)
+    }
+}
+
+pub fn describe(info: &wgpu::AdapterInfo) -> String {
+    format!("{} — {:?}, {:?}", info.name, info.backend, info.device_type)
+}
+
+/// The instance volao uses: every backend but GL unless `WGPU_BACKEND` says otherwise.
+pub fn instance() -> wgpu::Instance {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    if std::env::var_os("WGPU_BACKEND").is_none() {
+        desc.backends = wgpu::Backends::PRIMARY;
+    }
+    wgpu::Instance::new(desc)
+}
+
+/// The device descriptor for an adapter: its full limits and the wanted features it has.
+/// The GUI passes the same descriptor to eframe so every path gets the same device.
+pub fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'static> {
+    wgpu::DeviceDescriptor {
+        label: Some("volao::device"),
+        required_features: adapter.features() & wanted_features(),
+        required_limits: adapter.limits(),
+        ..Default::default()
+    }
+}
+
+/// Picks an adapter (high performance first) and creates the device. Blocks.
+pub fn request_device() -> Result<Gpu, GpuError> {
+    pollster::block_on(request_device_async())
+}
+
+async fn request_device_async() -> Result<Gpu, GpuError> {
+    let instance = instance();
+    let adapter = instance
+        .request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        })
+        .await
+        .map_err(|e| GpuError::NoAdapter {
+            tried: e.to_string(),
+        })?;
+    let info = adapter.get_info();
+    if info.backend == wgpu::Backend::Gl && std::env::var_os("VOLAO_ALLOW_GL").is_none() {
+        return Err(GpuError::OpenGlOnly { name: info.name });
+    }
+    let (device, queue) = adapter
+        .request_device(&device_descriptor(&adapter))
+        .await
+        .map_err(|source| GpuError::RequestDevice {
+            name: info.name.clone(),
+            source,
+        })?;
+    Ok(Gpu {
+        instance,
+        adapter,
+        device,
+        queue,
+        info,
+    })
+}
+
+/// Default bound on any single wait for the GPU (a hung driver fails instead of hanging).
+pub const WAIT: Duration = Duration::from_secs(60);
+
+/// Blocks until all submitted work is done, or fails after `timeout`.
+pub fn wait(device: &wgpu::Device, stage: &str, timeout: Duration) -> Result<(), GpuError> {
+    device
+        .poll(wgpu::PollType::Wait {
+            submission_index: None,
+            timeout: Some(timeout),
+        })
+        .map(|_| ())
+        .map_err(|e| match e {
+            wgpu::PollError::Timeout => GpuError::Timeout {
+                stage: stage.into(),
+                seconds: timeout.as_secs(),
+            },
+            other => GpuError::Readback {
+                stage: stage.into(),
+                message: other.to_string(),
+            },
+        })
+}
+
+/// Runs `f` inside a validation error scope and turns a captured error into [`GpuError`].
+pub fn validated<T>(
+    device: &wgpu::Device,
+    stage: &str,
+    f: impl FnOnce() -> T,
+) -> Result<T, GpuError> {
+    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let value = f();
+    match pollster::block_on(scope.pop()) {
+        None => Ok(value),
+        Some(e) => Err(GpuError::Validation {
+            stage: stage.into(),
+            message: e.to_string(),
+        }),
+    }
+}
+
+/// Maps a `MAP_READ` buffer, copies its bytes out and unmaps it.
+pub fn read_buffer(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    stage: &str,
+) -> Result<Vec<u8>, GpuError> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    wait(device, stage, WAIT)?;
+    match rx.try_recv() {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => {
+            return Err(GpuError::Readback {
+                stage: stage.into(),
+                message: e.to_string(),
+            });
+        }
+        Err(_) => {
+            return Err(GpuError::Readback {
+                stage: stage.into(),
+                message: "map callback never ran".into(),
+            });
+        }
+    }
+    let bytes = buffer
+        .slice(..)
+        .get_mapped_range()
+        .map_err(|e| GpuError::Readback {
+            stage: stage.into(),
+            message: e.to_string(),
+        })?
+        .to_vec();
+    buffer.unmap();
+    Ok(bytes)
+}
+
+/// `bytes_per_row` for texture↔buffer copies, padded to wgpu's 256-byte alignment.
+pub fn padded_row_bytes(unpadded: u32) -> u32 {
+    let align = wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    unpadded.div_ceil(align) * align
+}

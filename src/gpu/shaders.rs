@@ -1,0 +1,93 @@
+//! WGSL sources, embedded in the binary, with a tiny `//!include name.wgsl` resolver.
+//!
+//! WGSL has no includes. A line `//!include common.wgsl` (a comment, so every file
+//! still parses on its own) is replaced by that file's text, once per shader.
+
+use super::GpuError;
+
+/// Every shader in `shaders/`, embedded at build time. A test checks this list against
+/// the directory so a new file cannot be forgotten.
+pub const SOURCES: &[(&str, &str)] = &[
+    ("common.wgsl", include_str!("../../shaders/common.wgsl")),
+    ("smoke.wgsl", include_str!("../../shaders/smoke.wgsl")),
+];
+
+const DIRECTIVE: &str = "//!include ";
+
+/// The embedded source of `name` with its includes resolved.
+pub fn source(name: &str) -> Result<String, GpuError> {
+    let lookup = |n: &str| {
+        SOURCES
+            .iter()
+            .find(|(k, _)| *k == n)
+            .map(|(_, v)| (*v).to_owned())
+    };
+    resolve(name, &lookup).map_err(|message| GpuError::Shader {
+        name: name.into(),
+        message,
+    })
+}
+
+/// Resolves includes of `name` using `lookup` (embedded table or, in tests, the disk).
+/// Each file is included at most once; a missing file is an error naming it.
+pub fn resolve(name: &str, lookup: &dyn Fn(&str) -> Option<String>) -> Result<String, String> {
+    let mut seen = Vec::new();
+    let mut out = String::new();
+    include(name, lookup, &mut seen, &mut out)?;
+    Ok(out)
+}
+
+fn include(
+    name: &str,
+    lookup: &dyn Fn(&str) -> Option<String>,
+    seen: &mut Vec<String>,
+    out: &mut String,
+) -> Result<(), String> {
+    if seen.iter().any(|s| s == name) {
+        return Ok(());
+    }
+    seen.push(name.to_owned());
+    let text = lookup(name).ok_or_else(|| format!("included file {name} not found"))?;
+    for line in text.lines() {
+        match line.trim_start().strip_prefix(DIRECTIVE) {
+            Some(dep) => include(dep.trim(), lookup, seen, out)?,
+            None => {
+                out.push_str(line);
+                out.push('\n');
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Creates a shader module from an embedded shader, failing on validation errors.
+pub fn module(device: &wgpu::Device, name: &str) -> Result<wgpu::ShaderModule, GpuError> {
+    let code = source(name)?;
+    super::validated(device, name, || {
+        device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(name),
+            source: wgpu::ShaderSource::Wgsl(code.into()),
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn includes_resolve_once_and_missing_ones_fail() {
+        let files = |n: &str| match n {
+            "a.wgsl" => Some("//!include b.wgsl\n//!include c.wgsl\nfn a() {}".to_owned()),
+            "b.wgsl" => Some("//!include c.wgsl\nfn b() {}".to_owned()),
+            "c.wgsl" => Some("fn c() {}".to_owned()),
+            "bad.wgsl" => Some("//!include nope.wgsl".to_owned()),
+            _ => None,
+        };
+        let out = resolve("a.wgsl", &files).expect("resolves");
+        assert_eq!(out.matches("fn c()").count(), 1);
+        assert!(out.find("fn c()") < out.find("fn b()") && out.find("fn b()") < out.find("fn a()"));
+        let err = resolve("bad.wgsl", &files).expect_err("missing include must fail");
+        assert!(err.contains("nope.wgsl"), "{err}");
+    }
+}

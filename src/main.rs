@@ -1,0 +1,336 @@
+//! The `volao` command line: `volao` (viewer), `info`, `convert`, `gpu`, `bench`.
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Parser, Subcommand};
+use std::path::{Path, PathBuf};
+use volao::volume::{
+    self, Endian, LoadOptions, Loaded, RawOverrides, Volume, VoxelType, fmt_bytes, fmt_dims,
+};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "volao",
+    version,
+    about = "Direct volume rendering with exact, clip-aware ambient occlusion"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Describe a volume: format, size, spacing, type, value range, orientation, histogram.
+    /// Without FILE, describes the built-in demo volume.
+    Info(InfoArgs),
+    /// Convert between formats, chosen by the output's extension (.nii, .nii.gz, .pvm, .raw).
+    Convert(ConvertArgs),
+    /// Show the GPU adapter volao will use and run a compute self-test on it.
+    Gpu,
+    /// Benchmarks (results go to docs/benchmarks.md).
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+#[derive(Args, Debug)]
+struct InfoArgs {
+    /// Volume file (.nii, .nii.gz, .hdr/.img, .pvm, .raw/.dat). Omit for the demo volume.
+    file: Option<PathBuf>,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Histogram bins.
+    #[arg(long, default_value_t = 32)]
+    bins: usize,
+    #[command(flatten)]
+    load: LoadArgs,
+}
+
+#[derive(Args, Debug)]
+struct ConvertArgs {
+    input: PathBuf,
+    output: PathBuf,
+    #[command(flatten)]
+    load: LoadArgs,
+}
+
+/// How to read the input: 4-D frame and raw layout.
+#[derive(Args, Debug, Default)]
+struct LoadArgs {
+    /// 4-D NIfTI: which frame to load (0-based).
+    #[arg(long, default_value_t = 0)]
+    frame: usize,
+    /// Raw: voxel counts along x, y, z.
+    #[arg(long, num_args = 3, value_names = ["X", "Y", "Z"])]
+    dims: Option<Vec<usize>>,
+    /// Raw: voxel type (u8, i8, u16, i16, u32, i32, f32, f64).
+    #[arg(long = "type", value_parser = parse_type)]
+    ty: Option<VoxelType>,
+    /// Raw: byte order.
+    #[arg(long, value_parser = parse_endian)]
+    endian: Option<Endian>,
+    /// Raw: voxel spacing in mm along x, y, z.
+    #[arg(long, num_args = 3, value_names = ["SX", "SY", "SZ"])]
+    spacing: Option<Vec<f32>>,
+    /// Raw: bytes to skip before the first voxel.
+    #[arg(long)]
+    offset: Option<u64>,
+}
+
+fn parse_type(s: &str) -> Result<VoxelType, String> {
+    VoxelType::from_name(s)
+        .ok_or_else(|| format!("unknown voxel type {s:?} (u8, i8, u16, i16, u32, i32, f32, f64)"))
+}
+
+fn parse_endian(s: &str) -> Result<Endian, String> {
+    match s.to_ascii_lowercase().as_str() {
+        "little" | "le" => Ok(Endian::Little),
+        "big" | "be" => Ok(Endian::Big),
+        _ => Err(format!("unknown byte order {s:?} (little or big)")),
+    }
+}
+
+impl LoadArgs {
+    fn options(&self) -> LoadOptions {
+        let three = |v: &Option<Vec<usize>>| v.as_ref().map(|v| [v[0], v[1], v[2]]);
+        LoadOptions {
+            frame: self.frame,
+            raw: RawOverrides {
+                dims: three(&self.dims),
+                ty: self.ty,
+                endian: self.endian,
+                spacing: self.spacing.as_ref().map(|v| [v[0], v[1], v[2]]),
+                offset: self.offset,
+            },
+            max_bytes: None,
+        }
+    }
+}
+
+#[derive(Subcommand, Debug)]
+enum BenchCommand {
+    /// Load time and peak memory of volao vs Python nibabel on the same files.
+    Load(volao::bench::LoadBenchArgs),
+    /// (internal) load one file and print time and peak memory as JSON.
+    #[command(hide = true)]
+    LoadOne { file: PathBuf },
+}
+
+fn main() {
+    let cli = Cli::parse();
+    if let Err(e) = run(cli) {
+        // One line: the error and its causes, joined.
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        None => {
+            eprintln!(
+                "volao: the viewer is not built yet. Today volao loads, inspects and converts volumes \
+                 (see `volao --help`); here is the built-in demo volume the viewer will open on:\n"
+            );
+            print_info(&describe_demo(&volume::demo::head_phantom(128), 32), false)
+        }
+        Some(Command::Info(args)) => {
+            let report = match &args.file {
+                Some(path) => {
+                    let loaded = load_with_bar(path, &args.load.options())?;
+                    describe_loaded(path, &loaded, args.bins)
+                }
+                None => describe_demo(&volume::demo::head_phantom(128), args.bins),
+            };
+            print_info(&report, args.json)
+        }
+        Some(Command::Convert(args)) => {
+            let loaded = load_with_bar(&args.input, &args.load.options())?;
+            let warnings = volume::save(&loaded.volume, &args.output)?;
+            for w in warnings {
+                eprintln!("warning: {}: {w}", args.output.display());
+            }
+            eprintln!(
+                "wrote {} ({} {}, {})",
+                args.output.display(),
+                fmt_dims(loaded.volume.dims),
+                loaded.volume.data.voxel_type(),
+                fmt_bytes(loaded.volume.data.byte_len() as u64)
+            );
+            Ok(())
+        }
+        Some(Command::Gpu) => {
+            let start = std::time::Instant::now();
+            let gpu = volao::gpu::request_device()?;
+            println!("adapter:  {}", gpu.describe());
+            println!("driver:   {} {}", gpu.info.driver, gpu.info.driver_info);
+            let limits = gpu.device.limits();
+            println!(
+                "3-D textures up to {}³, storage buffers up to {}",
+                limits.max_texture_dimension_3d,
+                fmt_bytes(limits.max_storage_buffer_binding_size as u64)
+            );
+            println!("features: {:?}", gpu.device.features());
+            let dims = [16, 16, 16];
+            let out = volao::gpu::smoke::run(&gpu, dims)?;
+            if out != volao::gpu::smoke::expected(dims) {
+                bail!("GPU self-test: the compute shader's output differs from the CPU reference");
+            }
+            println!(
+                "self-test: compute shader output matches the CPU reference ({:.0} ms)",
+                start.elapsed().as_secs_f64() * 1e3
+            );
+            Ok(())
+        }
+        Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
+        Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
+    }
+}
+
+/// Loads a file, with a progress bar on the terminal for anything large.
+fn load_with_bar(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
+    let mut bar: Option<indicatif::ProgressBar> = None;
+    let mut progress = |done: u64, total: u64| {
+        if total < 32 << 20 {
+            return;
+        }
+        let b = bar.get_or_insert_with(|| {
+            let b = indicatif::ProgressBar::new(total);
+            if let Ok(style) = indicatif::ProgressStyle::with_template(
+                "loading {bar:40} {bytes}/{total_bytes} {eta}",
+            ) {
+                b.set_style(style);
+            }
+            b
+        });
+        b.set_position(done);
+    };
+    let loaded = volume::load_with_progress(path, opts, &mut progress);
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let loaded = loaded?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {}: {w}", path.display());
+    }
+    Ok(loaded)
+}
+
+/// Everything `volao info` reports, in the shape its JSON takes.
+#[derive(serde::Serialize)]
+struct Report {
+    file: String,
+    format: String,
+    dims: [usize; 3],
+    spacing_mm: [f32; 3],
+    voxel_type: VoxelType,
+    payload_bytes: usize,
+    scaling: volume::Scaling,
+    stats: volume::Stats,
+    orientation: String,
+    orientation_source: volume::orient::AffineSource,
+    affine: [[f64; 4]; 3],
+    descriptions: Vec<(String, String)>,
+    warnings: Vec<String>,
+    histogram: volume::Histogram,
+}
+
+fn describe(file: String, format: String, v: &Volume, warnings: &[String], bins: usize) -> Report {
+    let stats = v.stats();
+    Report {
+        file,
+        format,
+        dims: v.dims,
+        spacing_mm: v.spacing,
+        voxel_type: v.data.voxel_type(),
+        payload_bytes: v.data.byte_len(),
+        scaling: v.scaling,
+        histogram: v.histogram(bins, &stats),
+        stats,
+        orientation: v.orientation.axis_codes(),
+        orientation_source: v.orientation.source,
+        affine: v.orientation.rows(),
+        descriptions: v.descriptions.clone(),
+        warnings: warnings.to_vec(),
+    }
+}
+
+fn describe_loaded(path: &Path, loaded: &Loaded, bins: usize) -> Report {
+    describe(
+        path.display().to_string(),
+        loaded.format.to_string(),
+        &loaded.volume,
+        &loaded.warnings,
+        bins,
+    )
+}
+
+fn describe_demo(v: &Volume, bins: usize) -> Report {
+    describe(
+        "(built-in demo)".into(),
+        volume::Format::Demo.to_string(),
+        v,
+        &[],
+        bins,
+    )
+}
+
+fn print_info(r: &Report, json: bool) -> Result<()> {
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(r).context("encoding the report as JSON")?
+        );
+        return Ok(());
+    }
+    let [nx, ny, nz] = r.dims;
+    let s = &r.stats;
+    println!("file:         {}", r.file);
+    println!("format:       {}", r.format);
+    println!(
+        "dimensions:   {} ({} voxels)",
+        fmt_dims(r.dims),
+        nx * ny * nz
+    );
+    println!(
+        "spacing:      {} × {} × {} mm",
+        r.spacing_mm[0], r.spacing_mm[1], r.spacing_mm[2]
+    );
+    println!(
+        "type:         {} ({})",
+        r.voxel_type,
+        fmt_bytes(r.payload_bytes as u64)
+    );
+    if !r.scaling.is_identity() {
+        println!(
+            "scaling:      value = {} · stored + {}",
+            r.scaling.slope, r.scaling.inter
+        );
+    }
+    println!("value range:  {} … {}", s.min, s.max);
+    println!("mean:         {:.4}", s.mean);
+    if s.non_finite > 0 {
+        println!(
+            "non-finite:   {} voxels are NaN or ±Inf (treated as empty)",
+            s.non_finite
+        );
+    }
+    let source = match r.orientation_source {
+        volume::orient::AffineSource::Sform => "from sform",
+        volume::orient::AffineSource::Qform => "from qform",
+        volume::orient::AffineSource::Assumed => "assumed: the file has no orientation",
+    };
+    println!("orientation:  {} ({source})", r.orientation);
+    for row in &r.affine {
+        println!(
+            "              [{:>10.4} {:>10.4} {:>10.4} {:>10.4}]",
+            row[0], row[1], row[2], row[3]
+        );
+    }
+    for (label, text) in &r.descriptions {
+        println!("{:<13} {}", format!("{label}:"), text);
+    }
+    println!("histogram ({} bins, log scale):", r.histogram.counts.len());
+    print!("{}", r.histogram.to_text(48));
+    Ok(())
+}

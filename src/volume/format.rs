@@ -1,0 +1,313 @@
+//! Format detection and the one entry point for loading and saving volumes.
+
+use super::pvm::{self, DdsVersion, PvmVersion, PvmVoxels};
+use super::raw::{self, RawOverrides};
+use super::{Volume, fmt_dims};
+use super::{VolumeError, VoxelData, fmt_bytes, memory_budget, nifti};
+use std::fmt;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+/// The file format a volume came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    Nifti {
+        version: u8,
+        gzip: bool,
+        pair: bool,
+    },
+    Pvm {
+        version: PvmVersion,
+        dds: Option<DdsVersion>,
+    },
+    Raw {
+        sidecar: bool,
+    },
+    Demo,
+}
+
+impl fmt::Display for Format {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Format::Nifti {
+                version,
+                gzip,
+                pair,
+            } => {
+                write!(f, "NIfTI-{version}")?;
+                if *pair {
+                    f.write_str(" (.hdr/.img pair)")?;
+                }
+                if *gzip {
+                    f.write_str(", gzip")?;
+                }
+                Ok(())
+            }
+            Format::Pvm { version, dds } => {
+                let v = match version {
+                    PvmVersion::Pvm1 => "PVM",
+                    PvmVersion::Pvm2 => "PVM2",
+                    PvmVersion::Pvm3 => "PVM3",
+                };
+                match dds {
+                    Some(DdsVersion::V3d) => write!(f, "{v}, DDS v3d compressed"),
+                    Some(DdsVersion::V3e) => write!(f, "{v}, DDS v3e compressed"),
+                    None => f.write_str(v),
+                }
+            }
+            Format::Raw { sidecar: true } => f.write_str("raw with .dat sidecar"),
+            Format::Raw { sidecar: false } => f.write_str("raw"),
+            Format::Demo => f.write_str("built-in demo volume"),
+        }
+    }
+}
+
+/// What the caller knows beyond the file: which 4-D frame, raw layout flags, a memory cap.
+#[derive(Debug, Clone, Default)]
+pub struct LoadOptions {
+    /// 4-D NIfTI: which 3-D frame (0-based) to load.
+    pub frame: usize,
+    /// Raw layout given on the command line (overrides a `.dat` sidecar field by field).
+    pub raw: RawOverrides,
+    /// Refuse headers claiming more voxel bytes than this (default: available memory).
+    pub max_bytes: Option<u64>,
+}
+
+/// A loaded volume with its format and any non-fatal problems found on the way.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    pub volume: Volume,
+    pub format: Format,
+    /// The file the voxels were read from (differs from the argument for sidecars and pairs).
+    pub data_path: PathBuf,
+    /// Things the user should know but that did not stop loading (one line each).
+    pub warnings: Vec<String>,
+}
+
+/// Loads a volume, choosing the reader from the raw flags, the extension, then magic bytes.
+pub fn load(path: &Path, opts: &LoadOptions) -> Result<Loaded, VolumeError> {
+    load_with_progress(path, opts, &mut |_, _| {})
+}
+
+enum Kind {
+    Nifti,
+    Pvm,
+    Raw,
+}
+
+fn detect(path: &Path, opts: &LoadOptions) -> Result<Kind, VolumeError> {
+    if !opts.raw.is_empty() {
+        return Ok(Kind::Raw);
+    }
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if nifti::is_nifti_path(path) {
+        return Ok(Kind::Nifti);
+    }
+    match ext.as_str() {
+        "pvm" => return Ok(Kind::Pvm),
+        "raw" | "dat" => return Ok(Kind::Raw),
+        _ => {}
+    }
+    // Unknown extension: look at the first bytes.
+    let mut head = [0u8; 8];
+    let n = std::fs::File::open(path)
+        .and_then(|f| f.take(8).read(&mut head))
+        .map_err(|e| VolumeError::io(path, e))?;
+    let head = &head[..n];
+    let le = head
+        .get(..4)
+        .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    let be = head
+        .get(..4)
+        .map(|b| i32::from_be_bytes([b[0], b[1], b[2], b[3]]));
+    if head.starts_with(b"PVM") || head.starts_with(b"DDS v3") {
+        Ok(Kind::Pvm)
+    } else if head.starts_with(&[0x1f, 0x8b])
+        || [le, be].iter().any(|v| matches!(v, Some(348 | 540)))
+    {
+        Ok(Kind::Nifti)
+    } else if raw::find_sidecar(path).is_some() {
+        Ok(Kind::Raw)
+    } else {
+        Err(VolumeError::UnknownFormat {
+            path: path.to_owned(),
+        })
+    }
+}
+
+/// [`load`] with a progress callback `(bytes done, bytes total)` for the voxel read.
+pub fn load_with_progress(
+    path: &Path,
+    opts: &LoadOptions,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<Loaded, VolumeError> {
+    if !path.exists() {
+        return Err(VolumeError::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        ));
+    }
+    let max_bytes = opts.max_bytes.unwrap_or_else(memory_budget);
+    let mut warnings = Vec::new();
+    match detect(path, opts)? {
+        Kind::Nifti => {
+            let (volume, header) =
+                nifti::load(path, opts.frame, max_bytes, &mut warnings, progress)?;
+            let paths = nifti::resolve_paths(path);
+            let gzip = is_gzip(&paths.image);
+            let pair = paths.image != paths.header;
+            Ok(Loaded {
+                volume,
+                format: Format::Nifti {
+                    version: header.version,
+                    gzip,
+                    pair,
+                },
+                data_path: paths.image,
+                warnings,
+            })
+        }
+        Kind::Pvm => {
+            if opts.frame != 0 {
+                return Err(VolumeError::invalid(
+                    path,
+                    "PVM files hold a single frame; --frame does not apply",
+                ));
+            }
+            let (volume, format) = load_pvm(path, max_bytes, &mut warnings)?;
+            Ok(Loaded {
+                volume,
+                format,
+                data_path: path.to_owned(),
+                warnings,
+            })
+        }
+        Kind::Raw => {
+            let (data_path, spec) = raw::resolve(path, &opts.raw)?;
+            let sidecar = raw::find_sidecar(path).is_some();
+            let volume = raw::load(&data_path, &spec, max_bytes, &mut warnings, progress)?;
+            Ok(Loaded {
+                volume,
+                format: Format::Raw { sidecar },
+                data_path,
+                warnings,
+            })
+        }
+    }
+}
+
+fn is_gzip(path: &Path) -> bool {
+    let mut magic = [0u8; 2];
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_exact(&mut magic))
+        .is_ok()
+        && magic == [0x1f, 0x8b]
+}
+
+fn load_pvm(
+    path: &Path,
+    max_bytes: u64,
+    warnings: &mut Vec<String>,
+) -> Result<(Volume, Format), VolumeError> {
+    let len = std::fs::metadata(path)
+        .map_err(|e| VolumeError::io(path, e))?
+        .len();
+    if len > max_bytes {
+        return Err(VolumeError::invalid(
+            path,
+            format!("file is {} — more than available memory", fmt_bytes(len)),
+        ));
+    }
+    let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
+    pvm_to_volume(&bytes, max_bytes, path, warnings)
+}
+
+/// Decodes an in-memory PVM file (also used by fuzzing); `path` is for messages only.
+pub fn pvm_to_volume(
+    bytes: &[u8],
+    max_bytes: u64,
+    path: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<(Volume, Format), VolumeError> {
+    let p =
+        pvm::read_pvm(bytes, max_bytes).map_err(|e| VolumeError::invalid(path, e.to_string()))?;
+    let spacing = p.spacing.unwrap_or_else(|| {
+        warnings.push("plain PVM stores no voxel spacing; using 1 mm".into());
+        [1.0; 3]
+    });
+    let data = match p.voxels {
+        PvmVoxels::U8(v) => VoxelData::U8(v),
+        PvmVoxels::U16(v) => VoxelData::U16(v),
+    };
+    let mut volume =
+        Volume::new(p.dims, spacing, data).map_err(|m| VolumeError::invalid(path, m))?;
+    volume.descriptions = p.descriptions;
+    Ok((
+        volume,
+        Format::Pvm {
+            version: p.version,
+            dds: p.compression,
+        },
+    ))
+}
+
+/// Writes a volume in the format its extension names: `.nii`/`.nii.gz` (NIfTI),
+/// `.pvm` (uncompressed PVM3) or `.raw` (+ `.dat` sidecar). Returns warnings.
+pub fn save(volume: &Volume, path: &Path) -> Result<Vec<String>, VolumeError> {
+    let lower = path.to_string_lossy().to_ascii_lowercase();
+    let mut warnings = Vec::new();
+    if lower.ends_with(".nii") || lower.ends_with(".nii.gz") {
+        nifti::save(volume, path)?;
+    } else if lower.ends_with(".pvm") {
+        save_pvm(volume, path, &mut warnings)?;
+    } else if lower.ends_with(".raw") {
+        raw::save(volume, path, &mut warnings)?;
+    } else {
+        return Err(VolumeError::unsupported(
+            path,
+            "cannot tell the output format: use .nii, .nii.gz, .pvm or .raw",
+        ));
+    }
+    Ok(warnings)
+}
+
+fn save_pvm(volume: &Volume, path: &Path, warnings: &mut Vec<String>) -> Result<(), VolumeError> {
+    let voxels = match &volume.data {
+        VoxelData::U8(v) => PvmVoxels::U8(v.clone()),
+        VoxelData::U16(v) => PvmVoxels::U16(v.clone()),
+        other => {
+            return Err(VolumeError::unsupported(
+                path,
+                format!(
+                    "PVM holds only unsigned 8- or 16-bit voxels; this {} volume is {} — write NIfTI (.nii.gz) instead",
+                    fmt_dims(volume.dims),
+                    other.voxel_type()
+                ),
+            ));
+        }
+    };
+    if !volume.scaling.is_identity() {
+        warnings.push(
+            "PVM has no scaling field: stored values are written, slope/intercept are lost".into(),
+        );
+    }
+    if volume.orientation.axis_codes() != "RAS" {
+        warnings.push(format!(
+            "PVM has no orientation field: the {} axis order is not recorded",
+            volume.orientation.axis_codes()
+        ));
+    }
+    let file = std::fs::File::create(path).map_err(|e| VolumeError::io(path, e))?;
+    let w = std::io::BufWriter::new(file);
+    pvm::write_pvm3(
+        w,
+        volume.dims,
+        volume.spacing,
+        &voxels,
+        &volume.descriptions,
+    )
+    .map_err(|e| VolumeError::invalid(path, e.to_string()))
+}

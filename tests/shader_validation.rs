@@ -1,0 +1,75 @@
+//! Every shaders/*.wgsl parses and validates with naga, and every one is embedded.
+//! All failures are reported at once.
+
+use std::path::PathBuf;
+use volao::gpu::shaders;
+
+fn shader_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("shaders")
+}
+
+fn on_disk() -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(shader_dir())
+        .expect("shaders/ exists")
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".wgsl"))
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn every_shader_validates_with_naga() {
+    let names = on_disk();
+    assert!(!names.is_empty(), "no shaders found");
+    let lookup = |n: &str| std::fs::read_to_string(shader_dir().join(n)).ok();
+    let mut failures = Vec::new();
+    for name in &names {
+        let source = match shaders::resolve(name, &lookup) {
+            Ok(s) => s,
+            Err(e) => {
+                failures.push(format!("{name}: {e}"));
+                continue;
+            }
+        };
+        let module = match naga::front::wgsl::parse_str(&source) {
+            Ok(m) => m,
+            Err(e) => {
+                failures.push(format!(
+                    "{name}: parse error:\n{}",
+                    e.emit_to_string(&source)
+                ));
+                continue;
+            }
+        };
+        let mut validator = naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::all(),
+        );
+        if let Err(e) = validator.validate(&module) {
+            failures.push(format!(
+                "{name}: validation error:\n{}",
+                e.emit_to_string(&source)
+            ));
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{} shader(s) failed:\n{}",
+        failures.len(),
+        failures.join("\n\n")
+    );
+}
+
+#[test]
+fn every_shader_on_disk_is_embedded_and_identical() {
+    for name in on_disk() {
+        let embedded = shaders::SOURCES.iter().find(|(n, _)| *n == name);
+        let disk = std::fs::read_to_string(shader_dir().join(&name)).expect("read");
+        match embedded {
+            Some((_, text)) => assert_eq!(*text, disk, "{name}: embedded copy is stale"),
+            None => panic!("{name} is in shaders/ but not in gpu::shaders::SOURCES"),
+        }
+    }
+}
