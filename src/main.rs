@@ -275,6 +275,16 @@ fn describe_demo(v: &Volume, bins: usize) -> Report {
     )
 }
 
+/// Integers as integers, other values to 6 decimals without trailing zeros.
+fn fmt_value(x: f64) -> String {
+    if x.fract() == 0.0 && x.abs() < 1e15 {
+        format!("{x:.0}")
+    } else {
+        let s = format!("{x:.6}");
+        s.trim_end_matches('0').trim_end_matches('.').to_owned()
+    }
+}
+
 fn print_info(r: &Report, json: bool) -> Result<()> {
     if json {
         println!(
@@ -307,7 +317,7 @@ fn print_info(r: &Report, json: bool) -> Result<()> {
             r.scaling.slope, r.scaling.inter
         );
     }
-    println!("value range:  {} … {}", s.min, s.max);
+    println!("value range:  {} … {}", fmt_value(s.min), fmt_value(s.max));
     println!("mean:         {:.4}", s.mean);
     if s.non_finite > 0 {
         println!(
@@ -328,7 +338,9 @@ fn print_info(r: &Report, json: bool) -> Result<()> {
         );
     }
     for (label, text) in &r.descriptions {
-        println!("{:<13} {}", format!("{label}:"), text);
+        // Continuation lines of multi-line strings (PVM courtesy lines) stay in the column.
+        let text = text.trim_end().replace('\n', "\n              ");
+        println!("{:<13} {text}", format!("{label}:"));
     }
     println!("histogram ({} bins, log scale):", r.histogram.counts.len());
     print!("{}", r.histogram.to_text(48));

@@ -145,10 +145,7 @@ pub fn load_with_progress(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Loaded, VolumeError> {
     if !path.exists() {
-        return Err(VolumeError::io(
-            path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        ));
+        return Err(VolumeError::invalid(path, "no such file"));
     }
     let max_bytes = opts.max_bytes.unwrap_or_else(memory_budget);
     let mut warnings = Vec::new();

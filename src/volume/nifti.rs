@@ -568,7 +568,24 @@ pub fn read_all(
             }
             Ok(n) => done += n,
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(VolumeError::invalid(path, format!("{what}: {e}"))),
+            // A gzip stream cut short: report it as the truncation it is.
+            Err(e)
+                if e.kind() == std::io::ErrorKind::UnexpectedEof
+                    || e.to_string().contains("incomplete") =>
+            {
+                return Err(VolumeError::Truncated {
+                    path: path.to_owned(),
+                    what: format!("{what} (compressed stream ends early)"),
+                    expected: consumed + buf.len() as u64,
+                    actual: consumed + done as u64,
+                });
+            }
+            Err(e) => {
+                return Err(VolumeError::invalid(
+                    path,
+                    format!("{what}: corrupt or unreadable data ({e})"),
+                ));
+            }
         }
     }
     Ok(())

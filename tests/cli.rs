@@ -1,0 +1,119 @@
+//! The `volao` binary as a user runs it: output, exit codes, one-line errors.
+
+mod common;
+
+use common::data;
+use std::process::{Command, Output};
+
+fn volao(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_volao"))
+        .args(args)
+        .output()
+        .expect("volao runs")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn info_json_reports_the_file() {
+    let file = data("nifti/avg152T1_LR_nifti.nii.gz");
+    let out = volao(&[
+        "info",
+        file.to_str().expect("utf-8 path"),
+        "--json",
+        "--bins",
+        "16",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("valid JSON");
+    assert_eq!(j["dims"], serde_json::json!([91, 109, 91]));
+    assert_eq!(j["voxel_type"], "u8");
+    assert_eq!(j["orientation"], "LAS");
+    assert_eq!(j["format"], "NIfTI-1, gzip");
+    assert_eq!(j["histogram"]["counts"].as_array().map(Vec::len), Some(16));
+    assert_eq!(j["stats"]["max"], 255.0);
+}
+
+#[test]
+fn info_text_shows_histogram_and_descriptions() {
+    let file = data("pvm/Bucky.pvm");
+    let out = volao(&["info", file.to_str().expect("utf-8 path")]);
+    assert!(out.status.success());
+    let s = text(&out.stdout);
+    for needle in [
+        "32×32×32",
+        "PVM3, DDS v3d compressed",
+        "Bucky Ball",
+        "histogram (32 bins",
+        "mean:         35.8498",
+    ] {
+        assert!(s.contains(needle), "missing {needle:?} in:\n{s}");
+    }
+}
+
+#[test]
+fn bad_files_give_one_error_line_and_a_nonzero_exit() {
+    let not_nifti = data("nifti/not-nifti.nii");
+    let cases = [
+        vec!["info".to_owned(), not_nifti.display().to_string()],
+        vec!["info".to_owned(), "/nonexistent/scan.nii.gz".to_owned()],
+        vec![
+            "info".to_owned(),
+            data("raw/cranium-ct.raw").display().to_string(),
+        ],
+    ];
+    for args in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = volao(&args);
+        assert!(!out.status.success(), "{args:?} should fail");
+        let err = text(&out.stderr);
+        assert_eq!(
+            err.trim_end().lines().count(),
+            1,
+            "{args:?}: one line expected, got:\n{err}"
+        );
+        assert!(
+            err.starts_with("error: ") && err.contains(args[1]),
+            "{args:?}: {err}"
+        );
+    }
+}
+
+#[test]
+fn convert_writes_a_file_that_info_reads_back() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out_path = dir.path().join("cranium.nii.gz");
+    let raw = data("raw/cranium-ct.raw");
+    let out = volao(&[
+        "convert",
+        raw.to_str().expect("utf-8 path"),
+        out_path.to_str().expect("utf-8 path"),
+        "--dims",
+        "256",
+        "256",
+        "108",
+        "--type",
+        "i16",
+        "--spacing",
+        "0.957031",
+        "0.957031",
+        "1.5",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = volao(&["info", out_path.to_str().expect("utf-8 path"), "--json"]);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("valid JSON");
+    assert_eq!(j["voxel_type"], "i16");
+    assert_eq!(j["stats"]["min"], -1024.0);
+    assert_eq!(j["stats"]["max"], 2986.0);
+}
+
+#[test]
+fn info_without_a_file_describes_the_demo_volume() {
+    let out = volao(&["info", "--json"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("valid JSON");
+    assert_eq!(j["dims"], serde_json::json!([128, 128, 128]));
+    assert_eq!(j["voxel_type"], "i16");
+}
