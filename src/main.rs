@@ -48,8 +48,12 @@ struct InfoArgs {
 
 #[derive(Args, Debug)]
 struct ConvertArgs {
-    input: PathBuf,
-    output: PathBuf,
+    /// IN OUT, or just OUT with --demo. OUT's extension picks the format.
+    #[arg(num_args = 1..=2, value_names = ["IN", "OUT"], required = true)]
+    files: Vec<PathBuf>,
+    /// Write the built-in demo volume instead of reading a file.
+    #[arg(long)]
+    demo: bool,
     #[command(flatten)]
     load: LoadArgs,
 }
@@ -145,17 +149,23 @@ fn run(cli: Cli) -> Result<()> {
             print_info(&report, args.json)
         }
         Some(Command::Convert(args)) => {
-            let loaded = load_with_bar(&args.input, &args.load.options())?;
-            let warnings = volume::save(&loaded.volume, &args.output)?;
-            for w in warnings {
-                eprintln!("warning: {}: {w}", args.output.display());
+            let (volume, output) = match (args.demo, args.files.as_slice()) {
+                (false, [input, output]) => {
+                    (load_with_bar(input, &args.load.options())?.volume, output)
+                }
+                (true, [output]) => (volume::demo::head_phantom(128), output),
+                (false, _) => bail!("convert needs an input and an output file (or --demo OUT)"),
+                (true, _) => bail!("with --demo, give only the output file"),
+            };
+            for w in volume::save(&volume, output)? {
+                eprintln!("warning: {}: {w}", output.display());
             }
             eprintln!(
                 "wrote {} ({} {}, {})",
-                args.output.display(),
-                fmt_dims(loaded.volume.dims),
-                loaded.volume.data.voxel_type(),
-                fmt_bytes(loaded.volume.data.byte_len() as u64)
+                output.display(),
+                fmt_dims(volume.dims),
+                volume.data.voxel_type(),
+                fmt_bytes(volume.data.byte_len() as u64)
             );
             Ok(())
         }
@@ -345,4 +355,13 @@ fn print_info(r: &Report, json: bool) -> Result<()> {
     println!("histogram ({} bins, log scale):", r.histogram.counts.len());
     print!("{}", r.histogram.to_text(48));
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn cli_definition_is_consistent() {
+        use clap::CommandFactory;
+        super::Cli::command().debug_assert();
+    }
 }

@@ -104,11 +104,14 @@ impl fmt::Debug for VoxelData {
 }
 
 /// A zero-filled buffer of `n` elements, or `None` if the allocator refuses.
-fn try_zeroed<T: bytemuck::Zeroable + Clone>(n: usize) -> Option<Vec<T>> {
-    let mut v = Vec::new();
-    v.try_reserve_exact(n).ok()?;
-    v.resize(n, T::zeroed());
-    Some(v)
+///
+/// Uses `alloc_zeroed` (calloc): large buffers get lazily zeroed pages from the OS, so
+/// filling them from a file touches each page once instead of twice.
+fn try_zeroed<T: bytemuck::Zeroable + bytemuck::Pod>(n: usize) -> Option<Vec<T>> {
+    if n == 0 {
+        return Some(Vec::new());
+    }
+    bytemuck::allocation::try_zeroed_vec(n).ok()
 }
 
 impl VoxelData {
