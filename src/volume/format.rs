@@ -1,6 +1,6 @@
 //! Format detection and the one entry point for loading and saving volumes.
 
-use super::pvm::{self, DdsVersion, PvmVersion, PvmVoxels};
+use super::pvm::{self, DdsVersion, PvmSamples, PvmVersion, PvmVoxels};
 use super::raw::{self, RawOverrides};
 use super::{Volume, fmt_dims};
 use super::{VolumeError, VoxelData, fmt_bytes, memory_budget, nifti};
@@ -273,8 +273,8 @@ pub fn save(volume: &Volume, path: &Path) -> Result<Vec<String>, VolumeError> {
 
 fn save_pvm(volume: &Volume, path: &Path, warnings: &mut Vec<String>) -> Result<(), VolumeError> {
     let voxels = match &volume.data {
-        VoxelData::U8(v) => PvmVoxels::U8(v.clone()),
-        VoxelData::U16(v) => PvmVoxels::U16(v.clone()),
+        VoxelData::U8(v) => PvmSamples::U8(v),
+        VoxelData::U16(v) => PvmSamples::U16(v),
         other => {
             return Err(VolumeError::unsupported(
                 path,
@@ -299,12 +299,6 @@ fn save_pvm(volume: &Volume, path: &Path, warnings: &mut Vec<String>) -> Result<
     }
     let file = std::fs::File::create(path).map_err(|e| VolumeError::io(path, e))?;
     let w = std::io::BufWriter::new(file);
-    pvm::write_pvm3(
-        w,
-        volume.dims,
-        volume.spacing,
-        &voxels,
-        &volume.descriptions,
-    )
-    .map_err(|e| VolumeError::invalid(path, e.to_string()))
+    pvm::write_pvm3(w, volume.dims, volume.spacing, voxels, &volume.descriptions)
+        .map_err(|e| VolumeError::invalid(path, e.to_string()))
 }

@@ -185,6 +185,39 @@ impl PvmVoxels {
     }
 }
 
+/// Borrowed voxels to write, so saving needs no copy of the volume.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PvmSamples<'a> {
+    U8(&'a [u8]),
+    U16(&'a [u16]),
+}
+
+impl PvmSamples<'_> {
+    fn len(&self) -> usize {
+        match self {
+            PvmSamples::U8(v) => v.len(),
+            PvmSamples::U16(v) => v.len(),
+        }
+    }
+
+    fn bytes_per_voxel(&self) -> usize {
+        match self {
+            PvmSamples::U8(_) => 1,
+            PvmSamples::U16(_) => 2,
+        }
+    }
+}
+
+impl PvmVoxels {
+    /// A borrowed view for [`write_pvm3`].
+    pub fn samples(&self) -> PvmSamples<'_> {
+        match self {
+            PvmVoxels::U8(v) => PvmSamples::U8(v),
+            PvmVoxels::U16(v) => PvmSamples::U16(v),
+        }
+    }
+}
+
 /// A decoded PVM file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PvmVolume {
@@ -231,7 +264,7 @@ pub fn write_pvm3<W: Write>(
     mut out: W,
     dims: [usize; 3],
     spacing: [f32; 3],
-    voxels: &PvmVoxels,
+    voxels: PvmSamples<'_>,
     descriptions: &[(String, String)],
 ) -> Result<(), PvmError> {
     let [w, h, d] = dims;
@@ -271,8 +304,8 @@ pub fn write_pvm3<W: Write>(
     );
     out.write_all(header.as_bytes())?;
     match voxels {
-        PvmVoxels::U8(v) => out.write_all(v)?,
-        PvmVoxels::U16(v) => {
+        PvmSamples::U8(v) => out.write_all(v)?,
+        PvmSamples::U16(v) => {
             // Big-endian, converted in chunks so no second copy of the volume exists.
             let mut buf = Vec::with_capacity(64 * 1024);
             for chunk in v.chunks(32 * 1024) {
@@ -1146,7 +1179,7 @@ mod tests {
         descriptions: &[(String, String)],
     ) -> Vec<u8> {
         let mut out = Vec::new();
-        write_pvm3(&mut out, dims, spacing, voxels, descriptions).unwrap();
+        write_pvm3(&mut out, dims, spacing, voxels.samples(), descriptions).unwrap();
         out
     }
 
@@ -1214,12 +1247,21 @@ mod tests {
         );
 
         let mut sink = Vec::new();
-        assert!(write_pvm3(&mut sink, [0, 1, 2], [1.0; 3], &voxels, &[]).is_err());
-        assert!(write_pvm3(&mut sink, [3, 1, 1], [1.0; 3], &voxels, &[]).is_err());
-        assert!(write_pvm3(&mut sink, [2, 1, 1], [0.0, 1.0, 1.0], &voxels, &[]).is_err());
-        assert!(write_pvm3(&mut sink, [2, 1, 1], [f32::NAN, 1.0, 1.0], &voxels, &[]).is_err());
+        assert!(write_pvm3(&mut sink, [0, 1, 2], [1.0; 3], voxels.samples(), &[]).is_err());
+        assert!(write_pvm3(&mut sink, [3, 1, 1], [1.0; 3], voxels.samples(), &[]).is_err());
+        assert!(write_pvm3(&mut sink, [2, 1, 1], [0.0, 1.0, 1.0], voxels.samples(), &[]).is_err());
+        assert!(
+            write_pvm3(
+                &mut sink,
+                [2, 1, 1],
+                [f32::NAN, 1.0, 1.0],
+                voxels.samples(),
+                &[]
+            )
+            .is_err()
+        );
         let nul = descs(&[("comment", "a\0b")]);
-        assert!(write_pvm3(&mut sink, [2, 1, 1], [1.0; 3], &voxels, &nul).is_err());
+        assert!(write_pvm3(&mut sink, [2, 1, 1], [1.0; 3], voxels.samples(), &nul).is_err());
     }
 
     #[test]
