@@ -56,13 +56,13 @@ fn info_text_shows_histogram_and_descriptions() {
 #[test]
 fn bad_files_give_one_error_line_and_a_nonzero_exit() {
     let not_nifti = data("nifti/not-nifti.nii");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bare_raw = dir.path().join("bare.raw");
+    std::fs::write(&bare_raw, [0u8; 64]).expect("write");
     let cases = [
         vec!["info".to_owned(), not_nifti.display().to_string()],
         vec!["info".to_owned(), "/nonexistent/scan.nii.gz".to_owned()],
-        vec![
-            "info".to_owned(),
-            data("raw/cranium-ct.raw").display().to_string(),
-        ],
+        vec!["info".to_owned(), bare_raw.display().to_string()],
     ];
     for args in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();

@@ -342,3 +342,21 @@ fn reorienting_las_to_ras_flips_x_and_keeps_values() {
     let old_x = rows[0][0] * (nx as f64 - 1.0) + rows[0][3];
     assert_eq!(r.orientation.rows()[0][3], old_x);
 }
+
+#[test]
+fn invesalius_plist_beside_the_raw_file_gives_its_layout() {
+    let loaded = volume::load(&data("raw/cranium-ct.raw"), &LoadOptions::default())
+        .expect("loads without flags");
+    assert_eq!(loaded.format.to_string(), "raw with .plist sidecar");
+    let v = &loaded.volume;
+    assert_eq!(v.dims, [256, 256, 108]);
+    assert_eq!(v.data.voxel_type(), VoxelType::I16);
+    for (s, want) in v.spacing.iter().zip([0.957031, 0.957031, 1.5]) {
+        assert!((s - want).abs() < 1e-6, "spacing {:?}", v.spacing);
+    }
+    let s = v.stats();
+    assert!(
+        close(s.min, -1024.0) && close(s.max, 2986.0) && close(s.mean, -585.9553),
+        "{s:?}"
+    );
+}

@@ -270,3 +270,53 @@ fn four_d_nifti_loads_the_requested_frame() {
     .expect_err("no frame 3");
     assert!(err.to_string().contains("3 frames"), "{err}");
 }
+
+/// Byte-swaps a little-endian NIfTI-2 header field by field (strings stay as they are).
+fn nifti2_to_big_endian(h: &mut [u8]) {
+    // (offset, element size, count) of every numeric field of the 540-byte header.
+    const FIELDS: &[(usize, usize, usize)] = &[
+        (0, 4, 1),    // sizeof_hdr
+        (12, 2, 2),   // datatype, bitpix
+        (16, 8, 8),   // dim
+        (80, 8, 3),   // intent_p1..3
+        (104, 8, 8),  // pixdim
+        (168, 8, 10), // vox_offset .. slice_end
+        (344, 4, 2),  // qform_code, sform_code
+        (352, 8, 18), // quatern_b .. srow_z
+        (496, 4, 3),  // slice_code, xyzt_units, intent_code
+    ];
+    for &(at, size, count) in FIELDS {
+        for k in 0..count {
+            h[at + k * size..at + (k + 1) * size].reverse();
+        }
+    }
+}
+
+#[test]
+fn big_endian_nifti2_reads_like_little_endian() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let values: Vec<i16> = (0..80_000).map(|i| (i % 4001) as i16 - 2000).collect();
+    let mut v = Volume::new(
+        [40_000, 1, 2],
+        [0.5, 2.0, 3.0],
+        VoxelData::I16(values.clone()),
+    )
+    .expect("valid");
+    v.scaling = Scaling {
+        slope: 0.5,
+        inter: -3.0,
+    };
+    let mut header = nifti::encode_header(&v);
+    assert_eq!(header.len(), 540, "wide volumes are written as NIfTI-2");
+    nifti2_to_big_endian(&mut header);
+    let mut bytes = header;
+    bytes.extend([0u8; 4]);
+    values.iter().for_each(|x| bytes.extend(x.to_be_bytes()));
+    let path = dir.path().join("be2.nii");
+    std::fs::write(&path, bytes).expect("write");
+    let loaded = volume::load(&path, &LoadOptions::default()).expect("big-endian NIfTI-2 loads");
+    assert_eq!(loaded.format.to_string(), "NIfTI-2");
+    assert!(loaded.volume.data.bits_eq(&v.data));
+    assert_eq!(loaded.volume.spacing, v.spacing);
+    assert_eq!(loaded.volume.scaling, v.scaling);
+}

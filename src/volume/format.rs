@@ -21,7 +21,8 @@ pub enum Format {
         dds: Option<DdsVersion>,
     },
     Raw {
-        sidecar: bool,
+        /// ".dat" or ".plist" when a sidecar described the layout.
+        sidecar: Option<&'static str>,
     },
     Demo,
 }
@@ -55,8 +56,10 @@ impl fmt::Display for Format {
                     None => f.write_str(v),
                 }
             }
-            Format::Raw { sidecar: true } => f.write_str("raw with .dat sidecar"),
-            Format::Raw { sidecar: false } => f.write_str("raw"),
+            Format::Raw {
+                sidecar: Some(kind),
+            } => write!(f, "raw with {kind} sidecar"),
+            Format::Raw { sidecar: None } => f.write_str("raw"),
             Format::Demo => f.write_str("built-in demo volume"),
         }
     }
@@ -184,7 +187,7 @@ pub fn load_with_progress(
         }
         Kind::Raw => {
             let (data_path, spec) = raw::resolve(path, &opts.raw)?;
-            let sidecar = raw::find_sidecar(path).is_some();
+            let sidecar = raw::find_sidecar(path).map(|s| s.kind());
             let volume = raw::load(&data_path, &spec, max_bytes, &mut warnings, progress)?;
             Ok(Loaded {
                 volume,

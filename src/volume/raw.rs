@@ -148,33 +148,121 @@ fn dat_format_name(ty: VoxelType) -> &'static str {
     }
 }
 
+/// A description file beside a raw volume.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Sidecar {
+    /// Inviwo `.dat` text header.
+    Dat(PathBuf),
+    /// InVesalius project description (`main.plist` style, XML property list).
+    Plist(PathBuf),
+}
+
+impl Sidecar {
+    pub fn path(&self) -> &Path {
+        match self {
+            Sidecar::Dat(p) | Sidecar::Plist(p) => p,
+        }
+    }
+
+    /// ".dat" or ".plist", for messages.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Sidecar::Dat(_) => ".dat",
+            Sidecar::Plist(_) => ".plist",
+        }
+    }
+}
+
 /// The sidecar that describes `path`: the file itself if it is a `.dat`, else
-/// `<stem>.dat` beside it if that exists.
-pub fn find_sidecar(path: &Path) -> Option<PathBuf> {
+/// `<stem>.dat` or `<stem>.plist` beside it if one exists.
+pub fn find_sidecar(path: &Path) -> Option<Sidecar> {
     let ext = path.extension()?.to_string_lossy().to_ascii_lowercase();
     if ext == "dat" {
-        return Some(path.to_owned());
+        return Some(Sidecar::Dat(path.to_owned()));
     }
-    let candidate = path.with_extension("dat");
-    candidate.is_file().then_some(candidate)
+    let dat = path.with_extension("dat");
+    if dat.is_file() {
+        return Some(Sidecar::Dat(dat));
+    }
+    let plist = path.with_extension("plist");
+    plist.is_file().then_some(Sidecar::Plist(plist))
+}
+
+/// Reads the layout from an InVesalius plist: `matrix.dtype` (numpy name), `matrix.shape`
+/// (z, y, x) and `spacing` (x, y, z). The voxels are little-endian, as InVesalius writes them.
+pub fn parse_invesalius_plist(bytes: &[u8]) -> Result<DatSidecar, String> {
+    let value = plist::Value::from_reader_xml(bytes)
+        .map_err(|e| format!("not a readable XML plist ({e})"))?;
+    let root = value
+        .as_dictionary()
+        .ok_or("plist root is not a dictionary")?;
+    let matrix = root
+        .get("matrix")
+        .and_then(plist::Value::as_dictionary)
+        .ok_or("plist has no 'matrix' dictionary (not an InVesalius project description)")?;
+    let dtype = matrix
+        .get("dtype")
+        .and_then(plist::Value::as_string)
+        .ok_or("matrix has no 'dtype'")?;
+    let ty = match dtype {
+        "uint8" => VoxelType::U8,
+        "int8" => VoxelType::I8,
+        "uint16" => VoxelType::U16,
+        "int16" => VoxelType::I16,
+        "uint32" => VoxelType::U32,
+        "int32" => VoxelType::I32,
+        "float32" => VoxelType::F32,
+        "float64" => VoxelType::F64,
+        other => return Err(format!("matrix dtype {other:?} is not supported")),
+    };
+    let numbers = |v: Option<&plist::Value>| -> Option<Vec<f64>> {
+        v?.as_array()?
+            .iter()
+            .map(|x| {
+                x.as_real()
+                    .or_else(|| x.as_signed_integer().map(|i| i as f64))
+            })
+            .collect()
+    };
+    let shape = numbers(matrix.get("shape"))
+        .filter(|s| s.len() == 3 && s.iter().all(|&d| d >= 1.0 && d.fract() == 0.0 && d < 1e9))
+        .ok_or("matrix 'shape' is not three positive whole numbers")?;
+    let spacing = numbers(root.get("spacing"))
+        .filter(|s| s.len() == 3)
+        .ok_or("plist 'spacing' is not three numbers")?;
+    Ok(DatSidecar {
+        object_file: None,
+        dims: Some([shape[2] as usize, shape[1] as usize, shape[0] as usize]),
+        spacing: Some([spacing[0] as f32, spacing[1] as f32, spacing[2] as f32]),
+        ty: Some(ty),
+        endian: Some(Endian::Little),
+        offset: None,
+    })
 }
 
 /// Works out the data file and full spec from the sidecar (if any) and the flags.
 pub fn resolve(path: &Path, flags: &RawOverrides) -> Result<(PathBuf, RawSpec), VolumeError> {
     let mut dat = DatSidecar::default();
     let mut data_path = path.to_owned();
-    if let Some(side) = find_sidecar(path) {
-        let text = read_small_text(&side)?;
-        dat = parse_dat(&text).map_err(|m| VolumeError::invalid(&side, m))?;
-        if side == path {
-            let Some(obj) = &dat.object_file else {
-                return Err(VolumeError::invalid(
-                    &side,
-                    "sidecar has no ObjectFileName: which file holds the voxels?",
-                ));
-            };
-            data_path = side.parent().unwrap_or(Path::new(".")).join(obj);
+    match find_sidecar(path) {
+        Some(Sidecar::Dat(side)) => {
+            let text = read_small_text(&side)?;
+            dat = parse_dat(&text).map_err(|m| VolumeError::invalid(&side, m))?;
+            if side == path {
+                let Some(obj) = &dat.object_file else {
+                    return Err(VolumeError::invalid(
+                        &side,
+                        "sidecar has no ObjectFileName: which file holds the voxels?",
+                    ));
+                };
+                data_path = side.parent().unwrap_or(Path::new(".")).join(obj);
+            }
         }
+        Some(Sidecar::Plist(side)) => {
+            let bytes = read_small(&side)?;
+            dat = parse_invesalius_plist(&bytes).map_err(|m| VolumeError::invalid(&side, m))?;
+        }
+        None => {}
     }
     let missing = |what: &str| {
         VolumeError::invalid(
@@ -210,8 +298,8 @@ pub fn resolve(path: &Path, flags: &RawOverrides) -> Result<(PathBuf, RawSpec), 
     Ok((data_path, spec))
 }
 
-/// Reads a text sidecar, refusing anything implausibly large for one.
-fn read_small_text(path: &Path) -> Result<String, VolumeError> {
+/// Reads a sidecar, refusing anything implausibly large for one.
+fn read_small(path: &Path) -> Result<Vec<u8>, VolumeError> {
     let f = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
     let mut bytes = Vec::new();
     f.take(1 << 20)
@@ -220,10 +308,15 @@ fn read_small_text(path: &Path) -> Result<String, VolumeError> {
     if bytes.len() >= 1 << 20 {
         return Err(VolumeError::invalid(
             path,
-            "sidecar is over 1 MiB: not a .dat text header",
+            "sidecar is over 1 MiB: not a text header",
         ));
     }
-    String::from_utf8(bytes).map_err(|_| VolumeError::invalid(path, "sidecar is not UTF-8 text"))
+    Ok(bytes)
+}
+
+fn read_small_text(path: &Path) -> Result<String, VolumeError> {
+    String::from_utf8(read_small(path)?)
+        .map_err(|_| VolumeError::invalid(path, "sidecar is not UTF-8 text"))
 }
 
 /// Loads raw voxels as `spec` describes them.
@@ -372,6 +465,22 @@ mod tests {
         )
         .expect("valid");
         assert_eq!((d.ty, d.endian), (Some(VoxelType::I16), Some(Endian::Big)));
+    }
+
+    #[test]
+    fn reads_invesalius_plists() {
+        let xml = br#"<?xml version="1.0" encoding="UTF-8"?>
+<plist version="1.0"><dict>
+  <key>matrix</key><dict><key>dtype</key><string>int16</string>
+    <key>shape</key><array><integer>108</integer><integer>256</integer><integer>200</integer></array></dict>
+  <key>spacing</key><array><real>0.95</real><real>0.9</real><real>1.5</real></array>
+</dict></plist>"#;
+        let d = parse_invesalius_plist(xml).expect("valid plist");
+        assert_eq!(d.dims, Some([200, 256, 108]), "shape is z, y, x");
+        assert_eq!(d.spacing, Some([0.95, 0.9, 1.5]));
+        assert_eq!(d.ty, Some(VoxelType::I16));
+        assert!(parse_invesalius_plist(b"<plist><dict></dict></plist>").is_err());
+        assert!(parse_invesalius_plist(b"not xml").is_err());
     }
 
     #[test]
