@@ -16,4 +16,7 @@
 
 pub mod bench;
 pub mod gpu;
+pub mod render;
+pub mod scene;
+pub mod tf;
 pub mod volume;

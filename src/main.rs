@@ -25,6 +25,8 @@ enum Command {
     Info(InfoArgs),
     /// Convert between formats, chosen by the output's extension (.nii, .nii.gz, .pvm, .raw).
     Convert(ConvertArgs),
+    /// Render a volume or a scene file to PNG, headless.
+    Render(Box<RenderArgs>),
     /// Show the GPU adapter volao will use and run a compute self-test on it.
     Gpu,
     /// Benchmarks (results go to docs/benchmarks.md).
@@ -56,6 +58,84 @@ struct ConvertArgs {
     demo: bool,
     #[command(flatten)]
     load: LoadArgs,
+}
+
+#[derive(Args, Debug)]
+struct RenderArgs {
+    /// Volume file or scene (.json). Omit for the demo volume.
+    input: Option<PathBuf>,
+    /// Output PNG.
+    #[arg(short, long)]
+    output: PathBuf,
+    #[arg(long)]
+    width: Option<u32>,
+    #[arg(long)]
+    height: Option<u32>,
+    /// Transfer-function preset: ct-bone, ct-soft-tissue, ct-vessels, mr-t1-brain, cao-single-color.
+    #[arg(long)]
+    tf: Option<String>,
+    /// Orbit camera: azimuth and elevation in degrees, distance in bounding-sphere radii.
+    #[arg(long, value_name = "AZIMUTH,ELEVATION,DISTANCE", value_parser = parse_camera, allow_hyphen_values = true)]
+    camera: Option<[f32; 3]>,
+    /// Orthographic projection.
+    #[arg(long)]
+    ortho: bool,
+    /// Background: a name (black, white, grey), #rrggbb, or "transparent".
+    #[arg(long)]
+    background: Option<String>,
+    #[arg(long, value_parser = parse_shading)]
+    shading: Option<volao::render::Shading>,
+    /// Step between samples in voxels.
+    #[arg(long)]
+    step: Option<f32>,
+    /// Render on the CPU twin instead of the GPU.
+    #[arg(long)]
+    cpu: bool,
+    /// Also write the scene that reproduces this image.
+    #[arg(long)]
+    save_scene: Option<PathBuf>,
+    #[command(flatten)]
+    load: LoadArgs,
+}
+
+fn parse_camera(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    match v.as_slice() {
+        [a, e, d] if v.iter().all(|x| x.is_finite()) => Ok([*a, *e, *d]),
+        _ => Err(format!(
+            "{s:?}: expected three numbers AZIMUTH,ELEVATION,DISTANCE, e.g. 30,20,3.2"
+        )),
+    }
+}
+
+fn parse_shading(s: &str) -> Result<volao::render::Shading, String> {
+    match s {
+        "none" => Ok(volao::render::Shading::None),
+        "phong" => Ok(volao::render::Shading::Phong),
+        _ => Err(format!("unknown shading {s:?} (none or phong)")),
+    }
+}
+
+/// Parses a background colour into straight RGBA.
+fn parse_background(s: &str) -> Result<[f32; 4]> {
+    let hex = |h: &str| u8::from_str_radix(h, 16).map(|v| v as f32 / 255.0);
+    Ok(match s.to_ascii_lowercase().as_str() {
+        "transparent" => [0.0; 4],
+        "black" => [0.0, 0.0, 0.0, 1.0],
+        "white" => [1.0; 4],
+        "grey" | "gray" => [0.5, 0.5, 0.5, 1.0],
+        c if c.len() == 7 && c.starts_with('#') => {
+            let parse = || -> Result<[f32; 4], std::num::ParseIntError> {
+                Ok([hex(&c[1..3])?, hex(&c[3..5])?, hex(&c[5..7])?, 1.0])
+            };
+            parse().map_err(|_| anyhow::anyhow!("background {s:?}: not a #rrggbb colour"))?
+        }
+        _ => bail!("background {s:?}: use black, white, grey, #rrggbb or transparent"),
+    })
 }
 
 /// How to read the input: 4-D frame and raw layout.
@@ -192,9 +272,144 @@ fn run(cli: Cli) -> Result<()> {
             );
             Ok(())
         }
+        Some(Command::Render(args)) => render(&args),
         Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
     }
+}
+
+fn render(args: &RenderArgs) -> Result<()> {
+    use volao::render::{Frame, RenderSettings};
+    use volao::scene::{Light, RawLayout, SCENE_VERSION, Scene, VolumeSource};
+    use volao::tf::{Preset, TransferFunction};
+
+    let scene_path = args.input.as_ref().filter(|p| {
+        p.extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+    });
+    let scene = scene_path.map(|p| Scene::load(p)).transpose()?;
+    // Which volume, and how to read it: the scene's, unless flags say otherwise.
+    let (volume_path, mut opts) = match (&scene, scene_path) {
+        (Some(s), Some(sp)) => {
+            let raw = s
+                .volume
+                .raw
+                .as_ref()
+                .map(RawOverrides::from)
+                .unwrap_or_default();
+            (
+                s.volume_path(sp),
+                LoadOptions {
+                    frame: s.volume.frame,
+                    raw,
+                    max_bytes: None,
+                },
+            )
+        }
+        _ => (args.input.clone(), args.load.options()),
+    };
+    if scene.is_some() && !args.load.options().raw.is_empty() {
+        opts.raw = args.load.options().raw;
+    }
+    let volume = match &volume_path {
+        Some(p) => load_with_bar(p, &opts)?.volume,
+        None => volume::demo::head_phantom(128),
+    }
+    .to_ras();
+    let stats = volume.stats();
+    let tf = match (&args.tf, &scene) {
+        (Some(name), _) => TransferFunction::preset(Preset::from_name(name)?, &stats),
+        (None, Some(s)) => s.transfer_function.clone(),
+        (None, None) => TransferFunction::preset(Preset::default_for(&stats), &stats),
+    };
+    let mut camera = scene.as_ref().map(|s| s.camera).unwrap_or_default();
+    if let Some(c) = &args.camera {
+        (camera.azimuth_deg, camera.elevation_deg, camera.distance) = (c[0], c[1], c[2]);
+        if camera.distance <= 0.0 {
+            bail!(
+                "--camera: the distance must be positive (it is in bounding-sphere radii; {} is the default)",
+                volao::render::camera::DEFAULT_DISTANCE
+            );
+        }
+    }
+    camera.orthographic |= args.ortho;
+    let mut settings = scene
+        .as_ref()
+        .map(|s| s.render)
+        .unwrap_or_else(RenderSettings::default);
+    if let Some(b) = &args.background {
+        settings.background = parse_background(b)?;
+    }
+    if let Some(sh) = args.shading {
+        settings.shading = sh;
+    }
+    if let Some(step) = args.step {
+        if step.is_nan() || step <= 0.0 || step.is_infinite() {
+            bail!("--step must be positive (voxels between samples)");
+        }
+        settings.step_voxels = step;
+    }
+    let width = args
+        .width
+        .or(scene.as_ref().map(|s| s.width))
+        .unwrap_or(800);
+    let height = args
+        .height
+        .or(scene.as_ref().map(|s| s.height))
+        .unwrap_or(800);
+    if width == 0 || height == 0 || width > 32768 || height > 32768 {
+        bail!("image size {width}×{height}: each side must be 1 to 32768 pixels");
+    }
+    let frame = Frame {
+        camera,
+        settings,
+        width,
+        height,
+    };
+
+    let start = std::time::Instant::now();
+    let (image, adapter, downsampled) =
+        volao::render::offscreen::render(&volume, &tf, &frame, !args.cpu)?;
+    let seconds = start.elapsed().as_secs_f64();
+    if downsampled > 0 {
+        eprintln!(
+            "note: the volume was halved {downsampled}× to fit the adapter's 3-D texture limits"
+        );
+    }
+    image.save_png(&args.output)?;
+    println!(
+        "{}: {width}×{height} in {:.0} ms on {adapter}",
+        args.output.display(),
+        seconds * 1e3
+    );
+
+    if let Some(path) = &args.save_scene {
+        let s = Scene {
+            version: SCENE_VERSION,
+            volume: VolumeSource {
+                path: volume_path.clone(),
+                frame: opts.frame,
+                raw: (!opts.raw.is_empty()).then(|| RawLayout::from(&opts.raw)),
+            },
+            transfer_function: tf,
+            camera,
+            light: Light::Headlight,
+            render: settings,
+            width,
+            height,
+            ambient_occlusion: scene
+                .as_ref()
+                .map(|s| s.ambient_occlusion.clone())
+                .unwrap_or_default(),
+            clip_shapes: scene
+                .as_ref()
+                .map(|s| s.clip_shapes.clone())
+                .unwrap_or_default(),
+        };
+        s.save(path)?;
+        println!("scene: {}", path.display());
+    }
+    Ok(())
 }
 
 /// Loads a file, with a progress bar on the terminal for anything large.

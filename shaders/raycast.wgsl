@@ -1,0 +1,162 @@
+// Direct volume ray caster: one invocation per pixel of a tile.
+// CPU twin: src/render/cpu.rs (same steps, same order; keep them in sync).
+//!include common.wgsl
+
+struct Params {
+    inv_view_proj: mat4x4<f32>,
+    box_half: vec4<f32>,
+    background: vec4<f32>,
+    shading: vec4<f32>,   // ambient k, specular, shininess, phong on
+    voxel_uvw: vec4<f32>, // one voxel in uvw per axis, smallest spacing (mm)
+    lut_map: vec4<f32>,   // a, b, entries - 1, edge scale
+    step: vec4<f32>,      // dt (mm), jitter on, max steps, skipping on
+    image: vec4<u32>,     // width, height, tile x0, tile y0
+    grid: vec4<u32>,      // occupancy grid dims, block edge (voxels)
+}
+
+@group(0) @binding(0) var<uniform> p: Params;
+@group(0) @binding(1) var volume: texture_3d<f32>;
+@group(0) @binding(2) var linear_clamp: sampler;
+@group(0) @binding(3) var<storage, read> lut: array<vec4<f32>>;
+@group(0) @binding(4) var ambient_occlusion: texture_3d<f32>;
+@group(0) @binding(5) var occupancy: texture_3d<u32>;
+@group(0) @binding(6) var out_image: texture_storage_2d<rgba8unorm, write>;
+
+const OPAQUE: f32 = 0.99;
+
+// PCG hash of the pixel → [0, 1); identical to render::jitter.
+fn jitter(x: u32, y: u32) -> f32 {
+    var h = x * 1973u + y * 9277u + 26699u;
+    h = h * 747796405u + 2891336453u;
+    let word = ((h >> ((h >> 28u) + 4u)) ^ h) * 277803737u;
+    let r = (word >> 22u) ^ word;
+    return f32(r >> 8u) / 16777216.0;
+}
+
+// Ray–box intersection (slab method): (t_enter, t_exit); empty if t_exit <= t_enter.
+fn intersect_box(origin: vec3<f32>, dir: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
+    let inv = 1.0 / dir;
+    let a = (lo - origin) * inv;
+    let b = (hi - origin) * inv;
+    let t_near = min(a, b);
+    let t_far = max(a, b);
+    return vec2<f32>(max(max(t_near.x, t_near.y), t_near.z), min(min(t_far.x, t_far.y), t_far.z));
+}
+
+// Transfer function: linear interpolation between the two nearest LUT entries.
+fn classify(norm: f32) -> vec4<f32> {
+    let t = clamp(norm * p.lut_map.x + p.lut_map.y, 0.0, p.lut_map.z);
+    let i0 = u32(floor(t));
+    let i1 = min(i0 + 1u, u32(p.lut_map.z));
+    return mix(lut[i0], lut[i1], t - floor(t));
+}
+
+fn sample_norm(uvw: vec3<f32>) -> f32 {
+    return textureSampleLevel(volume, linear_clamp, uvw, 0.0).r;
+}
+
+// Blinn–Phong headlight with the ambient term k · A(x) · C_TF(x).
+fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
+    let k = p.shading.x;
+    let ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
+    if p.shading.w == 0.0 {
+        return rgb * (k * ao + (1.0 - k));
+    }
+    let d = p.voxel_uvw.xyz;
+    // Central differences in texel units per mm.
+    let g = vec3<f32>(
+        sample_norm(uvw + vec3<f32>(d.x, 0.0, 0.0)) - sample_norm(uvw - vec3<f32>(d.x, 0.0, 0.0)),
+        sample_norm(uvw + vec3<f32>(0.0, d.y, 0.0)) - sample_norm(uvw - vec3<f32>(0.0, d.y, 0.0)),
+        sample_norm(uvw + vec3<f32>(0.0, 0.0, d.z)) - sample_norm(uvw - vec3<f32>(0.0, 0.0, d.z)),
+    ) / (2.0 * p.voxel_uvw.w);
+    // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
+    let strength = length(g) * abs(p.lut_map.x) * p.voxel_uvw.w * p.lut_map.w;
+    let edge = clamp(strength, 0.0, 1.0);
+    var diffuse = 1.0;
+    var specular = 0.0;
+    if strength > 0.0 {
+        // Headlight: the light comes from the eye, so the half vector is the view vector.
+        let n_dot_v = abs(dot(normalize(g), view));
+        diffuse = mix(1.0, n_dot_v, edge);
+        specular = p.shading.y * pow(n_dot_v, p.shading.z) * edge;
+    }
+    return rgb * (k * ao + (1.0 - k) * diffuse) + vec3<f32>(specular);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let tile = textureDimensions(out_image);
+    if gid.x >= tile.x || gid.y >= tile.y {
+        return;
+    }
+    let px = gid.x + p.image.z;
+    let py = gid.y + p.image.w;
+    let ndc = vec2<f32>(
+        (f32(px) + 0.5) / f32(p.image.x) * 2.0 - 1.0,
+        1.0 - (f32(py) + 0.5) / f32(p.image.y) * 2.0,
+    );
+    let near = p.inv_view_proj * vec4<f32>(ndc, 0.0, 1.0);
+    let far = p.inv_view_proj * vec4<f32>(ndc, 1.0, 1.0);
+    let origin = near.xyz / near.w;
+    let dir = normalize(far.xyz / far.w - origin);
+    let half = p.box_half.xyz;
+    let hit = intersect_box(origin, dir, -half, half);
+    let t_enter = max(hit.x, 0.0);
+    let t_exit = hit.y;
+    let dt = p.step.x;
+    var acc = vec4<f32>(0.0);
+    if t_exit > t_enter {
+        var offset = 0.0;
+        if p.step.y != 0.0 {
+            offset = jitter(px, py);
+        }
+        let max_steps = u32(p.step.z);
+        let dims = vec3<f32>(textureDimensions(volume));
+        var k = 0u;
+        loop {
+            if k >= max_steps {
+                break;
+            }
+            let t = t_enter + (f32(k) + offset) * dt;
+            if t >= t_exit {
+                break;
+            }
+            let pos = origin + dir * t;
+            let uvw = pos / (2.0 * half) + 0.5;
+            if p.step.w != 0.0 {
+                // Empty-space skipping: jump to the first sample past a transparent block.
+                let block = min(vec3<u32>(clamp(uvw, vec3<f32>(0.0), vec3<f32>(1.0)) * dims) / p.grid.w, p.grid.xyz - vec3<u32>(1u));
+                if textureLoad(occupancy, block, 0).r == 0u {
+                    let lo = vec3<f32>(block * p.grid.w) / dims * 2.0 * half - half;
+                    let hi = vec3<f32>((block + vec3<u32>(1u)) * p.grid.w) / dims * 2.0 * half - half;
+                    let leave = intersect_box(origin, dir, lo, hi).y;
+                    let next = u32(max(ceil((leave - t_enter) / dt - offset), 0.0));
+                    k = max(k + 1u, next);
+                    continue;
+                }
+            }
+            let norm = sample_norm(uvw);
+            var rgba = classify(norm);
+            if rgba.a > 0.0 {
+                // The last step ends at the box exit: correct its opacity for its length.
+                let len = min(dt, t_exit - t);
+                if len < dt {
+                    rgba.a = 1.0 - pow(1.0 - rgba.a, len / dt);
+                }
+                let rgb = shade(rgba.rgb, uvw, -dir);
+                acc = vec4<f32>(acc.rgb + (1.0 - acc.a) * rgba.a * rgb, acc.a + (1.0 - acc.a) * rgba.a);
+                if acc.a > OPAQUE {
+                    break;
+                }
+            }
+            k = k + 1u;
+        }
+    }
+    let bg = p.background;
+    let alpha = acc.a + (1.0 - acc.a) * bg.a;
+    var rgb = acc.rgb + (1.0 - acc.a) * bg.a * bg.rgb;
+    if alpha > 0.0 {
+        rgb = rgb / alpha;
+    }
+    textureStore(out_image, vec2<u32>(gid.xy), vec4<f32>(clamp(rgb, vec3<f32>(0.0), vec3<f32>(1.0)), alpha));
+}

@@ -1,0 +1,211 @@
+//! CPU twin of `shaders/raycast.wgsl`: the same steps in the same order, in f32, on
+//! rayon. Tests compare it with the GPU; it is also the fallback without an adapter.
+
+use super::texels::{BlockRanges, VolumeTexels};
+use super::{Frame, Image, OPAQUE, RaycastParams, jitter};
+use crate::tf::Lut;
+use glam::{Mat4, Vec3, Vec4};
+use rayon::prelude::*;
+
+/// A volume prepared for CPU ray casting.
+#[derive(Debug, Clone)]
+pub struct CpuVolume {
+    pub dims: [usize; 3],
+    /// Texel values as the GPU samples them (normalised), x fastest.
+    pub norm: Vec<f32>,
+    /// Ambient occlusion per voxel in [0, 1]; `None` means 1 everywhere.
+    pub ao: Option<Vec<f32>>,
+}
+
+impl CpuVolume {
+    pub fn new(texels: &VolumeTexels) -> Self {
+        CpuVolume {
+            dims: texels.dims,
+            norm: texels.norm_values(),
+            ao: None,
+        }
+    }
+}
+
+/// Trilinear sample with clamp-to-edge, texel centres at (i + 0.5) / n, as a GPU's
+/// linear sampler does.
+pub fn trilinear(values: &[f32], dims: [usize; 3], uvw: Vec3) -> f32 {
+    let c = uvw * Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) - Vec3::splat(0.5);
+    let base = c.floor();
+    let f = c - base;
+    let idx = |axis: usize, off: i64| -> usize {
+        (base[axis] as i64 + off).clamp(0, dims[axis] as i64 - 1) as usize
+    };
+    let at = |x: usize, y: usize, z: usize| values[x + dims[0] * (y + dims[1] * z)];
+    let (x0, x1, y0, y1, z0, z1) = (
+        idx(0, 0),
+        idx(0, 1),
+        idx(1, 0),
+        idx(1, 1),
+        idx(2, 0),
+        idx(2, 1),
+    );
+    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+    let c00 = lerp(at(x0, y0, z0), at(x1, y0, z0), f.x);
+    let c10 = lerp(at(x0, y1, z0), at(x1, y1, z0), f.x);
+    let c01 = lerp(at(x0, y0, z1), at(x1, y0, z1), f.x);
+    let c11 = lerp(at(x0, y1, z1), at(x1, y1, z1), f.x);
+    lerp(lerp(c00, c10, f.y), lerp(c01, c11, f.y), f.z)
+}
+
+fn intersect_box(origin: Vec3, dir: Vec3, lo: Vec3, hi: Vec3) -> (f32, f32) {
+    let inv = Vec3::ONE / dir;
+    let a = (lo - origin) * inv;
+    let b = (hi - origin) * inv;
+    let near = a.min(b);
+    let far = a.max(b);
+    (near.max_element(), far.min_element())
+}
+
+fn classify(p: &RaycastParams, lut: &Lut, norm: f32) -> Vec4 {
+    let t = (norm * p.lut_map[0] + p.lut_map[1]).clamp(0.0, p.lut_map[2]);
+    let i0 = t.floor() as usize;
+    let i1 = (i0 + 1).min(p.lut_map[2] as usize);
+    let (a, b) = (Vec4::from(lut.rgba[i0]), Vec4::from(lut.rgba[i1]));
+    a.lerp(b, t - t.floor())
+}
+
+fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -> Vec3 {
+    let k = p.shading[0];
+    let ao = vol
+        .ao
+        .as_ref()
+        .map_or(1.0, |ao| trilinear(ao, vol.dims, uvw));
+    if p.shading[3] == 0.0 {
+        return rgb * (k * ao + (1.0 - k));
+    }
+    let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
+    let s = |o: Vec3| trilinear(&vol.norm, vol.dims, uvw + o);
+    let g = Vec3::new(
+        s(Vec3::new(d.x, 0.0, 0.0)) - s(Vec3::new(-d.x, 0.0, 0.0)),
+        s(Vec3::new(0.0, d.y, 0.0)) - s(Vec3::new(0.0, -d.y, 0.0)),
+        s(Vec3::new(0.0, 0.0, d.z)) - s(Vec3::new(0.0, 0.0, -d.z)),
+    ) / (2.0 * p.voxel_uvw[3]);
+    let strength = g.length() * p.lut_map[0].abs() * p.voxel_uvw[3] * p.lut_map[3];
+    let edge = strength.clamp(0.0, 1.0);
+    let (mut diffuse, mut specular) = (1.0, 0.0);
+    if strength > 0.0 {
+        let n_dot_v = g.normalize().dot(view).abs();
+        diffuse = 1.0 + (n_dot_v - 1.0) * edge;
+        specular = p.shading[1] * n_dot_v.powf(p.shading[2]) * edge;
+    }
+    rgb * (k * ao + (1.0 - k) * diffuse) + Vec3::splat(specular)
+}
+
+/// One pixel, exactly as `main` in raycast.wgsl computes it (before 8-bit quantisation).
+pub fn pixel(
+    p: &RaycastParams,
+    vol: &CpuVolume,
+    lut: &Lut,
+    occupancy: &[u8],
+    px: u32,
+    py: u32,
+) -> Vec4 {
+    let inv = Mat4::from_cols_array_2d(&p.inv_view_proj);
+    let ndc_x = (px as f32 + 0.5) / p.image[0] as f32 * 2.0 - 1.0;
+    let ndc_y = 1.0 - (py as f32 + 0.5) / p.image[1] as f32 * 2.0;
+    let near = inv * Vec4::new(ndc_x, ndc_y, 0.0, 1.0);
+    let far = inv * Vec4::new(ndc_x, ndc_y, 1.0, 1.0);
+    let origin = near.truncate() / near.w;
+    let dir = (far.truncate() / far.w - origin).normalize();
+    let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
+    let (t0, t1) = intersect_box(origin, dir, -half, half);
+    let t_enter = t0.max(0.0);
+    let t_exit = t1;
+    let dt = p.step[0];
+    let mut acc = Vec4::ZERO;
+    if t_exit > t_enter {
+        let offset = if p.step[1] != 0.0 {
+            jitter(px, py)
+        } else {
+            0.0
+        };
+        let max_steps = p.step[2] as u32;
+        let dims = Vec3::new(vol.dims[0] as f32, vol.dims[1] as f32, vol.dims[2] as f32);
+        let grid = [p.grid[0], p.grid[1], p.grid[2]];
+        let block_edge = p.grid[3];
+        let mut k = 0u32;
+        while k < max_steps {
+            let t = t_enter + (k as f32 + offset) * dt;
+            if t >= t_exit {
+                break;
+            }
+            let pos = origin + dir * t;
+            let uvw = pos / (2.0 * half) + Vec3::splat(0.5);
+            if p.step[3] != 0.0 {
+                let cell = (uvw.clamp(Vec3::ZERO, Vec3::ONE) * dims).as_uvec3() / block_edge;
+                let block = cell.min(glam::UVec3::new(grid[0] - 1, grid[1] - 1, grid[2] - 1));
+                let index = block.x as usize
+                    + grid[0] as usize * (block.y as usize + grid[1] as usize * block.z as usize);
+                if occupancy[index] == 0 {
+                    let lo = (block * block_edge).as_vec3() / dims * 2.0 * half - half;
+                    let hi =
+                        ((block + glam::UVec3::ONE) * block_edge).as_vec3() / dims * 2.0 * half
+                            - half;
+                    let leave = intersect_box(origin, dir, lo, hi).1;
+                    let next = ((leave - t_enter) / dt - offset).ceil().max(0.0) as u32;
+                    k = (k + 1).max(next);
+                    continue;
+                }
+            }
+            let norm = trilinear(&vol.norm, vol.dims, uvw);
+            let mut rgba = classify(p, lut, norm);
+            if rgba.w > 0.0 {
+                let len = dt.min(t_exit - t);
+                if len < dt {
+                    rgba.w = 1.0 - (1.0 - rgba.w).powf(len / dt);
+                }
+                let rgb = shade(p, vol, rgba.truncate(), uvw, -dir);
+                acc = (acc.truncate() + (1.0 - acc.w) * rgba.w * rgb)
+                    .extend(acc.w + (1.0 - acc.w) * rgba.w);
+                if acc.w > OPAQUE {
+                    break;
+                }
+            }
+            k += 1;
+        }
+    }
+    let bg = Vec4::from(p.background);
+    let alpha = acc.w + (1.0 - acc.w) * bg.w;
+    let mut rgb = acc.truncate() + (1.0 - acc.w) * bg.w * bg.truncate();
+    if alpha > 0.0 {
+        rgb /= alpha;
+    }
+    rgb.clamp(Vec3::ZERO, Vec3::ONE).extend(alpha)
+}
+
+/// Renders a whole frame on the CPU. `occupancy` comes from [`BlockRanges::occupancy`].
+pub fn render(
+    texels: &VolumeTexels,
+    vol: &CpuVolume,
+    lut: &Lut,
+    occupancy: &[u8],
+    frame: &Frame,
+) -> Image {
+    let p = frame.params(texels, lut, 0, 0);
+    let (w, h) = (frame.width, frame.height);
+    let pixels: Vec<[u8; 4]> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let c = pixel(&p, vol, lut, occupancy, i % w, i / w);
+            // Round to nearest, as the GPU's unorm8 store does.
+            c.to_array().map(|x| (x * 255.0).round() as u8)
+        })
+        .collect();
+    Image {
+        width: w,
+        height: h,
+        pixels,
+    }
+}
+
+/// Convenience: texels, CPU volume and occupancy for a TF in one go (tests, fallback).
+pub fn prepare(texels: &VolumeTexels, lut: &Lut) -> (CpuVolume, Vec<u8>) {
+    let occupancy = BlockRanges::new(texels).occupancy(texels, lut);
+    (CpuVolume::new(texels), occupancy)
+}

@@ -1,0 +1,438 @@
+//! The GPU ray caster: [`RayCaster`] holds what lives as long as the device (pipeline,
+//! layout, sampler); [`GpuVolume`] holds one volume's textures and its transfer function;
+//! a [`Frame`] is all that changes per frame.
+
+use super::texels::{BlockRanges, UploadLimits, VolumeTexels};
+use super::{Frame, Image};
+use crate::gpu::{Gpu, GpuError, padded_row_bytes, read_buffer, shaders, validated};
+use crate::tf::{Lut, TransferFunction, correct_opacity};
+
+/// Largest tile rendered in one submission: keeps each dispatch short (no driver
+/// watchdog on real GPUs) and lets any image size fit the 2-D texture limit.
+pub const TILE: u32 = 2048;
+
+/// Bytes of voxels we upload before halving the resolution.
+pub const MAX_VOLUME_BYTES: u64 = 2 << 30;
+
+/// Long-lived ray-casting state: built once per device.
+#[derive(Debug)]
+pub struct RayCaster {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+}
+
+/// One volume on the GPU with its transfer function baked.
+#[derive(Debug)]
+pub struct GpuVolume {
+    pub texels: VolumeTexels,
+    ranges: BlockRanges,
+    volume_view: wgpu::TextureView,
+    ao_view: wgpu::TextureView,
+    occupancy: wgpu::Texture,
+    occupancy_view: wgpu::TextureView,
+    lut_buffer: wgpu::Buffer,
+    /// The baked LUT currently on the GPU (alpha corrected for `lut_step`).
+    pub lut: Lut,
+    lut_step: f32,
+    tf: TransferFunction,
+}
+
+fn texture_3d(
+    device: &wgpu::Device,
+    label: &str,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: dims[0],
+            height: dims[1],
+            depth_or_array_layers: dims[2],
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D3,
+        format,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    })
+}
+
+fn write_3d(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    dims: [u32; 3],
+    bytes_per_texel: u32,
+    data: &[u8],
+) {
+    queue.write_texture(
+        texture.as_image_copy(),
+        data,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(dims[0] * bytes_per_texel),
+            rows_per_image: Some(dims[1]),
+        },
+        wgpu::Extent3d {
+            width: dims[0],
+            height: dims[1],
+            depth_or_array_layers: dims[2],
+        },
+    );
+}
+
+/// Bakes `tf` over the texels' value range with opacity corrected for `step_voxels`.
+pub fn bake_lut(tf: &TransferFunction, texels: &VolumeTexels, step_voxels: f32) -> Lut {
+    let (a, b) = (
+        texels.value_offset,
+        texels.value_offset + texels.value_scale,
+    );
+    let (lo, hi) = (a.min(b), a.max(b));
+    // Unorm texels span [lo, hi] exactly; float texels use the TF's own span, widened.
+    let (lo, hi) = match texels.format {
+        super::texels::TexelFormat::R32Float => {
+            let vals = texels.norm_values();
+            let mn = vals.iter().copied().fold(f32::INFINITY, f32::min) as f64;
+            let mx = vals.iter().copied().fold(f32::NEG_INFINITY, f32::max) as f64;
+            if mx > mn {
+                (mn, mx)
+            } else {
+                (mn - 0.5, mn + 0.5)
+            }
+        }
+        _ => (lo, hi),
+    };
+    let mut lut = tf.bake(lo, hi, crate::tf::LUT_ENTRIES);
+    for e in &mut lut.rgba {
+        e[3] = correct_opacity(e[3], step_voxels);
+    }
+    lut
+}
+
+impl GpuVolume {
+    /// Uploads a volume (halving it until it fits the adapter) with a transfer function.
+    pub fn new(
+        gpu: &Gpu,
+        volume: &crate::volume::Volume,
+        tf: &TransferFunction,
+        step_voxels: f32,
+    ) -> Result<Self, GpuError> {
+        let limits = gpu.device.limits();
+        let texels = VolumeTexels::new(
+            volume,
+            UploadLimits {
+                max_dim: limits.max_texture_dimension_3d as usize,
+                max_bytes: MAX_VOLUME_BYTES,
+            },
+        );
+        Self::from_texels(gpu, texels, tf, step_voxels)
+    }
+
+    pub fn from_texels(
+        gpu: &Gpu,
+        texels: VolumeTexels,
+        tf: &TransferFunction,
+        step_voxels: f32,
+    ) -> Result<Self, GpuError> {
+        let (device, queue) = (&gpu.device, &gpu.queue);
+        let dims = texels.dims.map(|d| d as u32);
+        let ranges = BlockRanges::new(&texels);
+        let lut = bake_lut(tf, &texels, step_voxels);
+        let occ = ranges.occupancy(&texels, &lut);
+        let grid = ranges.grid.map(|d| d as u32);
+        validated(device, "GpuVolume::upload", || {
+            let volume = texture_3d(device, "GpuVolume::volume", dims, texels.format.wgpu());
+            write_3d(
+                queue,
+                &volume,
+                dims,
+                texels.format.bytes() as u32,
+                &texels.bytes,
+            );
+            // No AO volume yet: a single texel of 1 makes A(x) = 1 everywhere.
+            let ao = texture_3d(
+                device,
+                "GpuVolume::ambient_occlusion",
+                [1, 1, 1],
+                wgpu::TextureFormat::R8Unorm,
+            );
+            write_3d(queue, &ao, [1, 1, 1], 1, &[255]);
+            let occupancy = texture_3d(
+                device,
+                "GpuVolume::occupancy",
+                grid,
+                wgpu::TextureFormat::R8Uint,
+            );
+            write_3d(queue, &occupancy, grid, 1, &occ);
+            let lut_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("GpuVolume::lut"),
+                size: (lut.rgba.len() * 16) as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            queue.write_buffer(&lut_buffer, 0, bytemuck::cast_slice(&lut.rgba));
+            GpuVolume {
+                volume_view: volume.create_view(&Default::default()),
+                ao_view: ao.create_view(&Default::default()),
+                occupancy_view: occupancy.create_view(&Default::default()),
+                occupancy,
+                lut_buffer,
+                lut: lut.clone(),
+                lut_step: step_voxels,
+                tf: tf.clone(),
+                ranges: ranges.clone(),
+                texels: texels.clone(),
+            }
+        })
+    }
+
+    /// Re-bakes the transfer function (and the skip grid) if it or the step changed.
+    pub fn set_transfer_function(&mut self, gpu: &Gpu, tf: &TransferFunction, step_voxels: f32) {
+        if *tf == self.tf && step_voxels == self.lut_step {
+            return;
+        }
+        self.lut = bake_lut(tf, &self.texels, step_voxels);
+        self.tf = tf.clone();
+        self.lut_step = step_voxels;
+        gpu.queue
+            .write_buffer(&self.lut_buffer, 0, bytemuck::cast_slice(&self.lut.rgba));
+        let occ = self.ranges.occupancy(&self.texels, &self.lut);
+        write_3d(
+            &gpu.queue,
+            &self.occupancy,
+            self.ranges.grid.map(|d| d as u32),
+            1,
+            &occ,
+        );
+    }
+
+    /// The occupancy grid for the current LUT (for the CPU twin).
+    pub fn occupancy(&self) -> Vec<u8> {
+        self.ranges.occupancy(&self.texels, &self.lut)
+    }
+}
+
+impl RayCaster {
+    pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
+        let module = shaders::module(device, "raycast.wgsl")?;
+        validated(device, "RayCaster::new", || {
+            let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty,
+                count: None,
+            };
+            let tex = |sample_type| wgpu::BindingType::Texture {
+                sample_type,
+                view_dimension: wgpu::TextureViewDimension::D3,
+                multisampled: false,
+            };
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("RayCaster::layout"),
+                entries: &[
+                    entry(
+                        0,
+                        wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Uniform,
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        },
+                    ),
+                    entry(1, tex(wgpu::TextureSampleType::Float { filterable: true })),
+                    entry(
+                        2,
+                        wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    ),
+                    entry(
+                        3,
+                        wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Storage { read_only: true },
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        },
+                    ),
+                    entry(4, tex(wgpu::TextureSampleType::Float { filterable: true })),
+                    entry(5, tex(wgpu::TextureSampleType::Uint)),
+                    entry(
+                        6,
+                        wgpu::BindingType::StorageTexture {
+                            access: wgpu::StorageTextureAccess::WriteOnly,
+                            format: wgpu::TextureFormat::Rgba8Unorm,
+                            view_dimension: wgpu::TextureViewDimension::D2,
+                        },
+                    ),
+                ],
+            });
+            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("RayCaster::pipeline_layout"),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("RayCaster::pipeline"),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+            let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("RayCaster::linear_clamp"),
+                mag_filter: wgpu::FilterMode::Linear,
+                min_filter: wgpu::FilterMode::Linear,
+                ..Default::default()
+            });
+            RayCaster {
+                pipeline,
+                layout,
+                sampler,
+            }
+        })
+    }
+
+    /// Renders a frame in tiles of at most [`TILE`]² and reads it back.
+    pub fn render(&self, gpu: &Gpu, vol: &GpuVolume, frame: &Frame) -> Result<Image, GpuError> {
+        let (w, h) = (frame.width.max(1), frame.height.max(1));
+        let mut image = Image {
+            width: w,
+            height: h,
+            pixels: vec![[0; 4]; (w * h) as usize],
+        };
+        let mut y0 = 0;
+        while y0 < h {
+            let mut x0 = 0;
+            while x0 < w {
+                let size = ((w - x0).min(TILE), (h - y0).min(TILE));
+                let tile = self.render_tile(gpu, vol, frame, (x0, y0), size)?;
+                image.blit(&tile, x0, y0);
+                x0 += TILE;
+            }
+            y0 += TILE;
+        }
+        Ok(image)
+    }
+
+    fn render_tile(
+        &self,
+        gpu: &Gpu,
+        vol: &GpuVolume,
+        frame: &Frame,
+        (x0, y0): (u32, u32),
+        (tw, th): (u32, u32),
+    ) -> Result<Image, GpuError> {
+        let device = &gpu.device;
+        let params = frame.params(&vol.texels, &vol.lut, x0, y0);
+        let row = padded_row_bytes(tw * 4);
+        let readback = validated(device, "RayCaster::tile", || {
+            let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("RayCaster::params"),
+                size: std::mem::size_of_val(&params) as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            gpu.queue
+                .write_buffer(&uniforms, 0, bytemuck::bytes_of(&params));
+            let target = device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("RayCaster::tile"),
+                size: wgpu::Extent3d {
+                    width: tw,
+                    height: th,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8Unorm,
+                usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            });
+            let target_view = target.create_view(&Default::default());
+            let readback = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("RayCaster::readback"),
+                size: row as u64 * th as u64,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("RayCaster::bind_group"),
+                layout: &self.layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: uniforms.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&vol.volume_view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::Sampler(&self.sampler),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: vol.lut_buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: wgpu::BindingResource::TextureView(&vol.ao_view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: wgpu::BindingResource::TextureView(&vol.occupancy_view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 6,
+                        resource: wgpu::BindingResource::TextureView(&target_view),
+                    },
+                ],
+            });
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("RayCaster::encoder"),
+            });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("RayCaster::pass"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &bind_group, &[]);
+                pass.dispatch_workgroups(tw.div_ceil(8), th.div_ceil(8), 1);
+            }
+            encoder.copy_texture_to_buffer(
+                target.as_image_copy(),
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &readback,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(row),
+                        rows_per_image: Some(th),
+                    },
+                },
+                wgpu::Extent3d {
+                    width: tw,
+                    height: th,
+                    depth_or_array_layers: 1,
+                },
+            );
+            gpu.queue.submit([encoder.finish()]);
+            readback
+        })?;
+        let bytes = read_buffer(device, &readback, "RayCaster::readback")?;
+        let mut pixels = Vec::with_capacity((tw * th) as usize);
+        for r in bytes.chunks_exact(row as usize) {
+            pixels.extend(
+                r[..(tw * 4) as usize]
+                    .chunks_exact(4)
+                    .map(|c| [c[0], c[1], c[2], c[3]]),
+            );
+        }
+        Ok(Image {
+            width: tw,
+            height: th,
+            pixels,
+        })
+    }
+}

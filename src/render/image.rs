@@ -1,0 +1,227 @@
+//! RGBA8 images: PNG files, and the one tolerance-based comparison every image test uses.
+
+use std::path::{Path, PathBuf};
+
+/// Straight-alpha RGBA8 pixels, row-major from the top-left.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<[u8; 4]>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    #[error("{path}: {message}")]
+    Io { path: PathBuf, message: String },
+}
+
+impl Image {
+    pub fn save_png(&self, path: &Path) -> Result<(), ImageError> {
+        let bytes: Vec<u8> = self.pixels.iter().flatten().copied().collect();
+        image::save_buffer(
+            path,
+            &bytes,
+            self.width,
+            self.height,
+            image::ColorType::Rgba8,
+        )
+        .map_err(|e| ImageError::Io {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })
+    }
+
+    pub fn load_png(path: &Path) -> Result<Image, ImageError> {
+        let img = image::open(path).map_err(|e| ImageError::Io {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+        let rgba = img.to_rgba8();
+        let (width, height) = rgba.dimensions();
+        let pixels = rgba
+            .into_raw()
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        Ok(Image {
+            width,
+            height,
+            pixels,
+        })
+    }
+
+    /// Copies `tile` into this image at `(x0, y0)` (clipped to the image).
+    pub fn blit(&mut self, tile: &Image, x0: u32, y0: u32) {
+        for y in 0..tile.height.min(self.height.saturating_sub(y0)) {
+            for x in 0..tile.width.min(self.width.saturating_sub(x0)) {
+                self.pixels[((y0 + y) * self.width + x0 + x) as usize] =
+                    tile.pixels[(y * tile.width + x) as usize];
+            }
+        }
+    }
+}
+
+/// How different two images may be: most pixels within `max_channel_diff`, and at most
+/// `max_outlier_fraction` of pixels beyond it (never more than `max_outlier_diff`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tolerance {
+    pub max_channel_diff: u8,
+    pub max_outlier_fraction: f64,
+    pub max_outlier_diff: u8,
+}
+
+impl Tolerance {
+    pub const EXACT: Tolerance = Tolerance {
+        max_channel_diff: 0,
+        max_outlier_fraction: 0.0,
+        max_outlier_diff: 0,
+    };
+}
+
+/// The result of comparing two images.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Comparison {
+    pub max_diff: u8,
+    pub mean_diff: f64,
+    /// Pixels with a channel differing by more than `max_channel_diff`.
+    pub outliers: usize,
+    pub pixels: usize,
+    pub passed: bool,
+}
+
+/// Compares two images channel by channel under `tol`.
+pub fn compare(actual: &Image, expected: &Image, tol: Tolerance) -> Comparison {
+    if (actual.width, actual.height) != (expected.width, expected.height) {
+        return Comparison {
+            max_diff: 255,
+            mean_diff: 255.0,
+            outliers: actual.pixels.len(),
+            pixels: actual.pixels.len(),
+            passed: false,
+        };
+    }
+    let (mut max_diff, mut sum, mut outliers) = (0u8, 0u64, 0usize);
+    for (a, b) in actual.pixels.iter().zip(&expected.pixels) {
+        let d = (0..4).map(|c| a[c].abs_diff(b[c])).max().unwrap_or(0);
+        max_diff = max_diff.max(d);
+        sum += d as u64;
+        if d > tol.max_channel_diff {
+            outliers += 1;
+        }
+    }
+    let n = actual.pixels.len().max(1);
+    let passed = outliers as f64 <= tol.max_outlier_fraction * n as f64
+        && (outliers == 0 || max_diff <= tol.max_outlier_diff.max(tol.max_channel_diff));
+    Comparison {
+        max_diff,
+        mean_diff: sum as f64 / n as f64,
+        outliers,
+        pixels: n,
+        passed,
+    }
+}
+
+/// A difference image: |a − b| per channel, amplified ×8, alpha opaque.
+pub fn difference(actual: &Image, expected: &Image) -> Image {
+    let pixels = actual
+        .pixels
+        .iter()
+        .zip(&expected.pixels)
+        .map(|(a, b)| {
+            let d = |c: usize| a[c].abs_diff(b[c]).saturating_mul(8);
+            [d(0), d(1), d(2).max(d(3)), 255]
+        })
+        .collect();
+    Image {
+        width: actual.width,
+        height: actual.height,
+        pixels,
+    }
+}
+
+/// Compares and, on failure, writes `NAME.actual.png`, `NAME.expected.png` and
+/// `NAME.diff.png` into `out_dir`, returning a message that names them.
+pub fn check(
+    name: &str,
+    actual: &Image,
+    expected: &Image,
+    tol: Tolerance,
+    out_dir: &Path,
+) -> Result<Comparison, String> {
+    let c = compare(actual, expected, tol);
+    if c.passed {
+        return Ok(c);
+    }
+    let _ = std::fs::create_dir_all(out_dir);
+    let file = |kind: &str| out_dir.join(format!("{name}.{kind}.png"));
+    let _ = actual.save_png(&file("actual"));
+    let _ = expected.save_png(&file("expected"));
+    if (actual.width, actual.height) == (expected.width, expected.height) {
+        let _ = difference(actual, expected).save_png(&file("diff"));
+    }
+    Err(format!(
+        "{name}: images differ beyond {tol:?}: max channel diff {}, mean {:.3}, {} of {} pixels over {}; wrote {}",
+        c.max_diff,
+        c.mean_diff,
+        c.outliers,
+        c.pixels,
+        tol.max_channel_diff,
+        file("{actual,expected,diff}").display()
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn img(v: u8) -> Image {
+        Image {
+            width: 4,
+            height: 4,
+            pixels: vec![[v, v, v, 255]; 16],
+        }
+    }
+
+    #[test]
+    fn tolerance_counts_outliers() {
+        let a = img(100);
+        let mut b = img(102);
+        assert!(
+            compare(
+                &a,
+                &b,
+                Tolerance {
+                    max_channel_diff: 2,
+                    max_outlier_fraction: 0.0,
+                    max_outlier_diff: 0
+                }
+            )
+            .passed
+        );
+        assert!(
+            !compare(
+                &a,
+                &b,
+                Tolerance {
+                    max_channel_diff: 1,
+                    max_outlier_fraction: 0.0,
+                    max_outlier_diff: 0
+                }
+            )
+            .passed
+        );
+        b.pixels[0] = [200, 200, 200, 255];
+        let tol = Tolerance {
+            max_channel_diff: 2,
+            max_outlier_fraction: 0.1,
+            max_outlier_diff: 50,
+        };
+        assert!(!compare(&a, &b, tol).passed, "outlier too large");
+        let tol = Tolerance {
+            max_outlier_diff: 100,
+            ..tol
+        };
+        assert!(compare(&a, &b, tol).passed);
+    }
+}

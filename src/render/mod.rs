@@ -1,0 +1,162 @@
+//! Ray casting: the GPU ray caster ([`gpu::RayCaster`]), its CPU twin ([`cpu`]), the
+//! camera, the shared per-frame parameters and images.
+//!
+//! Both paths build the same [`RaycastParams`] and follow the same steps per pixel:
+//! ray through the pixel centre → box intersection in physical space → jittered start →
+//! fixed steps of `step_voxels` voxels, the last one shortened to the box exit and its
+//! opacity corrected for its true length (Imagire et al.'s valid sampling path) →
+//! transfer-function lookup → optional Blinn–Phong headlight with the ambient term
+//! `k · A(x) · C_TF(x)` → front-to-back compositing, stopping at α > 0.99.
+
+pub mod camera;
+pub mod cpu;
+pub mod gpu;
+pub mod image;
+pub mod offscreen;
+pub mod texels;
+
+pub use camera::Camera;
+pub use image::Image;
+
+use crate::tf::Lut;
+use texels::{BLOCK, VolumeTexels};
+
+/// Opacity at which a ray stops (early ray termination).
+pub const OPAQUE: f32 = 0.99;
+
+/// How to shade samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Shading {
+    /// Transfer-function colour times the ambient term only.
+    None,
+    /// Blinn–Phong with a headlight, gradient normals by central differences.
+    #[default]
+    Phong,
+}
+
+/// Render settings that are not the camera or the transfer function.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct RenderSettings {
+    /// Distance between samples in voxels (of the smallest spacing).
+    pub step_voxels: f32,
+    pub shading: Shading,
+    /// Ambient coefficient `k` of `k · A(x) · C_TF(x)`; the directional part gets `1 − k`.
+    pub ambient: f32,
+    pub specular: f32,
+    pub shininess: f32,
+    /// Per-pixel jittered ray start (removes wood-grain rings).
+    pub jitter: bool,
+    /// Skip blocks the transfer function makes fully transparent (never changes the image).
+    pub empty_space_skipping: bool,
+    /// Straight RGBA; alpha 0 gives a transparent background.
+    pub background: [f32; 4],
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            step_voxels: 0.5,
+            shading: Shading::Phong,
+            ambient: 0.4,
+            specular: 0.3,
+            shininess: 24.0,
+            jitter: true,
+            empty_space_skipping: true,
+            background: [0.0, 0.0, 0.0, 1.0],
+        }
+    }
+}
+
+/// Per-frame uniforms. Mirrors `struct Params` in `shaders/raycast.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct RaycastParams {
+    /// Clip space → volume-centred physical space (mm).
+    pub inv_view_proj: [[f32; 4]; 4],
+    /// Half the box extent in mm (the box is `[-h, h]`), w unused.
+    pub box_half: [f32; 4],
+    /// Straight RGBA background.
+    pub background: [f32; 4],
+    /// ambient k, specular, shininess, shading on (0/1).
+    pub shading: [f32; 4],
+    /// One voxel in texture coordinates along x, y, z; w = smallest spacing (mm).
+    pub voxel_uvw: [f32; 4],
+    /// LUT map `t = norm · a + b`: a, b, entries − 1, gradient scale for "is this an edge".
+    pub lut_map: [f32; 4],
+    /// dt (mm), jitter on (0/1), max steps, skipping on (0/1).
+    pub step: [f32; 4],
+    /// Full image width, height; this tile's x0, y0.
+    pub image: [u32; 4],
+    /// Occupancy grid dims, block edge in voxels.
+    pub grid: [u32; 4],
+}
+
+const _: () = assert!(std::mem::size_of::<RaycastParams>() == 64 + 8 * 16);
+
+/// Everything a frame needs besides the volume and the LUT data.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame {
+    pub camera: Camera,
+    pub settings: RenderSettings,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Frame {
+    /// The uniforms for a tile of this frame starting at `(x0, y0)`.
+    pub fn params(&self, texels: &VolumeTexels, lut: &Lut, x0: u32, y0: u32) -> RaycastParams {
+        let extent = texels.extent();
+        let half = glam::Vec3::from(extent) * 0.5;
+        let radius = half.length();
+        let aspect = self.width as f32 / self.height.max(1) as f32;
+        let inv = self.camera.view_proj(radius, aspect).inverse();
+        let min_spacing = texels.spacing.iter().copied().fold(f32::INFINITY, f32::min);
+        let dt = self.settings.step_voxels.max(0.01) * min_spacing;
+        let (a, b) = texels.lut_map(lut);
+        let entries = (lut.rgba.len().max(2) - 1) as f32;
+        let diag = 2.0 * radius;
+        let s = &self.settings;
+        let grid: [usize; 3] = std::array::from_fn(|i| texels.dims[i].div_ceil(BLOCK));
+        RaycastParams {
+            inv_view_proj: inv.to_cols_array_2d(),
+            box_half: [half.x, half.y, half.z, 0.0],
+            background: s.background,
+            shading: [
+                s.ambient,
+                s.specular,
+                s.shininess,
+                f32::from(u8::from(s.shading == Shading::Phong)),
+            ],
+            voxel_uvw: [
+                1.0 / texels.dims[0] as f32,
+                1.0 / texels.dims[1] as f32,
+                1.0 / texels.dims[2] as f32,
+                min_spacing,
+            ],
+            // A gradient of 2 % of the LUT's range per voxel counts as a full edge.
+            lut_map: [a, b, entries, 1.0 / (0.02 * entries)],
+            step: [
+                dt,
+                f32::from(u8::from(s.jitter)),
+                (diag / dt).ceil() + 2.0,
+                f32::from(u8::from(s.empty_space_skipping)),
+            ],
+            image: [self.width, self.height, x0, y0],
+            grid: [grid[0] as u32, grid[1] as u32, grid[2] as u32, BLOCK as u32],
+        }
+    }
+}
+
+/// Per-pixel jitter in [0, 1): a PCG hash of the pixel, identical on CPU and GPU.
+pub fn jitter(x: u32, y: u32) -> f32 {
+    let mut h = x
+        .wrapping_mul(1973)
+        .wrapping_add(y.wrapping_mul(9277))
+        .wrapping_add(26699);
+    h = h.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let word = ((h >> ((h >> 28).wrapping_add(4))) ^ h).wrapping_mul(277_803_737);
+    let r = (word >> 22) ^ word;
+    (r >> 8) as f32 / 16_777_216.0
+}

@@ -1,0 +1,369 @@
+//! The volume as the GPU sees it: texture format, normalised texel values, the map from
+//! a texel value back to the data's units, and the occupancy grid for empty-space skipping.
+//!
+//! Both the GPU upload and the CPU twin start from [`VolumeTexels`], so they sample the
+//! same numbers.
+
+use crate::tf::Lut;
+use crate::volume::{Volume, VoxelData};
+
+/// Texture format chosen to keep the data's precision.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TexelFormat {
+    /// 8-bit data (`u8`, `i8` shifted by 128).
+    R8Unorm,
+    /// 16-bit data (`u16`, `i16` shifted by 32768) — CT keeps every Hounsfield unit.
+    R16Unorm,
+    /// Everything else, as f32 physical values.
+    R32Float,
+}
+
+impl TexelFormat {
+    pub fn wgpu(self) -> wgpu::TextureFormat {
+        match self {
+            TexelFormat::R8Unorm => wgpu::TextureFormat::R8Unorm,
+            TexelFormat::R16Unorm => wgpu::TextureFormat::R16Unorm,
+            TexelFormat::R32Float => wgpu::TextureFormat::R32Float,
+        }
+    }
+
+    pub fn bytes(self) -> usize {
+        match self {
+            TexelFormat::R8Unorm => 1,
+            TexelFormat::R16Unorm => 2,
+            TexelFormat::R32Float => 4,
+        }
+    }
+}
+
+/// A volume ready for upload: raw texel bytes plus the same texels as f32 for the CPU twin.
+#[derive(Debug, Clone)]
+pub struct VolumeTexels {
+    pub dims: [usize; 3],
+    /// Spacing in mm (after any downsampling).
+    pub spacing: [f32; 3],
+    pub format: TexelFormat,
+    /// Texel bytes in `format`, x fastest.
+    pub bytes: Vec<u8>,
+    /// Physical value of a texel: `value = norm * value_scale + value_offset`, where `norm`
+    /// is what the GPU returns when sampling (unorm in [0, 1], or the float itself).
+    pub value_scale: f64,
+    pub value_offset: f64,
+    /// How many times the volume was halved to fit the adapter (0 = full resolution).
+    pub downsampled: u32,
+}
+
+/// Limits the upload must respect.
+#[derive(Debug, Clone, Copy)]
+pub struct UploadLimits {
+    pub max_dim: usize,
+    pub max_bytes: u64,
+}
+
+impl VolumeTexels {
+    /// Converts a volume, halving its resolution until it fits `limits`.
+    pub fn new(volume: &Volume, limits: UploadLimits) -> Self {
+        let mut v = std::borrow::Cow::Borrowed(volume);
+        let mut downsampled = 0;
+        loop {
+            let format = format_for(&v.data);
+            let bytes = v.voxel_count() as u64 * format.bytes() as u64;
+            if v.dims.iter().all(|&d| d <= limits.max_dim) && bytes <= limits.max_bytes
+                || v.dims.iter().all(|&d| d <= 1)
+            {
+                break;
+            }
+            v = std::borrow::Cow::Owned(halve(&v));
+            downsampled += 1;
+        }
+        let (format, bytes, scale, offset) = encode(&v.data);
+        let s = v.scaling;
+        VolumeTexels {
+            dims: v.dims,
+            spacing: v.spacing,
+            format,
+            bytes,
+            // value = slope · stored + inter, stored = norm · scale + offset.
+            value_scale: s.slope * scale,
+            value_offset: s.slope * offset + s.inter,
+            downsampled,
+        }
+    }
+
+    /// Texel values as the GPU reads them (normalised for unorm formats), x fastest.
+    pub fn norm_values(&self) -> Vec<f32> {
+        match self.format {
+            TexelFormat::R8Unorm => self.bytes.iter().map(|&b| b as f32 / 255.0).collect(),
+            TexelFormat::R16Unorm => self
+                .bytes
+                .chunks_exact(2)
+                .map(|c| u16::from_le_bytes([c[0], c[1]]) as f32 / 65535.0)
+                .collect(),
+            TexelFormat::R32Float => self
+                .bytes
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect(),
+        }
+    }
+
+    /// Physical size of the box in mm.
+    pub fn extent(&self) -> [f32; 3] {
+        std::array::from_fn(|i| self.dims[i] as f32 * self.spacing[i])
+    }
+
+    /// The `(a, b)` with `t = norm · a + b` giving the LUT's fractional entry index.
+    pub fn lut_map(&self, lut: &Lut) -> (f32, f32) {
+        let n = (lut.rgba.len().max(2) - 1) as f64;
+        let span = (lut.max - lut.min).max(f64::MIN_POSITIVE);
+        let a = self.value_scale / span * n;
+        let b = (self.value_offset - lut.min) / span * n;
+        (a as f32, b as f32)
+    }
+}
+
+fn format_for(data: &VoxelData) -> TexelFormat {
+    match data {
+        VoxelData::U8(_) | VoxelData::I8(_) => TexelFormat::R8Unorm,
+        VoxelData::U16(_) | VoxelData::I16(_) => TexelFormat::R16Unorm,
+        _ => TexelFormat::R32Float,
+    }
+}
+
+/// Texel bytes and the map `stored = norm · scale + offset`.
+///
+/// Non-finite floats become the lowest finite value of the volume, so they render as
+/// whatever the transfer function gives the bottom of the range (normally transparent).
+fn encode(data: &VoxelData) -> (TexelFormat, Vec<u8>, f64, f64) {
+    match data {
+        VoxelData::U8(v) => (TexelFormat::R8Unorm, v.clone(), 255.0, 0.0),
+        VoxelData::I8(v) => (
+            TexelFormat::R8Unorm,
+            v.iter().map(|&x| (x as i16 + 128) as u8).collect(),
+            255.0,
+            -128.0,
+        ),
+        VoxelData::U16(v) => (
+            TexelFormat::R16Unorm,
+            v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            65535.0,
+            0.0,
+        ),
+        VoxelData::I16(v) => (
+            TexelFormat::R16Unorm,
+            v.iter()
+                .flat_map(|&x| ((x as i32 + 32768) as u16).to_le_bytes())
+                .collect(),
+            65535.0,
+            -32768.0,
+        ),
+        other => {
+            let n = other.len();
+            let vals: Vec<f64> = (0..n).map(|i| other.get_f64(i)).collect();
+            let lowest = vals
+                .iter()
+                .copied()
+                .filter(|x| x.is_finite())
+                .fold(f64::INFINITY, f64::min);
+            let lowest = if lowest.is_finite() { lowest } else { 0.0 };
+            let bytes = vals
+                .iter()
+                .flat_map(|&x| (if x.is_finite() { x } else { lowest } as f32).to_le_bytes())
+                .collect();
+            (TexelFormat::R32Float, bytes, 1.0, 0.0)
+        }
+    }
+}
+
+/// Halves each dimension above 1 with a 2×2×2 box filter (stored values averaged as f64,
+/// kept in the stored type), doubling the spacing.
+fn halve(v: &Volume) -> Volume {
+    let old = v.dims;
+    let dims: [usize; 3] = std::array::from_fn(|i| old[i].div_ceil(2).max(1));
+    let factor: [usize; 3] = std::array::from_fn(|i| if old[i] > 1 { 2 } else { 1 });
+    let spacing: [f32; 3] = std::array::from_fn(|i| v.spacing[i] * factor[i] as f32);
+    let avg = |x: usize, y: usize, z: usize| -> f64 {
+        let (mut sum, mut n) = (0.0, 0.0);
+        for dz in 0..factor[2] {
+            for dy in 0..factor[1] {
+                for dx in 0..factor[0] {
+                    let (a, b, c) = (x * factor[0] + dx, y * factor[1] + dy, z * factor[2] + dz);
+                    if a < old[0] && b < old[1] && c < old[2] {
+                        let s = v.data.get_f64(a + old[0] * (b + old[1] * c));
+                        if s.is_finite() {
+                            sum += s;
+                            n += 1.0;
+                        }
+                    }
+                }
+            }
+        }
+        if n > 0.0 { sum / n } else { f64::NAN }
+    };
+    let n = dims[0] * dims[1] * dims[2];
+    let idx = |i: usize| {
+        (
+            i % dims[0],
+            (i / dims[0]) % dims[1],
+            i / (dims[0] * dims[1]),
+        )
+    };
+    macro_rules! rebuild {
+        ($variant:ident, $t:ty) => {
+            VoxelData::$variant(
+                (0..n)
+                    .map(|i| {
+                        let (x, y, z) = idx(i);
+                        avg(x, y, z).round() as $t
+                    })
+                    .collect(),
+            )
+        };
+    }
+    let data = match &v.data {
+        VoxelData::U8(_) => rebuild!(U8, u8),
+        VoxelData::I8(_) => rebuild!(I8, i8),
+        VoxelData::U16(_) => rebuild!(U16, u16),
+        VoxelData::I16(_) => rebuild!(I16, i16),
+        VoxelData::U32(_) => rebuild!(U32, u32),
+        VoxelData::I32(_) => rebuild!(I32, i32),
+        VoxelData::F32(_) => VoxelData::F32(
+            (0..n)
+                .map(|i| {
+                    let (x, y, z) = idx(i);
+                    avg(x, y, z) as f32
+                })
+                .collect(),
+        ),
+        VoxelData::F64(_) => VoxelData::F64(
+            (0..n)
+                .map(|i| {
+                    let (x, y, z) = idx(i);
+                    avg(x, y, z)
+                })
+                .collect(),
+        ),
+    };
+    Volume {
+        dims,
+        spacing,
+        data,
+        scaling: v.scaling,
+        orientation: v.orientation,
+        descriptions: v.descriptions.clone(),
+    }
+}
+
+/// Edge length of an occupancy block in voxels.
+pub const BLOCK: usize = 8;
+
+/// Per-block min/max of the texel values (with a one-voxel apron, so every trilinear
+/// sample taken inside a block reads only voxels counted in its range). Computed once per
+/// volume; [`BlockRanges::occupancy`] turns it into the skip grid for a given TF.
+#[derive(Debug, Clone)]
+pub struct BlockRanges {
+    pub grid: [usize; 3],
+    /// (min, max) of `norm` per block, x fastest.
+    pub ranges: Vec<(f32, f32)>,
+}
+
+impl BlockRanges {
+    pub fn new(texels: &VolumeTexels) -> Self {
+        use rayon::prelude::*;
+        let dims = texels.dims;
+        let norm = texels.norm_values();
+        let grid: [usize; 3] = std::array::from_fn(|i| dims[i].div_ceil(BLOCK));
+        let ranges = (0..grid[0] * grid[1] * grid[2])
+            .into_par_iter()
+            .map(|b| {
+                let bi = [
+                    b % grid[0],
+                    (b / grid[0]) % grid[1],
+                    b / (grid[0] * grid[1]),
+                ];
+                let lo: [usize; 3] = std::array::from_fn(|i| (bi[i] * BLOCK).saturating_sub(1));
+                let hi: [usize; 3] =
+                    std::array::from_fn(|i| ((bi[i] + 1) * BLOCK + 1).min(dims[i]));
+                let (mut mn, mut mx) = (f32::INFINITY, f32::NEG_INFINITY);
+                for z in lo[2]..hi[2] {
+                    for y in lo[1]..hi[1] {
+                        let row = dims[0] * (y + dims[1] * z);
+                        for &v in &norm[row + lo[0]..row + hi[0]] {
+                            mn = mn.min(v);
+                            mx = mx.max(v);
+                        }
+                    }
+                }
+                (mn, mx)
+            })
+            .collect();
+        BlockRanges { grid, ranges }
+    }
+
+    /// 1 where a block may be visible under `lut`, 0 where every sample in it is
+    /// transparent. Conservative: skipping the zeros cannot change the image.
+    pub fn occupancy(&self, texels: &VolumeTexels, lut: &Lut) -> Vec<u8> {
+        self.ranges
+            .iter()
+            .map(|&(mn, mx)| {
+                let a = mn as f64 * texels.value_scale + texels.value_offset;
+                let b = mx as f64 * texels.value_scale + texels.value_offset;
+                u8::from(!lut.is_transparent_over(a.min(b), a.max(b)))
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn i16_keeps_every_hounsfield_unit() {
+        let v =
+            Volume::new([3, 1, 1], [1.0; 3], VoxelData::I16(vec![-1024, 0, 3071])).expect("valid");
+        let t = VolumeTexels::new(
+            &v,
+            UploadLimits {
+                max_dim: 4096,
+                max_bytes: 1 << 30,
+            },
+        );
+        assert_eq!(t.format, TexelFormat::R16Unorm);
+        let phys: Vec<f64> = t
+            .norm_values()
+            .iter()
+            .map(|&n| n as f64 * t.value_scale + t.value_offset)
+            .collect();
+        for (p, want) in phys.iter().zip([-1024.0, 0.0, 3071.0]) {
+            assert!((p - want).abs() < 0.01, "{p} vs {want}");
+        }
+    }
+
+    #[test]
+    fn oversized_volumes_are_halved_until_they_fit() {
+        let v = Volume::new(
+            [10, 6, 3],
+            [1.0, 2.0, 3.0],
+            VoxelData::U8((0..180).map(|i| i as u8).collect()),
+        )
+        .expect("valid");
+        let t = VolumeTexels::new(
+            &v,
+            UploadLimits {
+                max_dim: 4,
+                max_bytes: 1 << 30,
+            },
+        );
+        assert_eq!((t.dims, t.downsampled), ([3, 2, 1], 2));
+        assert_eq!(t.spacing, [4.0, 8.0, 12.0], "z halves twice: 3 → 2 → 1");
+        let t = VolumeTexels::new(
+            &v,
+            UploadLimits {
+                max_dim: 4096,
+                max_bytes: 100,
+            },
+        );
+        assert!(t.bytes.len() <= 100);
+    }
+}

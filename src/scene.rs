@@ -1,0 +1,280 @@
+//! Scene files: versioned JSON holding everything needed to reproduce a rendering —
+//! the volume (path relative to the scene file where possible), transfer function,
+//! camera, light, render settings and image size. AO and clip shapes are reserved for
+//! the issues that add them and are carried through unchanged.
+
+use crate::render::{Camera, RenderSettings};
+use crate::tf::TransferFunction;
+use crate::volume::{Endian, RawOverrides, VoxelType};
+use std::path::{Path, PathBuf};
+
+/// The scene format this volao writes and the newest it reads.
+pub const SCENE_VERSION: u32 = 1;
+
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("{path}: {message}")]
+    Io { path: PathBuf, message: String },
+    #[error("{path}: not a valid volao scene: {message}")]
+    Invalid { path: PathBuf, message: String },
+    #[error(
+        "{path}: scene version {found} is newer than this volao understands (up to {SCENE_VERSION}); update volao"
+    )]
+    TooNew { path: PathBuf, found: u64 },
+}
+
+/// Raw layout saved with the scene, so raw volumes reopen without flags.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RawLayout {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dims: Option<[usize; 3]>,
+    #[serde(rename = "type", skip_serializing_if = "Option::is_none")]
+    pub ty: Option<VoxelType>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub endian: Option<Endian>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spacing: Option<[f32; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub offset: Option<u64>,
+}
+
+impl From<&RawOverrides> for RawLayout {
+    fn from(r: &RawOverrides) -> Self {
+        RawLayout {
+            dims: r.dims,
+            ty: r.ty,
+            endian: r.endian,
+            spacing: r.spacing,
+            offset: r.offset,
+        }
+    }
+}
+
+impl From<&RawLayout> for RawOverrides {
+    fn from(r: &RawLayout) -> Self {
+        RawOverrides {
+            dims: r.dims,
+            ty: r.ty,
+            endian: r.endian,
+            spacing: r.spacing,
+            offset: r.offset,
+        }
+    }
+}
+
+/// Which volume to show.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VolumeSource {
+    /// File path; relative paths are relative to the scene file. `None`: the demo volume.
+    pub path: Option<PathBuf>,
+    #[serde(default)]
+    pub frame: usize,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub raw: Option<RawLayout>,
+}
+
+/// The light. Only a headlight exists today; the field keeps scenes forward-compatible.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase", tag = "kind")]
+pub enum Light {
+    #[default]
+    Headlight,
+}
+
+/// A complete, reproducible view.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    pub version: u32,
+    pub volume: VolumeSource,
+    pub transfer_function: TransferFunction,
+    #[serde(default)]
+    pub camera: Camera,
+    #[serde(default)]
+    pub light: Light,
+    #[serde(default)]
+    pub render: RenderSettings,
+    pub width: u32,
+    pub height: u32,
+    /// Reserved for the ambient-occlusion issues: kept as written.
+    #[serde(default, skip_serializing_if = "serde_json::Value::is_null")]
+    pub ambient_occlusion: serde_json::Value,
+    /// Reserved for the clipping issue: kept as written.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clip_shapes: Vec<serde_json::Value>,
+}
+
+impl Scene {
+    /// Reads a scene, checking its version before anything else.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SceneError::Io {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses scene JSON; `path` names the file in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Scene, SceneError> {
+        let invalid = |message: String| SceneError::Invalid {
+            path: path.to_owned(),
+            message,
+        };
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| invalid(format!("malformed JSON ({e})")))?;
+        let version = value
+            .get("version")
+            .ok_or_else(|| invalid("no \"version\" field".into()))?
+            .as_u64()
+            .ok_or_else(|| invalid("\"version\" is not a whole number".into()))?;
+        if version > SCENE_VERSION as u64 {
+            return Err(SceneError::TooNew {
+                path: path.to_owned(),
+                found: version,
+            });
+        }
+        if version == 0 {
+            return Err(invalid("version 0 does not exist".into()));
+        }
+        let scene: Scene = serde_json::from_value(value).map_err(|e| invalid(e.to_string()))?;
+        scene
+            .transfer_function
+            .validate()
+            .map_err(|e| invalid(format!("transfer function: {e}")))?;
+        if scene.width == 0 || scene.height == 0 {
+            return Err(invalid(format!(
+                "image size {}×{} has a zero side",
+                scene.width, scene.height
+            )));
+        }
+        Ok(scene)
+    }
+
+    /// Writes the scene as pretty JSON, storing the volume path relative to the scene
+    /// file when the volume lies in the same folder tree.
+    pub fn save(&self, path: &Path) -> Result<(), SceneError> {
+        let mut scene = self.clone();
+        if let Some(vol) = &self.volume.path {
+            scene.volume.path = Some(relative_to(vol, path.parent().unwrap_or(Path::new("."))));
+        }
+        let text = serde_json::to_string_pretty(&scene).map_err(|e| SceneError::Io {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+        std::fs::write(path, text + "\n").map_err(|e| SceneError::Io {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })
+    }
+
+    /// The volume's path resolved against the scene file's folder.
+    pub fn volume_path(&self, scene_path: &Path) -> Option<PathBuf> {
+        let p = self.volume.path.as_ref()?;
+        Some(if p.is_absolute() {
+            p.clone()
+        } else {
+            scene_path.parent().unwrap_or(Path::new(".")).join(p)
+        })
+    }
+}
+
+/// `target` relative to `base` if it is below it, else `target` made absolute.
+fn relative_to(target: &Path, base: &Path) -> PathBuf {
+    let abs = |p: &Path| {
+        std::fs::canonicalize(p).unwrap_or_else(|_| {
+            std::env::current_dir()
+                .map(|d| d.join(p))
+                .unwrap_or_else(|_| p.to_owned())
+        })
+    };
+    let (t, b) = (abs(target), abs(base));
+    match t.strip_prefix(&b) {
+        Ok(rel) => rel.to_owned(),
+        Err(_) => t,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tf::Preset;
+
+    fn scene() -> Scene {
+        let stats = crate::volume::Stats {
+            min: -1024.0,
+            max: 3071.0,
+            mean: 0.0,
+            non_finite: 0,
+            finite: 1,
+        };
+        Scene {
+            version: SCENE_VERSION,
+            volume: VolumeSource {
+                path: Some("ct.raw".into()),
+                frame: 0,
+                raw: Some(RawLayout {
+                    dims: Some([4, 4, 4]),
+                    ty: Some(VoxelType::I16),
+                    ..Default::default()
+                }),
+            },
+            transfer_function: TransferFunction::preset(Preset::CtBone, &stats),
+            camera: Camera {
+                azimuth_deg: 45.0,
+                ..Default::default()
+            },
+            light: Light::Headlight,
+            render: RenderSettings::default(),
+            width: 320,
+            height: 200,
+            ambient_occlusion: serde_json::json!({"method": "lao", "rays": 54}),
+            clip_shapes: vec![serde_json::json!({"shape": "sphere"})],
+        }
+    }
+
+    #[test]
+    fn scenes_round_trip_with_reserved_fields() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("s.json");
+        std::fs::write(dir.path().join("ct.raw"), [0u8; 128]).expect("write");
+        let mut s = scene();
+        s.volume.path = Some(dir.path().join("ct.raw"));
+        s.save(&path).expect("save");
+        let back = Scene::load(&path).expect("load");
+        assert_eq!(
+            back.volume.path.as_deref(),
+            Some(Path::new("ct.raw")),
+            "stored relative to the scene"
+        );
+        assert_eq!(back.volume_path(&path), Some(dir.path().join("ct.raw")));
+        assert_eq!(
+            Scene {
+                volume: s.volume.clone(),
+                ..back
+            },
+            s
+        );
+    }
+
+    #[test]
+    fn bad_scenes_are_refused_clearly() {
+        let p = Path::new("bad.json");
+        let msg = |t: &str| Scene::parse(t, p).expect_err("must fail").to_string();
+        assert!(msg("{ not json").contains("malformed JSON"));
+        assert!(msg("{}").contains("no \"version\""));
+        let mut v = serde_json::to_value(scene()).expect("json");
+        v["version"] = serde_json::json!(99);
+        assert!(msg(&v.to_string()).contains("scene version 99 is newer"));
+        v["version"] = serde_json::json!(1);
+        v["width"] = serde_json::json!(0);
+        assert!(msg(&v.to_string()).contains("zero side"));
+        v["width"] = serde_json::json!(10);
+        v["camra"] = serde_json::json!({});
+        assert!(
+            msg(&v.to_string()).contains("camra"),
+            "unknown fields are named"
+        );
+    }
+}
