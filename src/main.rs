@@ -74,6 +74,10 @@ struct RenderArgs {
     /// Transfer-function preset: ct-bone, ct-soft-tissue, ct-vessels, mr-t1-brain, cao-single-color.
     #[arg(long)]
     tf: Option<String>,
+    /// Window/level in data units (e.g. HU): stretches the transfer function's points
+    /// over [level - window/2, level + window/2].
+    #[arg(long, value_name = "WINDOW,LEVEL", value_parser = parse_window_level, allow_hyphen_values = true)]
+    window_level: Option<(f64, f64)>,
     /// Orbit camera: azimuth and elevation in degrees, distance in bounding-sphere radii.
     #[arg(long, value_name = "AZIMUTH,ELEVATION,DISTANCE", value_parser = parse_camera, allow_hyphen_values = true)]
     camera: Option<[f32; 3]>,
@@ -108,6 +112,20 @@ fn parse_camera(s: &str) -> Result<[f32; 3], String> {
         [a, e, d] if v.iter().all(|x| x.is_finite()) => Ok([*a, *e, *d]),
         _ => Err(format!(
             "{s:?}: expected three numbers AZIMUTH,ELEVATION,DISTANCE, e.g. 30,20,3.2"
+        )),
+    }
+}
+
+fn parse_window_level(s: &str) -> Result<(f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    match v.as_slice() {
+        [w, l] if *w > 0.0 && w.is_finite() && l.is_finite() => Ok((*w, *l)),
+        _ => Err(format!(
+            "{s:?}: expected WINDOW,LEVEL with a positive window, e.g. 400,40"
         )),
     }
 }
@@ -195,6 +213,8 @@ impl LoadArgs {
 enum BenchCommand {
     /// Load time and peak memory of volao vs Python nibabel on the same files.
     Load(volao::bench::LoadBenchArgs),
+    /// Frame times of the GPU ray caster (engine and cranium CT, 512² and 1024²).
+    Render(volao::bench::RenderBenchArgs),
     /// (internal) load one file and print time and peak memory as JSON.
     #[command(hide = true)]
     LoadOne { file: PathBuf },
@@ -273,6 +293,7 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Some(Command::Render(args)) => render(&args),
+        Some(Command::Bench(BenchCommand::Render(args))) => volao::bench::render_bench(&args),
         Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
     }
@@ -321,6 +342,10 @@ fn render(args: &RenderArgs) -> Result<()> {
         (Some(name), _) => TransferFunction::preset(Preset::from_name(name)?, &stats),
         (None, Some(s)) => s.transfer_function.clone(),
         (None, None) => TransferFunction::preset(Preset::default_for(&stats), &stats),
+    };
+    let tf = match args.window_level {
+        Some((w, l)) => tf.with_window_level(w, l),
+        None => tf,
     };
     let mut camera = scene.as_ref().map(|s| s.camera).unwrap_or_default();
     if let Some(c) = &args.camera {

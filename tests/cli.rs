@@ -117,3 +117,64 @@ fn info_without_a_file_describes_the_demo_volume() {
     assert_eq!(j["dims"], serde_json::json!([128, 128, 128]));
     assert_eq!(j["voxel_type"], "i16");
 }
+
+#[test]
+fn render_writes_a_png_and_a_scene_that_reproduces_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let png = dir.path().join("bucky.png");
+    let scene = dir.path().join("bucky.json");
+    let again = dir.path().join("again.png");
+    let bucky = data("pvm/Bucky.pvm");
+    let p = |p: &std::path::Path| p.to_str().expect("utf-8 path").to_owned();
+    let out = volao(&[
+        "render",
+        &p(&bucky),
+        "-o",
+        &p(&png),
+        "--width",
+        "72",
+        "--height",
+        "48",
+        "--tf",
+        "mr-t1-brain",
+        "--camera",
+        "-30,15,3",
+        "--background",
+        "transparent",
+        "--window-level",
+        "200,120",
+        "--save-scene",
+        &p(&scene),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("72×48"), "{}", text(&out.stdout));
+    let out = volao(&["render", &p(&scene), "-o", &p(&again)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let (a, b) = (
+        std::fs::read(&png).expect("png"),
+        std::fs::read(&again).expect("png"),
+    );
+    assert_eq!(a, b, "the saved scene reproduces the image byte for byte");
+    let img = volao::render::Image::load_png(&png).expect("decodes");
+    assert_eq!((img.width, img.height), (72, 48));
+    assert!(
+        img.pixels.iter().any(|p| p[3] == 0),
+        "transparent background"
+    );
+    assert!(img.pixels.iter().any(|p| p[3] > 0), "something rendered");
+}
+
+#[test]
+fn render_rejects_bad_options_in_one_line() {
+    for args in [
+        vec!["render", "-o", "/tmp/x.png", "--camera", "1,2"],
+        vec!["render", "-o", "/tmp/x.png", "--tf", "nope"],
+        vec!["render", "-o", "/tmp/x.png", "--background", "#12"],
+        vec!["render", "/nonexistent/scene.json", "-o", "/tmp/x.png"],
+    ] {
+        let out = volao(&args);
+        assert!(!out.status.success(), "{args:?} should fail");
+        let err = text(&out.stderr);
+        assert!(err.contains("error"), "{args:?}: {err}");
+    }
+}
