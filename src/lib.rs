@@ -14,6 +14,7 @@
 //! Steps 2–6 land with their issues; today the crate has the volume model, loaders,
 //! writers, the demo volume and the GPU device path.
 
+pub mod ao;
 pub mod bench;
 pub mod gpu;
 pub mod render;

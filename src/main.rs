@@ -27,6 +27,8 @@ enum Command {
     Convert(ConvertArgs),
     /// Render a volume or a scene file to PNG, headless.
     Render(Box<RenderArgs>),
+    /// Compute an ambient-occlusion volume in the input's geometry and write it.
+    Ao(AoArgs),
     /// Show the GPU adapter volao will use and run a compute self-test on it.
     Gpu,
     /// Benchmarks (results go to docs/benchmarks.md).
@@ -92,6 +94,18 @@ struct RenderArgs {
     /// Step between samples in voxels.
     #[arg(long)]
     step: Option<f32>,
+    /// Ambient coefficient k of k·A(x)·C_TF(x), 0 to 1 (1: ambient occlusion only).
+    #[arg(long)]
+    ambient: Option<f32>,
+    /// Ambient occlusion: none or lao.
+    #[arg(long, value_parser = volao::ao::AoMethod::parse)]
+    ao: Option<volao::ao::AoMethod>,
+    /// AO ray pattern: 6, 14, 26, 54 (the CAO paper's) or fib:N (Fibonacci lattice).
+    #[arg(long, value_parser = parse_rays)]
+    rays: Option<volao::ao::rays::RaySet>,
+    /// AO samples per ray (1 mm apart).
+    #[arg(long)]
+    samples: Option<u32>,
     /// Render on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
@@ -130,6 +144,10 @@ fn parse_window_level(s: &str) -> Result<(f64, f64), String> {
     }
 }
 
+fn parse_rays(s: &str) -> Result<volao::ao::rays::RaySet, String> {
+    volao::ao::rays::RaySet::parse(s).map_err(|e| e.to_string())
+}
+
 fn parse_shading(s: &str) -> Result<volao::render::Shading, String> {
     match s {
         "none" => Ok(volao::render::Shading::None),
@@ -154,6 +172,32 @@ fn parse_background(s: &str) -> Result<[f32; 4]> {
         }
         _ => bail!("background {s:?}: use black, white, grey, #rrggbb or transparent"),
     })
+}
+
+#[derive(Args, Debug)]
+struct AoArgs {
+    /// Volume file.
+    input: PathBuf,
+    /// Output volume (.nii.gz, .nii or .raw), f32 values in [0, 1].
+    #[arg(short, long)]
+    output: PathBuf,
+    /// AO method.
+    #[arg(long, default_value = "lao", value_parser = volao::ao::AoMethod::parse)]
+    method: volao::ao::AoMethod,
+    /// Ray pattern: 6, 14, 26, 54 or fib:N.
+    #[arg(long, default_value = "54", value_parser = parse_rays)]
+    rays: volao::ao::rays::RaySet,
+    /// Samples per ray (1 mm apart).
+    #[arg(long, default_value_t = volao::ao::lao::DEFAULT_SAMPLES)]
+    samples: u32,
+    /// Transfer-function preset giving the opacity (default: by the data's range).
+    #[arg(long)]
+    tf: Option<String>,
+    /// Compute on the CPU twin instead of the GPU.
+    #[arg(long)]
+    cpu: bool,
+    #[command(flatten)]
+    load: LoadArgs,
 }
 
 /// How to read the input: 4-D frame and raw layout.
@@ -293,10 +337,60 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Some(Command::Render(args)) => render(&args),
+        Some(Command::Ao(args)) => ambient_occlusion(&args),
         Some(Command::Bench(BenchCommand::Render(args))) => volao::bench::render_bench(&args),
         Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
     }
+}
+
+fn ambient_occlusion(args: &AoArgs) -> Result<()> {
+    use volao::ao::{AoMethod, AoSettings};
+    use volao::tf::{Preset, TransferFunction};
+    if args.method == AoMethod::None {
+        bail!("--method none computes nothing; use lao");
+    }
+    if args.samples == 0 {
+        bail!("--samples must be at least 1");
+    }
+    let volume = load_with_bar(&args.input, &args.load.options())?.volume;
+    let stats = volume.stats();
+    let preset = match &args.tf {
+        Some(name) => Preset::from_name(name)?,
+        None => Preset::default_for(&stats),
+    };
+    let tf = TransferFunction::preset(preset, &stats);
+    let settings = AoSettings {
+        method: args.method,
+        rays: args.rays,
+        samples: args.samples,
+    };
+    let start = std::time::Instant::now();
+    let bar = slice_bar("ambient occlusion", true);
+    let (ao, device) =
+        volao::ao::compute_volume(&volume, &tf, &settings, !args.cpu, &|done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        })?;
+    bar.finish_and_clear();
+    let seconds = start.elapsed().as_secs_f64();
+    for w in volume::save(&ao, &args.output)? {
+        eprintln!("warning: {}: {w}", args.output.display());
+    }
+    let s = ao.stats();
+    println!(
+        "{}: {} LAO, {} rays × {} samples, TF {}, in {:.1} s on {device}; A from {:.4} to {:.4}, mean {:.4}",
+        args.output.display(),
+        fmt_dims(ao.dims),
+        settings.rays.name(),
+        settings.samples,
+        tf.name,
+        seconds,
+        s.min,
+        s.max,
+        s.mean
+    );
+    Ok(())
 }
 
 fn render(args: &RenderArgs) -> Result<()> {
@@ -365,6 +459,12 @@ fn render(args: &RenderArgs) -> Result<()> {
     if let Some(b) = &args.background {
         settings.background = parse_background(b)?;
     }
+    if let Some(k) = args.ambient {
+        if !(0.0..=1.0).contains(&k) {
+            bail!("--ambient must be between 0 and 1");
+        }
+        settings.ambient = k;
+    }
     if let Some(sh) = args.shading {
         settings.shading = sh;
     }
@@ -392,20 +492,54 @@ fn render(args: &RenderArgs) -> Result<()> {
         height,
     };
 
+    let mut ao = scene
+        .as_ref()
+        .map(|s| s.ambient_occlusion)
+        .unwrap_or_default();
+    if let Some(m) = args.ao {
+        ao.method = m;
+    }
+    if let Some(r) = args.rays {
+        ao.rays = r;
+    }
+    if let Some(m) = args.samples {
+        if m == 0 {
+            bail!("--samples must be at least 1");
+        }
+        ao.samples = m;
+    }
+
     let start = std::time::Instant::now();
-    let (image, adapter, downsampled) =
-        volao::render::offscreen::render(&volume, &tf, &frame, !args.cpu)?;
+    let bar = slice_bar("ambient occlusion", ao.method != volao::ao::AoMethod::None);
+    let out =
+        volao::render::offscreen::render(&volume, &tf, &frame, &ao, !args.cpu, &|done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        })?;
+    bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
-    if downsampled > 0 {
+    if out.downsampled > 0 {
         eprintln!(
-            "note: the volume was halved {downsampled}× to fit the adapter's 3-D texture limits"
+            "note: the volume was halved {}× to fit the adapter's 3-D texture limits",
+            out.downsampled
         );
     }
-    image.save_png(&args.output)?;
+    out.image.save_png(&args.output)?;
+    let ao_note = if ao.method == volao::ao::AoMethod::None {
+        String::new()
+    } else {
+        format!(
+            " (AO {} rays × {} samples: {:.0} ms)",
+            ao.rays.name(),
+            ao.samples,
+            out.ao_seconds * 1e3
+        )
+    };
     println!(
-        "{}: {width}×{height} in {:.0} ms on {adapter}",
+        "{}: {width}×{height} in {:.0} ms on {}{ao_note}",
         args.output.display(),
-        seconds * 1e3
+        seconds * 1e3,
+        out.device
     );
 
     if let Some(path) = &args.save_scene {
@@ -422,10 +556,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             render: settings,
             width,
             height,
-            ambient_occlusion: scene
-                .as_ref()
-                .map(|s| s.ambient_occlusion.clone())
-                .unwrap_or_default(),
+            ambient_occlusion: ao,
             clip_shapes: scene
                 .as_ref()
                 .map(|s| s.clip_shapes.clone())
@@ -435,6 +566,20 @@ fn render(args: &RenderArgs) -> Result<()> {
         println!("scene: {}", path.display());
     }
     Ok(())
+}
+
+/// A progress bar over z-slices for AO precomputation (hidden when not a terminal).
+fn slice_bar(what: &str, visible: bool) -> indicatif::ProgressBar {
+    if !visible {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(1);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
+        "{what} {{bar:40}} {{pos}}/{{len}} slices {{eta}}"
+    )) {
+        bar.set_style(style);
+    }
+    bar
 }
 
 /// Loads a file, with a progress bar on the terminal for anything large.

@@ -1,8 +1,9 @@
 //! Scene files: versioned JSON holding everything needed to reproduce a rendering —
 //! the volume (path relative to the scene file where possible), transfer function,
-//! camera, light, render settings and image size. AO and clip shapes are reserved for
-//! the issues that add them and are carried through unchanged.
+//! camera, light, render settings, image size and the ambient-occlusion method. Clip
+//! shapes are reserved for the issue that adds them and are carried through unchanged.
 
+use crate::ao::AoSettings;
 use crate::render::{Camera, RenderSettings};
 use crate::tf::TransferFunction;
 use crate::volume::{Endian, RawOverrides, VoxelType};
@@ -98,9 +99,9 @@ pub struct Scene {
     pub render: RenderSettings,
     pub width: u32,
     pub height: u32,
-    /// Reserved for the ambient-occlusion issues: kept as written.
-    #[serde(default, skip_serializing_if = "serde_json::Value::is_null")]
-    pub ambient_occlusion: serde_json::Value,
+    /// Ambient-occlusion method and parameters.
+    #[serde(default)]
+    pub ambient_occlusion: AoSettings,
     /// Reserved for the clipping issue: kept as written.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub clip_shapes: Vec<serde_json::Value>,
@@ -229,7 +230,11 @@ mod tests {
             render: RenderSettings::default(),
             width: 320,
             height: 200,
-            ambient_occlusion: serde_json::json!({"method": "lao", "rays": 54}),
+            ambient_occlusion: AoSettings {
+                method: crate::ao::AoMethod::Lao,
+                rays: crate::ao::rays::RaySet::Fibonacci(96),
+                samples: 12,
+            },
             clip_shapes: vec![serde_json::json!({"shape": "sphere"})],
         }
     }

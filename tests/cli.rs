@@ -178,3 +178,36 @@ fn render_rejects_bad_options_in_one_line() {
         assert!(err.contains("error"), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn ao_writes_a_volume_in_the_input_geometry() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out_path = dir.path().join("ao.nii.gz");
+    let input = data("nifti/avg152T1_LR_nifti.nii.gz");
+    let out = volao(&[
+        "ao",
+        input.to_str().expect("utf-8 path"),
+        "-o",
+        out_path.to_str().expect("utf-8 path"),
+        "--method",
+        "lao",
+        "--rays",
+        "6",
+        "--samples",
+        "6",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let src = volao::volume::load(&input, &Default::default())
+        .expect("input loads")
+        .volume;
+    let ao = volao::volume::load(&out_path, &Default::default())
+        .expect("AO loads")
+        .volume;
+    assert_eq!(ao.dims, src.dims);
+    assert_eq!(ao.spacing, src.spacing);
+    assert_eq!(ao.orientation.axis_codes(), "LAS", "orientation kept");
+    assert_eq!(ao.orientation.rows(), src.orientation.rows());
+    let s = ao.stats();
+    assert!(s.min >= 0.0 && s.max <= 1.0 && s.min < s.max, "{s:?}");
+    assert_eq!(s.non_finite, 0);
+}

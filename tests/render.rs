@@ -409,7 +409,7 @@ fn a_saved_scene_renders_the_same_image() {
         },
         width: 120,
         height: 90,
-        ambient_occlusion: serde_json::Value::Null,
+        ambient_occlusion: Default::default(),
         clip_shapes: Vec::new(),
     };
     let render = |s: &Scene, scene_path: &std::path::Path| {
@@ -441,4 +441,55 @@ fn a_saved_scene_renders_the_same_image() {
         &out_dir(),
     )
     .unwrap_or_else(|e| panic!("{e}"));
+}
+
+#[test]
+fn gpu_matches_cpu_twin_with_lao() {
+    use volao::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
+    use volao::ao::rays::RaySet;
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let lao = LaoGpu::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let v = volume::demo::head_phantom(48);
+    let texels = small(&v);
+    let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
+    let f = Frame {
+        settings: RenderSettings {
+            ambient: 0.8,
+            ..Default::default()
+        },
+        ..frame(96, Shading::Phong)
+    };
+    let mut vol = GpuVolume::from_texels(&gpu, texels.clone(), &tf, f.settings.step_voxels)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let rays = Rays::uniform(RaySet::Fourteen.directions());
+    let lut = lao_lut(&tf, &texels);
+    let a = lao
+        .compute(&gpu, &vol, &lut, &rays, 10, &|_, _| {})
+        .unwrap_or_else(|e| panic!("{e}"));
+    let sampled = vol.set_ambient_occlusion(&gpu, &a);
+    let g = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+    // The CPU twin computes its own LAO, quantised as the GPU stores it.
+    let (mut cv, occ) = cpu::prepare(&texels, &vol.lut);
+    let cpu_a = lao_cpu(&texels, &lut, &rays, 10, &|_, _| {});
+    cv.ao = Some(
+        cpu_a
+            .iter()
+            .map(|&x| (x.clamp(0.0, 1.0) * 65535.0).round() / 65535.0)
+            .collect(),
+    );
+    let c = cpu::render(&texels, &cv, &vol.lut, &occ, &f);
+    check("twin_demo_lao", &g, &c, TWIN, &out_dir()).unwrap_or_else(|e| panic!("{e}"));
+    // And the AO visibly darkens the image compared with A = 1.
+    let (mut flat, _) = cpu::prepare(&texels, &vol.lut);
+    flat.ao = None;
+    let unoccluded = cpu::render(&texels, &flat, &vol.lut, &occ, &f);
+    let lum = |img: &Image| {
+        img.pixels
+            .iter()
+            .map(|p| p[0] as u64 + p[1] as u64 + p[2] as u64)
+            .sum::<u64>()
+    };
+    assert!(lum(&c) < lum(&unoccluded), "AO must darken");
+    assert!(sampled.iter().all(|&x| (0.0..=1.0).contains(&x)));
 }

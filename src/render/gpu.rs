@@ -208,6 +208,39 @@ impl GpuVolume {
         );
     }
 
+    /// The volume texture (for compute passes such as LAO).
+    pub fn volume_view(&self) -> &wgpu::TextureView {
+        &self.volume_view
+    }
+
+    /// Uses `values` (one per voxel, x fastest, in [0, 1]) as the ambient factor A(x).
+    ///
+    /// Stored as R16Unorm: 8 bits would quantise A by 1/255, the size of the whole error
+    /// of a 54-ray pattern (CAO paper Table 5), while 16 bits keep it far below.
+    /// Returns the values as the GPU will sample them (for the CPU twin).
+    pub fn set_ambient_occlusion(&mut self, gpu: &Gpu, values: &[f32]) -> Vec<f32> {
+        let dims = self.texels.dims.map(|d| d as u32);
+        let quantised: Vec<u16> = values
+            .iter()
+            .map(|&a| (a.clamp(0.0, 1.0) * 65535.0).round() as u16)
+            .collect();
+        let texture = texture_3d(
+            &gpu.device,
+            "GpuVolume::ambient_occlusion",
+            dims,
+            wgpu::TextureFormat::R16Unorm,
+        );
+        write_3d(
+            &gpu.queue,
+            &texture,
+            dims,
+            2,
+            bytemuck::cast_slice(&quantised),
+        );
+        self.ao_view = texture.create_view(&Default::default());
+        quantised.iter().map(|&q| q as f32 / 65535.0).collect()
+    }
+
     /// The occupancy grid for the current LUT (for the CPU twin).
     pub fn occupancy(&self) -> Vec<u8> {
         self.ranges.occupancy(&self.texels, &self.lut)

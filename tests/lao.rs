@@ -1,0 +1,232 @@
+//! Local Ambient Occlusion: analytic cases, GPU vs CPU twin, ray sets in use.
+//! GPU tests run on lavapipe in CI; never skipped.
+
+mod common;
+
+use common::data;
+use volao::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
+use volao::ao::rays::RaySet;
+use volao::gpu::{self, Gpu};
+use volao::render::gpu::GpuVolume;
+use volao::render::texels::{UploadLimits, VolumeTexels};
+use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
+use volao::volume::{self, LoadOptions, Volume, VoxelData};
+
+fn device() -> Gpu {
+    gpu::request_device().unwrap_or_else(|e| {
+        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
+    })
+}
+
+/// Opacity 0 below 100, 1 from 155 up (u8 data): a sharp, fully opaque material.
+fn step_tf() -> TransferFunction {
+    TransferFunction {
+        name: "step".into(),
+        opacity: vec![
+            OpacityPoint {
+                value: 100.0,
+                alpha: 0.0,
+            },
+            OpacityPoint {
+                value: 155.0,
+                alpha: 1.0,
+            },
+        ],
+        color: vec![ColorStop {
+            value: 0.0,
+            rgb: [1.0; 3],
+        }],
+    }
+}
+
+fn texels(v: &Volume) -> VolumeTexels {
+    VolumeTexels::new(
+        v,
+        UploadLimits {
+            max_dim: 4096,
+            max_bytes: 1 << 30,
+        },
+    )
+}
+
+fn cpu(v: &Volume, tf: &TransferFunction, set: RaySet, samples: u32) -> Vec<f32> {
+    let t = texels(v);
+    lao_cpu(
+        &t,
+        &lao_lut(tf, &t),
+        &Rays::uniform(set.directions()),
+        samples,
+        &|_, _| {},
+    )
+}
+
+fn filled(n: usize, f: impl Fn(usize, usize, usize) -> u8) -> Volume {
+    let data = (0..n * n * n)
+        .map(|i| f(i % n, (i / n) % n, i / (n * n)))
+        .collect();
+    Volume::new([n, n, n], [1.0; 3], VoxelData::U8(data)).expect("valid volume")
+}
+
+#[test]
+fn empty_volume_is_unoccluded() {
+    let a = cpu(&filled(12, |_, _, _| 0), &step_tf(), RaySet::FiftyFour, 20);
+    assert!(a.iter().all(|&x| x == 1.0), "A = 1 everywhere");
+}
+
+#[test]
+fn opaque_volume_gives_one_over_m_inside() {
+    let n = 30;
+    for (set, m) in [(RaySet::Six, 5u32), (RaySet::TwentySix, 8)] {
+        let a = cpu(&filled(n, |_, _, _| 255), &step_tf(), set, m);
+        // Eq. 2 with a_i = 1: only the m = 1 term survives, A_k = 1/M, so A = 1/M.
+        // Voxels at least M mm from every face see no outside (empty) samples.
+        let r = m as usize + 1;
+        for z in r..n - r {
+            for y in r..n - r {
+                for x in r..n - r {
+                    let v = a[x + n * (y + n * z)];
+                    assert!(
+                        (v - 1.0 / m as f32).abs() < 1e-6,
+                        "{set:?}: A({x},{y},{z}) = {v}"
+                    );
+                }
+            }
+        }
+        // Near a face, rays leave into empty space: more light.
+        assert!(
+            a[0] > 1.0 / m as f32 + 0.1,
+            "{set:?}: corner voxel {}",
+            a[0]
+        );
+    }
+}
+
+#[test]
+fn opaque_half_space_occludes_the_rays_pointing_into_it() {
+    // Voxels with z < 16 are opaque; the voxel under test sits in the first empty layer,
+    // its centre half a voxel above the interface.
+    let n = 32;
+    let m = 20u32;
+    let v = filled(n, |_, _, z| if z < 16 { 255 } else { 0 });
+    for set in [
+        RaySet::Six,
+        RaySet::Fourteen,
+        RaySet::TwentySix,
+        RaySet::FiftyFour,
+        RaySet::Fibonacci(128),
+    ] {
+        let a = cpu(&v, &step_tf(), set, m);
+        let got = a[16 + n * (16 + n * 16)];
+        // A ray going down with slope dz reaches the opaque side at sample ⌈0.5/|dz|⌉:
+        // its A_k counts the samples before that; a ray going up or sideways sees nothing.
+        let dirs = set.directions();
+        let expected: f32 = dirs
+            .iter()
+            .map(|d| {
+                if d.z >= 0.0 {
+                    1.0
+                } else {
+                    ((0.5 / -d.z).ceil() as u32).min(m) as f32 / m as f32
+                }
+            })
+            .sum::<f32>()
+            / dirs.len() as f32;
+        let down = dirs.iter().filter(|d| d.z < -0.5).count() as f32 / dirs.len() as f32;
+        // The transfer function's ramp (100…155 of 255) and trilinear blending make the
+        // crossing sample partly opaque: allow one sample per ray, 1/M.
+        assert!(
+            (got - expected).abs() <= 1.0 / m as f32 + 1e-4,
+            "{set:?}: A = {got}, expected {expected}"
+        );
+        // And the gist: roughly the fraction of rays not pointing into the half-space.
+        assert!(
+            got < 1.0 - 0.8 * down,
+            "{set:?}: A = {got} with {down} of the rays pointing down"
+        );
+    }
+}
+
+#[test]
+fn anisotropic_spacing_is_respected() {
+    // The same physical scene at 1 mm and at 2 mm slices: A agrees where both sample.
+    let iso = filled(24, |_, _, z| if z < 12 { 255 } else { 0 });
+    let data: Vec<u8> = (0..24 * 24 * 12)
+        .map(|i| if i / (24 * 24) < 6 { 255 } else { 0 })
+        .collect();
+    let aniso = Volume::new([24, 24, 12], [1.0, 1.0, 2.0], VoxelData::U8(data)).expect("valid");
+    let a = cpu(&iso, &step_tf(), RaySet::Six, 6);
+    let b = cpu(&aniso, &step_tf(), RaySet::Six, 6);
+    // Voxel centre 4.5 mm above the interface in both: rays down reach it at sample 5.
+    let ai = a[12 + 24 * (12 + 24 * 16)];
+    let bi = b[12 + 24 * (12 + 24 * 8)];
+    assert!((ai - bi).abs() < 0.02, "iso {ai} vs aniso {bi}");
+}
+
+#[test]
+fn gpu_matches_cpu_twin_for_every_ray_set() {
+    let gpu = device();
+    let lao = LaoGpu::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let cases = [
+        ("engine", "raw/engine.raw", [96, 96, 40], [40, 40, 20]),
+        ("cranium", "raw/cranium-ct.raw", [30, 108, 40], [40, 32, 24]),
+    ];
+    for (name, file, origin, size) in cases {
+        let full = volume::load(&data(file), &LoadOptions::default())
+            .unwrap_or_else(|e| panic!("{e}"))
+            .volume;
+        let v = crop(&full, origin, size);
+        let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
+        let t = texels(&v);
+        let vol =
+            GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+        let lut = lao_lut(&tf, &t);
+        for set in [
+            RaySet::Six,
+            RaySet::Fourteen,
+            RaySet::TwentySix,
+            RaySet::FiftyFour,
+            RaySet::Fibonacci(32),
+        ] {
+            let rays = Rays::uniform(set.directions());
+            let g = lao
+                .compute(&gpu, &vol, &lut, &rays, 20, &|_, _| {})
+                .unwrap_or_else(|e| panic!("{e}"));
+            let c = lao_cpu(&t, &lut, &rays, 20, &|_, _| {});
+            let max = g
+                .iter()
+                .zip(&c)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            eprintln!("{name} {}: max |GPU − CPU| = {max:.2e}", set.name());
+            assert!(
+                max <= 1.0 / 255.0,
+                "{name} {}: max difference {max}",
+                set.name()
+            );
+            assert!(
+                c.iter().any(|&a| a < 0.9),
+                "{name}: the crop should contain occluded voxels"
+            );
+        }
+    }
+}
+
+/// A sub-box of a volume (same type and spacing).
+fn crop(v: &Volume, origin: [usize; 3], size: [usize; 3]) -> Volume {
+    let [nx, ny, _] = v.dims;
+    let idx = |i: usize| {
+        let (x, y, z) = (
+            i % size[0],
+            (i / size[0]) % size[1],
+            i / (size[0] * size[1]),
+        );
+        origin[0] + x + nx * (origin[1] + y + ny * (origin[2] + z))
+    };
+    let n = size.iter().product::<usize>();
+    let data = match &v.data {
+        VoxelData::U8(d) => VoxelData::U8((0..n).map(|i| d[idx(i)]).collect()),
+        VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
+        other => panic!("crop: {:?} not needed here", other.voxel_type()),
+    };
+    Volume::new(size, v.spacing, data).expect("valid crop")
+}
