@@ -7,7 +7,10 @@
 //! Opacities `a_i` come from the transfer function, corrected for a 1 mm step; samples
 //! outside the volume are empty.
 
-use crate::gpu::{Gpu, GpuError, read_buffer, shaders, validated};
+use crate::gpu::{
+    Gpu, GpuError, bind_group, read_buffer, readback_buffer, shaders, submit_compute,
+    uniform_buffer, validated,
+};
 use crate::render::cpu::trilinear;
 use crate::render::gpu::{GpuVolume, bake_lut};
 use crate::render::texels::VolumeTexels;
@@ -230,12 +233,7 @@ impl LaoGpu {
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             });
-            let readback = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("Lao::readback"),
-                size,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
+            let readback = readback_buffer(device, "Lao::readback", size);
             (lut_buf, ray_buf, out, readback)
         })?;
         let mut result = Vec::with_capacity(nx * ny * nz);
@@ -251,57 +249,32 @@ impl LaoGpu {
             p.counts[2] = count;
             p.counts[3] = gx * 64;
             validated(device, "Lao::slab", || {
-                let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("Lao::params"),
-                    size: std::mem::size_of::<LaoParams>() as u64,
-                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                });
-                gpu.queue.write_buffer(&uniforms, 0, bytemuck::bytes_of(&p));
-                let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("Lao::bind_group"),
-                    layout: &self.pipeline.get_bind_group_layout(0),
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: uniforms.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: wgpu::BindingResource::TextureView(vol.volume_view()),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::Sampler(&self.sampler),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: lut_buf.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 4,
-                            resource: ray_buf.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 5,
-                            resource: out.as_entire_binding(),
-                        },
+                let uniforms =
+                    uniform_buffer(device, &gpu.queue, "Lao::params", bytemuck::bytes_of(&p));
+                let group = bind_group(
+                    device,
+                    "Lao::bind_group",
+                    &self.pipeline.get_bind_group_layout(0),
+                    &[
+                        uniforms.as_entire_binding(),
+                        wgpu::BindingResource::TextureView(vol.volume_view()),
+                        wgpu::BindingResource::Sampler(&self.sampler),
+                        lut_buf.as_entire_binding(),
+                        ray_buf.as_entire_binding(),
+                        out.as_entire_binding(),
                     ],
-                });
-                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("Lao::encoder"),
-                });
-                {
-                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some("Lao::pass"),
-                        timestamp_writes: None,
-                    });
-                    pass.set_pipeline(&self.pipeline);
-                    pass.set_bind_group(0, &bind_group, &[]);
-                    pass.dispatch_workgroups(gx, gy, 1);
-                }
-                encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, count as u64 * 4);
-                gpu.queue.submit([encoder.finish()]);
+                );
+                submit_compute(
+                    device,
+                    &gpu.queue,
+                    "Lao::slab",
+                    &self.pipeline,
+                    &group,
+                    [gx, gy, 1],
+                    |encoder| {
+                        encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, count as u64 * 4);
+                    },
+                );
             })?;
             let bytes = read_buffer(device, &readback, "Lao::readback")?;
             result.extend(bytemuck::pod_collect_to_vec::<u8, f32>(

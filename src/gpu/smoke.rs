@@ -1,7 +1,9 @@
 //! The GPU smoke test (`shaders/smoke.wgsl`) and its CPU twin: proves a device runs
 //! compute work, writes every slice of a 3-D storage texture and reads back correctly.
 
-use super::{Gpu, GpuError, padded_row_bytes, read_buffer, shaders, validated};
+use super::{
+    Gpu, GpuError, bind_group, padded_row_bytes, read_buffer, shaders, submit_compute, validated,
+};
 
 /// What the smoke shader wrote, read back from the GPU.
 #[derive(Debug, Clone, PartialEq)]
@@ -85,50 +87,43 @@ pub fn run(gpu: &Gpu, dims: [u32; 3]) -> Result<SmokeOutput, GpuError> {
 
     validated(device, "Smoke::dispatch", || {
         let view = texture.create_view(&Default::default());
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("Smoke::bind_group"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: linear.as_entire_binding(),
-                },
+        let group = bind_group(
+            device,
+            "Smoke::bind_group",
+            &pipeline.get_bind_group_layout(0),
+            &[
+                wgpu::BindingResource::TextureView(&view),
+                linear.as_entire_binding(),
             ],
-        });
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("Smoke::encoder"),
-        });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("Smoke::pass"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(
-                dims[0].div_ceil(4),
-                dims[1].div_ceil(4),
-                dims[2].div_ceil(4),
-            );
-        }
-        encoder.copy_texture_to_buffer(
-            texture.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &tex_readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: Some(dims[1]),
-                },
-            },
-            size,
         );
-        encoder.copy_buffer_to_buffer(&linear, 0, &lin_readback, 0, n * 4);
-        gpu.queue.submit([encoder.finish()]);
+        let groups = [
+            dims[0].div_ceil(4),
+            dims[1].div_ceil(4),
+            dims[2].div_ceil(4),
+        ];
+        submit_compute(
+            device,
+            &gpu.queue,
+            "Smoke::dispatch",
+            &pipeline,
+            &group,
+            groups,
+            |encoder| {
+                encoder.copy_texture_to_buffer(
+                    texture.as_image_copy(),
+                    wgpu::TexelCopyBufferInfo {
+                        buffer: &tex_readback,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(row),
+                            rows_per_image: Some(dims[1]),
+                        },
+                    },
+                    size,
+                );
+                encoder.copy_buffer_to_buffer(&linear, 0, &lin_readback, 0, n * 4);
+            },
+        );
     })?;
 
     let padded = read_buffer(device, &tex_readback, "Smoke::volume")?;

@@ -4,7 +4,10 @@
 
 use super::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use super::{Frame, Image};
-use crate::gpu::{Gpu, GpuError, padded_row_bytes, read_buffer, shaders, validated};
+use crate::gpu::{
+    Gpu, GpuError, bind_group, padded_row_bytes, read_buffer, readback_buffer, shaders,
+    submit_compute, uniform_buffer, validated,
+};
 use crate::tf::{Lut, TransferFunction, correct_opacity};
 
 /// Largest tile rendered in one submission: keeps each dispatch short (no driver
@@ -359,14 +362,12 @@ impl RayCaster {
         let params = frame.params(&vol.texels, &vol.lut, x0, y0);
         let row = padded_row_bytes(tw * 4);
         let readback = validated(device, "RayCaster::tile", || {
-            let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("RayCaster::params"),
-                size: std::mem::size_of_val(&params) as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            gpu.queue
-                .write_buffer(&uniforms, 0, bytemuck::bytes_of(&params));
+            let uniforms = uniform_buffer(
+                device,
+                &gpu.queue,
+                "RayCaster::params",
+                bytemuck::bytes_of(&params),
+            );
             let target = device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("RayCaster::tile"),
                 size: wgpu::Extent3d {
@@ -382,75 +383,47 @@ impl RayCaster {
                 view_formats: &[],
             });
             let target_view = target.create_view(&Default::default());
-            let readback = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("RayCaster::readback"),
-                size: row as u64 * th as u64,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("RayCaster::bind_group"),
-                layout: &self.layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: uniforms.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: wgpu::BindingResource::TextureView(&vol.volume_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: wgpu::BindingResource::Sampler(&self.sampler),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: vol.lut_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 4,
-                        resource: wgpu::BindingResource::TextureView(&vol.ao_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 5,
-                        resource: wgpu::BindingResource::TextureView(&vol.occupancy_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 6,
-                        resource: wgpu::BindingResource::TextureView(&target_view),
-                    },
+            let readback = readback_buffer(device, "RayCaster::readback", row as u64 * th as u64);
+            let group = bind_group(
+                device,
+                "RayCaster::bind_group",
+                &self.layout,
+                &[
+                    uniforms.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&vol.volume_view),
+                    wgpu::BindingResource::Sampler(&self.sampler),
+                    vol.lut_buffer.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&vol.ao_view),
+                    wgpu::BindingResource::TextureView(&vol.occupancy_view),
+                    wgpu::BindingResource::TextureView(&target_view),
                 ],
-            });
-            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("RayCaster::encoder"),
-            });
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("RayCaster::pass"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &bind_group, &[]);
-                pass.dispatch_workgroups(tw.div_ceil(8), th.div_ceil(8), 1);
-            }
-            encoder.copy_texture_to_buffer(
-                target.as_image_copy(),
-                wgpu::TexelCopyBufferInfo {
-                    buffer: &readback,
-                    layout: wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(row),
-                        rows_per_image: Some(th),
-                    },
-                },
-                wgpu::Extent3d {
-                    width: tw,
-                    height: th,
-                    depth_or_array_layers: 1,
+            );
+            submit_compute(
+                device,
+                &gpu.queue,
+                "RayCaster::tile",
+                &self.pipeline,
+                &group,
+                [tw.div_ceil(8), th.div_ceil(8), 1],
+                |encoder| {
+                    encoder.copy_texture_to_buffer(
+                        target.as_image_copy(),
+                        wgpu::TexelCopyBufferInfo {
+                            buffer: &readback,
+                            layout: wgpu::TexelCopyBufferLayout {
+                                offset: 0,
+                                bytes_per_row: Some(row),
+                                rows_per_image: Some(th),
+                            },
+                        },
+                        wgpu::Extent3d {
+                            width: tw,
+                            height: th,
+                            depth_or_array_layers: 1,
+                        },
+                    );
                 },
             );
-            gpu.queue.submit([encoder.finish()]);
             readback
         })?;
         let bytes = read_buffer(device, &readback, "RayCaster::readback")?;
