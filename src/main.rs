@@ -259,6 +259,8 @@ enum BenchCommand {
     Load(volao::bench::LoadBenchArgs),
     /// Frame times of the GPU ray caster (engine and cranium CT, 512² and 1024²).
     Render(volao::bench::RenderBenchArgs),
+    /// The CAO paper's Tables 5–6 (LAO accuracy vs rays) on the Engine, and LAO throughput.
+    Lao(volao::bench::LaoBenchArgs),
     /// (internal) load one file and print time and peak memory as JSON.
     #[command(hide = true)]
     LoadOne { file: PathBuf },
@@ -277,8 +279,9 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         None => {
             eprintln!(
-                "volao: the viewer is not built yet. Today volao loads, inspects and converts volumes \
-                 (see `volao --help`); here is the built-in demo volume the viewer will open on:\n"
+                "volao: the viewer is not built yet. Today volao inspects, converts and renders volumes \
+                 headless (see `volao --help`; `volao render -o demo.png --ao lao` renders this one);\n\
+                 here is the built-in demo volume the viewer will open on:\n"
             );
             print_info(&describe_demo(&volume::demo::head_phantom(128), 32), false)
         }
@@ -339,6 +342,7 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Render(args)) => render(&args),
         Some(Command::Ao(args)) => ambient_occlusion(&args),
         Some(Command::Bench(BenchCommand::Render(args))) => volao::bench::render_bench(&args),
+        Some(Command::Bench(BenchCommand::Lao(args))) => volao::bench::lao_bench(&args),
         Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
     }
