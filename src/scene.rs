@@ -181,8 +181,10 @@ impl Scene {
     }
 }
 
-/// `target` relative to `base` if it is below it, else `target` made absolute.
+/// `target` relative to the folder `base` (with `..` where needed), or absolute when the
+/// two share no root (another drive on Windows).
 fn relative_to(target: &Path, base: &Path) -> PathBuf {
+    use std::path::Component;
     let abs = |p: &Path| {
         std::fs::canonicalize(p).unwrap_or_else(|_| {
             std::env::current_dir()
@@ -191,10 +193,21 @@ fn relative_to(target: &Path, base: &Path) -> PathBuf {
         })
     };
     let (t, b) = (abs(target), abs(base));
-    match t.strip_prefix(&b) {
-        Ok(rel) => rel.to_owned(),
-        Err(_) => t,
+    let (tc, bc): (Vec<Component>, Vec<Component>) =
+        (t.components().collect(), b.components().collect());
+    let common = tc.iter().zip(&bc).take_while(|(x, y)| x == y).count();
+    // Only the root in common (or not even that): a relative path would not help.
+    if common <= 1 {
+        return t;
     }
+    let mut rel = PathBuf::new();
+    for _ in common..bc.len() {
+        rel.push("..");
+    }
+    for c in &tc[common..] {
+        rel.push(c);
+    }
+    rel
 }
 
 #[cfg(test)]
@@ -260,6 +273,37 @@ mod tests {
                 ..back
             },
             s
+        );
+    }
+
+    #[test]
+    fn volume_paths_beside_the_scene_folder_are_relative() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        std::fs::create_dir_all(dir.path().join("scenes/figures")).expect("mkdir");
+        std::fs::create_dir_all(dir.path().join("data")).expect("mkdir");
+        let volume = dir.path().join("data/ct.raw");
+        std::fs::write(&volume, [0u8; 8]).expect("write");
+        let base = dir.path().join("scenes/figures");
+        assert_eq!(relative_to(&volume, &base), Path::new("../../data/ct.raw"));
+        assert_eq!(
+            relative_to(&volume, &dir.path().join("data")),
+            Path::new("ct.raw")
+        );
+        let scene_path = base.join("s.json");
+        let s = Scene {
+            volume: VolumeSource {
+                path: Some(volume.clone()),
+                frame: 0,
+                raw: None,
+            },
+            ..scene()
+        };
+        s.save(&scene_path).expect("save");
+        let back = Scene::load(&scene_path).expect("load");
+        assert_eq!(
+            back.volume_path(&scene_path)
+                .map(|p| p.canonicalize().expect("exists")),
+            Some(volume.canonicalize().expect("exists"))
         );
     }
 
