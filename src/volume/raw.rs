@@ -78,7 +78,15 @@ pub fn parse_dat(text: &str) -> Result<DatSidecar, String> {
             )
         };
         match key.as_str() {
-            "objectfilename" | "rawfile" => dat.object_file = Some(value.to_owned()),
+            "objectfilename" | "rawfile" => {
+                if value.is_empty() {
+                    return Err(format!(
+                        "line {}: {key} is empty: which file holds the voxels?",
+                        lineno + 1
+                    ));
+                }
+                dat.object_file = Some(value.to_owned());
+            }
             "resolution" | "dimensions" => {
                 let v = numbers::<usize>(value)
                     .filter(|v| v.len() == 3)
@@ -486,6 +494,8 @@ mod tests {
     #[test]
     fn rejects_bad_sidecar_values() {
         for bad in [
+            "ObjectFileName:",
+            "ObjectFileName:   ",
             "Resolution: 1 2",
             "Resolution: a b c",
             "Format: RGB",
