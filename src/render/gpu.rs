@@ -182,11 +182,11 @@ impl GpuVolume {
                 occupancy_view: occupancy.create_view(&Default::default()),
                 occupancy,
                 lut_buffer,
-                lut: lut.clone(),
+                lut,
                 lut_step: step_voxels,
                 tf: tf.clone(),
-                ranges: ranges.clone(),
-                texels: texels.clone(),
+                ranges,
+                texels,
             }
         })
     }
