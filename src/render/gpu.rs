@@ -96,9 +96,8 @@ pub fn bake_lut(tf: &TransferFunction, texels: &VolumeTexels, step_voxels: f32) 
     // Unorm texels span [lo, hi] exactly; float texels use the TF's own span, widened.
     let (lo, hi) = match texels.format {
         super::texels::TexelFormat::R32Float => {
-            let vals = texels.norm_values();
-            let mn = vals.iter().copied().fold(f32::INFINITY, f32::min) as f64;
-            let mx = vals.iter().copied().fold(f32::NEG_INFINITY, f32::max) as f64;
+            let (mn, mx) = texels.norm_range();
+            let (mn, mx) = (mn as f64, mx as f64);
             if mx > mn {
                 (mn, mx)
             } else {

@@ -90,21 +90,40 @@ impl VolumeTexels {
         }
     }
 
-    /// Texel values as the GPU reads them (normalised for unorm formats), x fastest.
-    pub fn norm_values(&self) -> Vec<f32> {
+    /// Texel `i` (x fastest) as the GPU reads it: normalised for unorm formats.
+    #[inline]
+    pub fn norm_at(&self, i: usize) -> f32 {
+        let b = &self.bytes;
         match self.format {
-            TexelFormat::R8Unorm => self.bytes.iter().map(|&b| b as f32 / 255.0).collect(),
-            TexelFormat::R16Unorm => self
-                .bytes
-                .chunks_exact(2)
-                .map(|c| u16::from_le_bytes([c[0], c[1]]) as f32 / 65535.0)
-                .collect(),
-            TexelFormat::R32Float => self
-                .bytes
-                .chunks_exact(4)
-                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                .collect(),
+            TexelFormat::R8Unorm => b[i] as f32 / 255.0,
+            TexelFormat::R16Unorm => u16::from_le_bytes([b[2 * i], b[2 * i + 1]]) as f32 / 65535.0,
+            TexelFormat::R32Float => {
+                f32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]])
+            }
         }
+    }
+
+    /// All texels as [`Self::norm_at`] reads them, for the CPU twins.
+    pub fn norm_values(&self) -> Vec<f32> {
+        (0..self.bytes.len() / self.format.bytes())
+            .map(|i| self.norm_at(i))
+            .collect()
+    }
+
+    /// Smallest and largest texel value (as [`Self::norm_at`] reads them).
+    pub fn norm_range(&self) -> (f32, f32) {
+        use rayon::prelude::*;
+        (0..self.bytes.len() / self.format.bytes())
+            .into_par_iter()
+            .map(|i| self.norm_at(i))
+            .fold(
+                || (f32::INFINITY, f32::NEG_INFINITY),
+                |(a, b), v| (a.min(v), b.max(v)),
+            )
+            .reduce(
+                || (f32::INFINITY, f32::NEG_INFINITY),
+                |(a, b), (c, d)| (a.min(c), b.max(d)),
+            )
     }
 
     /// Physical size of the box in mm.
@@ -271,7 +290,6 @@ impl BlockRanges {
     pub fn new(texels: &VolumeTexels) -> Self {
         use rayon::prelude::*;
         let dims = texels.dims;
-        let norm = texels.norm_values();
         let grid: [usize; 3] = std::array::from_fn(|i| dims[i].div_ceil(BLOCK));
         let ranges = (0..grid[0] * grid[1] * grid[2])
             .into_par_iter()
@@ -288,7 +306,7 @@ impl BlockRanges {
                 for z in lo[2]..hi[2] {
                     for y in lo[1]..hi[1] {
                         let row = dims[0] * (y + dims[1] * z);
-                        for &v in &norm[row + lo[0]..row + hi[0]] {
+                        for v in (row + lo[0]..row + hi[0]).map(|i| texels.norm_at(i)) {
                             mn = mn.min(v);
                             mx = mx.max(v);
                         }
