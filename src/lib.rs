@@ -16,6 +16,7 @@
 
 pub mod ao;
 pub mod bench;
+pub mod bench_cao;
 pub mod clip;
 pub mod gpu;
 pub mod render;

@@ -97,7 +97,8 @@ struct RenderArgs {
     /// Ambient coefficient k of k·A(x)·C_TF(x), 0 to 1 (1: ambient occlusion only).
     #[arg(long)]
     ambient: Option<f32>,
-    /// Ambient occlusion: none or lao.
+    /// Ambient occlusion: none, lao, cao (exact under clipping) or lao-full (LAO of every
+    /// voxel each frame, CAO's baseline).
     #[arg(long, value_parser = volao::ao::AoMethod::parse)]
     ao: Option<volao::ao::AoMethod>,
     /// AO ray pattern: 6, 14, 26, 54 (the CAO paper's) or fib:N (Fibonacci lattice).
@@ -106,6 +107,8 @@ struct RenderArgs {
     /// AO samples per ray (1 mm apart).
     #[arg(long)]
     samples: Option<u32>,
+    #[command(flatten)]
+    clip: ClipArgs,
     /// Render on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
@@ -193,11 +196,81 @@ struct AoArgs {
     /// Transfer-function preset giving the opacity (default: by the data's range).
     #[arg(long)]
     tf: Option<String>,
+    #[command(flatten)]
+    clip: ClipArgs,
     /// Compute on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
     #[command(flatten)]
     load: LoadArgs,
+}
+
+/// Clip shapes and CAO parameters.
+#[derive(Args, Debug, Default)]
+struct ClipArgs {
+    /// A clip shape (repeatable, up to 8), lengths in mm from the volume's centre:
+    /// plane:PX,PY,PZ,NX,NY,NZ (removes the side the normal points to),
+    /// sphere:CX,CY,CZ,R, box:CX,CY,CZ,SX,SY,SZ[,RX,RY,RZ], cylinder:CX,CY,CZ,R,H[,RX,RY,RZ],
+    /// torus:CX,CY,CZ,R,r[,RX,RY,RZ], mesh:FILE.obj|stl[,CX,CY,CZ[,SCALE]]. Replaces a scene's shapes.
+    #[arg(long = "clip", value_name = "SHAPE", value_parser = volao::clip::ClipShape::parse)]
+    shapes: Vec<volao::clip::ClipShape>,
+    /// carve (remove the inside, default) or probe (keep only the inside) for --clip shapes.
+    #[arg(long, value_parser = volao::clip::ClipMode::parse)]
+    clip_mode: Option<volao::clip::ClipMode>,
+    /// CAO: extra anti-aliasing samples for partly clipped voxels (default 32; 41 in all).
+    #[arg(long)]
+    msaa: Option<u32>,
+    /// CAO: depth/dilation map size per clip shape in pixels (default 1024).
+    #[arg(long)]
+    clip_resolution: Option<u32>,
+}
+
+impl ClipArgs {
+    /// The shapes given on the command line with the mode applied, or `fallback`.
+    fn shapes_or(&self, fallback: Vec<volao::clip::ClipShape>) -> Vec<volao::clip::ClipShape> {
+        if self.shapes.is_empty() {
+            return fallback;
+        }
+        let mode = self.clip_mode.unwrap_or_default();
+        self.shapes
+            .iter()
+            .cloned()
+            .map(|mut s| {
+                s.mode = mode;
+                s
+            })
+            .collect()
+    }
+
+    fn apply(&self, ao: &mut volao::ao::AoSettings) -> Result<()> {
+        if let Some(n) = self.msaa {
+            if n > 256 {
+                bail!("--msaa: at most 256 extra samples");
+            }
+            ao.msaa = n;
+        }
+        if let Some(r) = self.clip_resolution {
+            if !(16..=8192).contains(&r) {
+                bail!("--clip-resolution must be 16 to 8192 pixels");
+            }
+            ao.clip_resolution = r;
+        }
+        Ok(())
+    }
+}
+
+/// One line per stage of a CAO frame.
+fn print_cao(stats: &volao::ao::cao::CaoStats) {
+    println!(
+        "{:.2} % of voxels ray cast ({} of {}; {} clipped); per frame: maps {:.1} ms, clip + mask {:.1} ms, ray cast {:.1} ms",
+        stats.percent_recomputed(),
+        stats.recomputed,
+        stats.voxels,
+        stats.clipped,
+        stats.maps_seconds * 1e3,
+        stats.clip_seconds * 1e3,
+        stats.lao_seconds * 1e3
+    );
 }
 
 /// How to read the input: 4-D frame and raw layout.
@@ -261,6 +334,9 @@ enum BenchCommand {
     Render(volao::bench::RenderBenchArgs),
     /// The CAO paper's Tables 5–6 (LAO accuracy vs rays) on the Engine, and LAO throughput.
     Lao(volao::bench::LaoBenchArgs),
+    /// The CAO paper's Tables 2–4: voxels recomputed, LAO every frame vs CAO, one vs
+    /// two meshes, per-stage times and GPU memory.
+    Cao(volao::bench_cao::CaoBenchArgs),
     /// (internal) load one file and print time and peak memory as JSON.
     #[command(hide = true)]
     LoadOne { file: PathBuf },
@@ -344,6 +420,7 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Bench(BenchCommand::Render(args))) => volao::bench::render_bench(&args),
         Some(Command::Bench(BenchCommand::Lao(args))) => volao::bench::lao_bench(&args),
         Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
+        Some(Command::Bench(BenchCommand::Cao(args))) => volao::bench_cao::cao_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
     }
 }
@@ -364,28 +441,51 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
         None => Preset::default_for(&stats),
     };
     let tf = TransferFunction::preset(preset, &stats);
-    let settings = AoSettings {
+    let mut settings = AoSettings {
         method: args.method,
         rays: args.rays,
         samples: args.samples,
+        ..Default::default()
     };
+    args.clip.apply(&mut settings)?;
+    let clip = args.clip.shapes_or(Vec::new());
+    if !clip.is_empty() && !matches!(args.method, AoMethod::Cao | AoMethod::LaoFull) {
+        bail!("--clip needs --method cao or lao-full (plain LAO ignores clipping)");
+    }
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", true);
-    let (ao, device) =
-        volao::ao::compute_volume(&volume, &tf, &settings, !args.cpu, &|done, total| {
+    let (ao, device, cao) = volao::ao::compute_volume_clipped(
+        &volume,
+        &tf,
+        &settings,
+        &clip,
+        !args.cpu,
+        &|done, total| {
             bar.set_length(total as u64);
             bar.set_position(done as u64);
-        })?;
+        },
+    )?;
     bar.finish_and_clear();
+    if let Some(stats) = &cao {
+        for e in &stats.clip_errors {
+            eprintln!("warning: {e}");
+        }
+        print_cao(stats);
+    }
     let seconds = start.elapsed().as_secs_f64();
     for w in volume::save(&ao, &args.output)? {
         eprintln!("warning: {}: {w}", args.output.display());
     }
     let s = ao.stats();
     println!(
-        "{}: {} LAO, {} rays × {} samples, TF {}, in {:.1} s on {device}; A from {:.4} to {:.4}, mean {:.4}",
+        "{}: {} {}, {} rays × {} samples, TF {}, in {:.1} s on {device}; A from {:.4} to {:.4}, mean {:.4}",
         args.output.display(),
         fmt_dims(ao.dims),
+        match args.method {
+            AoMethod::Cao => "CAO",
+            AoMethod::LaoFull => "LAO (every voxel, clipped)",
+            _ => "LAO",
+        },
         settings.rays.name(),
         settings.samples,
         tf.name,
@@ -513,14 +613,31 @@ fn render(args: &RenderArgs) -> Result<()> {
         ao.samples = m;
     }
 
+    args.clip.apply(&mut ao)?;
+    let scene_clip = match (&scene, scene_path) {
+        (Some(s), Some(sp)) => s.clip_shapes_resolved(sp),
+        _ => Vec::new(),
+    };
+    let clip = args.clip.shapes_or(scene_clip);
+
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", ao.method != volao::ao::AoMethod::None);
-    let out =
-        volao::render::offscreen::render(&volume, &tf, &frame, &ao, !args.cpu, &|done, total| {
+    let out = volao::render::offscreen::render_clipped(
+        &volume,
+        &tf,
+        &frame,
+        &ao,
+        &clip,
+        !args.cpu,
+        &|done, total| {
             bar.set_length(total as u64);
             bar.set_position(done as u64);
-        })?;
+        },
+    )?;
     bar.finish_and_clear();
+    for e in &out.clip_errors {
+        eprintln!("warning: {e} (rendered without it)");
+    }
     let seconds = start.elapsed().as_secs_f64();
     if out.downsampled > 0 {
         eprintln!(
@@ -545,6 +662,9 @@ fn render(args: &RenderArgs) -> Result<()> {
         seconds * 1e3,
         out.device
     );
+    if let Some(stats) = &out.cao {
+        print_cao(stats);
+    }
 
     if let Some(path) = &args.save_scene {
         let s = Scene {
@@ -561,10 +681,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             width,
             height,
             ambient_occlusion: ao,
-            clip_shapes: scene
-                .as_ref()
-                .map(|s| s.clip_shapes.clone())
-                .unwrap_or_default(),
+            clip_shapes: clip,
         };
         s.save(path)?;
         println!("scene: {}", path.display());

@@ -459,7 +459,8 @@ fn dilation_maps_match_the_cpu_twin() {
         let camera = s.cao.clip.cameras()[0];
         let (r_xy, r_z) = camera.dilation_radii();
         let z = [0, 1, 2, 3].map(|l| maps.layer(0, l));
-        let d = volao::clip::cpu::dilate(z, maps.resolution, r_xy, r_z, mode == ClipMode::Probe);
+        let f = volao::clip::gpu::block_size(r_xy);
+        let d = volao::clip::cpu::dilate(z, maps.resolution, r_xy, r_z, mode == ClipMode::Probe, f);
         for (k, dk) in d.iter().enumerate() {
             let g = maps.layer(0, 4 + k as u32);
             let worst = dk
