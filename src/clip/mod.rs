@@ -166,6 +166,20 @@ impl ClipShape {
         Ok(mesh.validate(&self.describe())?)
     }
 
+    /// The mesh posed in the volume's physical space (for drawing the shape).
+    pub fn posed_geometry(&self, volume_radius: f32) -> Result<TriMesh, ClipError> {
+        let m = self.geometry(volume_radius)?;
+        let to_volume = self.shape_to_volume();
+        Ok(TriMesh {
+            vertices: m
+                .vertices
+                .iter()
+                .map(|v| to_volume.transform_point3(*v))
+                .collect(),
+            triangles: m.triangles,
+        })
+    }
+
     /// e.g. "sphere at (10, 0, -5) mm".
     pub fn describe(&self) -> String {
         let name = match &self.shape {
