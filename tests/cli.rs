@@ -275,7 +275,11 @@ fn cao_renders_with_clip_flags_prints_its_figures_and_its_scene_reproduces_it() 
     }
     // A broken mesh is reported and the other shape still clips.
     let open = dir.path().join("open.obj");
-    std::fs::write(&open, "v 0 0 0\nv 9 0 0\nv 0 9 0\nv 0 0 9\nf 1 2 3\nf 1 2 4\n").expect("write");
+    std::fs::write(
+        &open,
+        "v 0 0 0\nv 9 0 0\nv 0 9 0\nv 0 0 9\nf 1 2 3\nf 1 2 4\n",
+    )
+    .expect("write");
     let out = volao(&[
         "render",
         &p(&bucky),
@@ -297,5 +301,67 @@ fn cao_renders_with_clip_flags_prints_its_figures_and_its_scene_reproduces_it() 
     assert!(
         err.contains("open.obj") && err.contains("not closed"),
         "{err}"
+    );
+}
+
+#[test]
+fn ao_with_clip_shapes_writes_the_cao_volume() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bucky = data("pvm/Bucky.pvm");
+    let p = |p: &std::path::Path| p.to_str().expect("utf-8 path").to_owned();
+    let run = |method: &str, name: &str| {
+        let out_path = dir.path().join(name);
+        let out = volao(&[
+            "ao",
+            &p(&bucky),
+            "-o",
+            &p(&out_path),
+            "--method",
+            method,
+            "--rays",
+            "6",
+            "--samples",
+            "6",
+            "--clip",
+            "sphere:5,5,0,8",
+            "--clip-resolution",
+            "64",
+        ]);
+        (out, out_path)
+    };
+    let (out, cao_path) = run("cao", "cao.nii.gz");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("% of voxels ray cast"),
+        "{}",
+        text(&out.stdout)
+    );
+    let (out, full_path) = run("lao-full", "full.nii.gz");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let load = |path: &std::path::Path| match volao::volume::load(path, &Default::default())
+        .expect("AO loads")
+        .volume
+        .data
+    {
+        volao::volume::VoxelData::F32(v) => v,
+        other => panic!("{:?}", other.voxel_type()),
+    };
+    let (cao, full) = (load(&cao_path), load(&full_path));
+    assert_eq!(cao.len(), 32 * 32 * 32);
+    assert!(cao.iter().all(|a| (0.0..=1.0).contains(a)));
+    assert_eq!(cao, full, "CAO equals LAO every frame");
+    let out = volao(&[
+        "ao",
+        &p(&bucky),
+        "-o",
+        &p(&dir.path().join("x.nii.gz")),
+        "--clip",
+        "sphere:0,0,0,5",
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("--method cao"),
+        "{}",
+        text(&out.stderr)
     );
 }
