@@ -368,6 +368,7 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
         method: args.method,
         rays: args.rays,
         samples: args.samples,
+        ..Default::default()
     };
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", true);

@@ -5,6 +5,7 @@
 
 pub mod lao;
 pub mod rays;
+pub mod vao;
 
 use rays::RaySet;
 
@@ -17,6 +18,10 @@ pub enum AoMethod {
     None,
     /// Local Ambient Occlusion, precomputed once per transfer function.
     Lao,
+    /// Positional AO by ray marching (Papaioannou et al. Eq. 8), precomputed per voxel.
+    Vao,
+    /// The same positional AO evaluated at every ray-cast sample, no precomputation.
+    VaoLive,
 }
 
 impl AoMethod {
@@ -24,8 +29,10 @@ impl AoMethod {
         match s {
             "none" => Ok(AoMethod::None),
             "lao" => Ok(AoMethod::Lao),
+            "vao" => Ok(AoMethod::Vao),
+            "vao-live" => Ok(AoMethod::VaoLive),
             other => Err(format!(
-                "unknown AO method {other:?} (available: none, lao)"
+                "unknown AO method {other:?} (available: none, lao, vao, vao-live)"
             )),
         }
     }
@@ -41,6 +48,8 @@ pub struct AoSettings {
     pub rays: RaySet,
     /// Samples per ray (M), 1 mm apart.
     pub samples: u32,
+    /// Parameters of positional AO (`vao`, `vao-live`).
+    pub vao: vao::VaoSettings,
 }
 
 impl Default for AoSettings {
@@ -49,6 +58,7 @@ impl Default for AoSettings {
             method: AoMethod::None,
             rays: RaySet::FiftyFour,
             samples: lao::DEFAULT_SAMPLES,
+            vao: vao::VaoSettings::default(),
         }
     }
 }
@@ -79,6 +89,9 @@ pub fn compute_volume(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(crate::volume::Volume, String), crate::gpu::GpuError> {
     use crate::render::texels::{UploadLimits, VolumeTexels};
+    if matches!(settings.method, AoMethod::Vao | AoMethod::VaoLive) {
+        return vao::compute_volume(volume, tf, &settings.vao, use_gpu, progress);
+    }
     let rays = lao::Rays::uniform(settings.rays.directions());
     let mut computed = None;
     if use_gpu {

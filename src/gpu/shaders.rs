@@ -12,6 +12,8 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("lao.wgsl", include_str!("../../shaders/lao.wgsl")),
     ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
     ("smoke.wgsl", include_str!("../../shaders/smoke.wgsl")),
+    ("vao.wgsl", include_str!("../../shaders/vao.wgsl")),
+    ("vao_common.wgsl", include_str!("../../shaders/vao_common.wgsl")),
 ];
 
 const DIRECTIVE: &str = "//!include ";
