@@ -219,6 +219,52 @@ pub fn mip_chain(texels: &VolumeTexels, levels: u32) -> Vec<(Vec<u16>, [usize; 3
     chain
 }
 
+/// An R16Float 3-D texture holding `chain` as its mip levels (from [`mip_chain`]).
+pub fn f16_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    chain: &[(Vec<u16>, [usize; 3])],
+) -> wgpu::Texture {
+    let first = chain[0].1.map(|d| d as u32);
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: first[0],
+            height: first[1],
+            depth_or_array_layers: first[2],
+        },
+        mip_level_count: chain.len() as u32,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D3,
+        format: wgpu::TextureFormat::R16Float,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    for (l, (values, dims)) in chain.iter().enumerate() {
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: l as u32,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytemuck::cast_slice(values),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(dims[0] as u32 * 2),
+                rows_per_image: Some(dims[1] as u32),
+            },
+            wgpu::Extent3d {
+                width: dims[0] as u32,
+                height: dims[1] as u32,
+                depth_or_array_layers: dims[2] as u32,
+            },
+        );
+    }
+    texture
+}
+
 /// Uniforms of the positional-AO function. Mirrors `struct VaoParams` in
 /// `shaders/vao_common.wgsl`.
 #[repr(C)]
@@ -479,42 +525,7 @@ impl VaoInputs {
                 gpu.queue.write_buffer(&b, 0, bytes);
                 b
             };
-            let first = chain[0].1.map(|d| d as u32);
-            let texture = device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("Vao::levels"),
-                size: wgpu::Extent3d {
-                    width: first[0],
-                    height: first[1],
-                    depth_or_array_layers: first[2],
-                },
-                mip_level_count: chain.len() as u32,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format: wgpu::TextureFormat::R16Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            });
-            for (l, (values, dims)) in chain.iter().enumerate() {
-                gpu.queue.write_texture(
-                    wgpu::TexelCopyTextureInfo {
-                        texture: &texture,
-                        mip_level: l as u32,
-                        origin: wgpu::Origin3d::ZERO,
-                        aspect: wgpu::TextureAspect::All,
-                    },
-                    bytemuck::cast_slice(values),
-                    wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(dims[0] as u32 * 2),
-                        rows_per_image: Some(dims[1] as u32),
-                    },
-                    wgpu::Extent3d {
-                        width: dims[0] as u32,
-                        height: dims[1] as u32,
-                        depth_or_array_layers: dims[2] as u32,
-                    },
-                );
-            }
+            let texture = f16_texture(device, &gpu.queue, "Vao::levels", &chain);
             VaoInputs {
                 params,
                 uniforms: uniform_buffer(

@@ -10,6 +10,7 @@ use super::GpuError;
 pub const SOURCES: &[(&str, &str)] = &[
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
     ("lao.wgsl", include_str!("../../shaders/lao.wgsl")),
+    ("light.wgsl", include_str!("../../shaders/light.wgsl")),
     ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
     ("smoke.wgsl", include_str!("../../shaders/smoke.wgsl")),
     ("vao.wgsl", include_str!("../../shaders/vao.wgsl")),

@@ -13,6 +13,7 @@ pub mod cpu;
 pub mod gpu;
 pub mod image;
 pub mod offscreen;
+pub mod shadow;
 pub mod texels;
 
 pub use camera::Camera;
