@@ -1,6 +1,7 @@
 // Direct volume ray caster: one invocation per pixel of a tile.
 // CPU twin: src/render/cpu.rs (same steps, same order; keep them in sync).
 //!include common.wgsl
+//!include vao_common.wgsl
 
 struct Params {
     inv_view_proj: mat4x4<f32>,
@@ -22,7 +23,26 @@ struct Params {
 @group(0) @binding(5) var occupancy: texture_3d<u32>;
 @group(0) @binding(6) var out_image: texture_storage_2d<rgba8unorm, write>;
 
+// Group 1 (src/render/shadow.rs): live positional AO (vao_common.wgsl, bindings 0–4)
+// and the light volume for shadows.
+struct Extras {
+    flags: vec4<u32>,  // live positional AO on, shadows on
+    light: vec4<f32>,  // unit direction towards the light (volume space)
+}
+
+@group(1) @binding(5) var<uniform> extras: Extras;
+@group(1) @binding(6) var light_volume: texture_3d<f32>;
+
 const OPAQUE: f32 = 0.99;
+
+// Shadow factor at a view-ray sample, anti-aliased as Imagire et al. (Eq. 3–4): the light
+// volume at the sample and at the half-step positions on either side, weighted ¼, ½, ¼.
+fn shadow(uvw: vec3<f32>, view: vec3<f32>) -> f32 {
+    let half_step = -view * (0.5 * p.step.x) / (2.0 * p.box_half.xyz);
+    return 0.25 * textureSampleLevel(light_volume, linear_clamp, uvw - half_step, 0.0).r
+        + 0.5 * textureSampleLevel(light_volume, linear_clamp, uvw, 0.0).r
+        + 0.25 * textureSampleLevel(light_volume, linear_clamp, uvw + half_step, 0.0).r;
+}
 
 // PCG hash of the pixel → [0, 1); identical to render::jitter.
 fn jitter(x: u32, y: u32) -> f32 {
@@ -58,9 +78,17 @@ fn sample_norm(uvw: vec3<f32>) -> f32 {
 // Blinn–Phong headlight with the ambient term k · A(x) · C_TF(x).
 fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
     let k = p.shading.x;
-    let ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
+    var ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
+    if extras.flags.x != 0u {
+        ao = 1.0 - positional_ao(uvw);  // live mode: Eq. 8 at this very sample
+    }
+    let shadows = extras.flags.y != 0u;
+    var lit = 1.0;
+    if shadows {
+        lit = shadow(uvw, view);
+    }
     if p.shading.w == 0.0 {
-        return rgb * (k * ao + (1.0 - k));
+        return rgb * (k * ao + (1.0 - k) * lit);
     }
     let d = p.voxel_uvw.xyz;
     // Central differences in texel units per mm.
@@ -74,13 +102,21 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
     let edge = clamp(strength, 0.0, 1.0);
     var diffuse = 1.0;
     var specular = 0.0;
-    if strength > 0.0 {
+    if strength > 0.0 && shadows {
+        // Directional light: two-sided Blinn–Phong with the half vector of light and eye.
+        let n = normalize(g);
+        diffuse = mix(1.0, abs(dot(n, extras.light.xyz)), edge);
+        let h = extras.light.xyz + view;
+        if dot(h, h) > 1e-12 {
+            specular = p.shading.y * pow(abs(dot(n, normalize(h))), p.shading.z) * edge;
+        }
+    } else if strength > 0.0 {
         // Headlight: the light comes from the eye, so the half vector is the view vector.
         let n_dot_v = abs(dot(normalize(g), view));
         diffuse = mix(1.0, n_dot_v, edge);
         specular = p.shading.y * pow(n_dot_v, p.shading.z) * edge;
     }
-    return rgb * (k * ao + (1.0 - k) * diffuse) + vec3<f32>(specular);
+    return rgb * (k * ao + (1.0 - k) * diffuse * lit) + vec3<f32>(specular * lit);
 }
 
 @compute @workgroup_size(8, 8, 1)

@@ -283,3 +283,30 @@ pub fn submit_compute(
     after(&mut encoder);
     queue.submit([encoder.finish()]);
 }
+
+/// As [`submit_compute`], with bind groups 0, 1, … set from `bind_groups` in order.
+pub fn submit_compute_groups(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    bind_groups: &[&wgpu::BindGroup],
+    groups: [u32; 3],
+    after: impl FnOnce(&mut wgpu::CommandEncoder),
+) {
+    let mut encoder =
+        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(pipeline);
+        for (i, g) in bind_groups.iter().enumerate() {
+            pass.set_bind_group(i as u32, *g, &[]);
+        }
+        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+    }
+    after(&mut encoder);
+    queue.submit([encoder.finish()]);
+}

@@ -15,6 +15,11 @@ pub struct CpuVolume {
     pub norm: Vec<f32>,
     /// Ambient occlusion per voxel in [0, 1]; `None` means 1 everywhere.
     pub ao: Option<Vec<f32>>,
+    /// Live positional AO: evaluated at every sample instead of `ao` (CPU twin of the
+    /// ray caster's live mode).
+    pub live_vao: Option<crate::ao::vao::PositionalAo>,
+    /// Light volume for shadows from a directional light.
+    pub light: Option<super::shadow::LightVolume>,
 }
 
 impl CpuVolume {
@@ -23,6 +28,8 @@ impl CpuVolume {
             dims: texels.dims,
             norm: texels.norm_values(),
             ao: None,
+            live_vao: None,
+            light: None,
         }
     }
 }
@@ -72,12 +79,20 @@ fn classify(p: &RaycastParams, lut: &Lut, norm: f32) -> Vec4 {
 
 fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -> Vec3 {
     let k = p.shading[0];
-    let ao = vol
+    let mut ao = vol
         .ao
         .as_ref()
         .map_or(1.0, |ao| trilinear(ao, vol.dims, uvw));
+    if let Some(pao) = &vol.live_vao {
+        ao = 1.0 - pao.positional_ao(uvw);
+    }
+    let lit = vol.light.as_ref().map_or(1.0, |l| {
+        let half_step = -view * (0.5 * p.step[0])
+            / (2.0 * Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]));
+        super::shadow::shadow_factor(&l.values, vol.dims, uvw, half_step)
+    });
     if p.shading[3] == 0.0 {
-        return rgb * (k * ao + (1.0 - k));
+        return rgb * (k * ao + (1.0 - k) * lit);
     }
     let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
     let s = |o: Vec3| trilinear(&vol.norm, vol.dims, uvw + o);
@@ -89,12 +104,19 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -
     let strength = g.length() * p.lut_map[0].abs() * p.voxel_uvw[3] * p.lut_map[3];
     let edge = strength.clamp(0.0, 1.0);
     let (mut diffuse, mut specular) = (1.0, 0.0);
-    if strength > 0.0 {
+    if let (true, Some(l)) = (strength > 0.0, &vol.light) {
+        let n = g.normalize();
+        diffuse = 1.0 + (n.dot(l.direction).abs() - 1.0) * edge;
+        let h = l.direction + view;
+        if h.dot(h) > 1e-12 {
+            specular = p.shading[1] * n.dot(h.normalize()).abs().powf(p.shading[2]) * edge;
+        }
+    } else if strength > 0.0 {
         let n_dot_v = g.normalize().dot(view).abs();
         diffuse = 1.0 + (n_dot_v - 1.0) * edge;
         specular = p.shading[1] * n_dot_v.powf(p.shading[2]) * edge;
     }
-    rgb * (k * ao + (1.0 - k) * diffuse) + Vec3::splat(specular)
+    rgb * (k * ao + (1.0 - k) * diffuse * lit) + Vec3::splat(specular * lit)
 }
 
 /// One pixel, exactly as `main` in raycast.wgsl computes it (before 8-bit quantisation).

@@ -6,7 +6,7 @@ use super::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use super::{Frame, Image};
 use crate::gpu::{
     Gpu, GpuError, bind_group, padded_row_bytes, read_buffer, readback_buffer, shaders,
-    submit_compute, uniform_buffer, validated,
+    submit_compute_groups, uniform_buffer, validated,
 };
 use crate::tf::{Lut, TransferFunction, correct_opacity};
 
@@ -23,6 +23,9 @@ pub struct RayCaster {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
+    /// Group 1: live positional AO and shadows (`render::shadow`).
+    layout_1: wgpu::BindGroupLayout,
+    placeholders: super::shadow::Placeholders,
 }
 
 /// One volume on the GPU with its transfer function baked.
@@ -39,6 +42,8 @@ pub struct GpuVolume {
     pub lut: Lut,
     lut_step: f32,
     tf: TransferFunction,
+    /// Live positional AO and the light volume (bind group 1), see `render::shadow`.
+    pub extras: super::shadow::RayExtras,
 }
 
 fn texture_3d(
@@ -184,6 +189,7 @@ impl GpuVolume {
                 lut,
                 lut_step: step_voxels,
                 tf: tf.clone(),
+                extras: Default::default(),
                 ranges,
                 texels,
             }
@@ -300,9 +306,13 @@ impl RayCaster {
                     ),
                 ],
             });
+            let layout_1 = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("RayCaster::layout_1"),
+                entries: &super::shadow::layout_entries(),
+            });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("RayCaster::pipeline_layout"),
-                bind_group_layouts: &[Some(&layout)],
+                bind_group_layouts: &[Some(&layout), Some(&layout_1)],
                 immediate_size: 0,
             });
             let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -323,6 +333,8 @@ impl RayCaster {
                 pipeline,
                 layout,
                 sampler,
+                layout_1,
+                placeholders: super::shadow::Placeholders::new(device),
             }
         })
     }
@@ -397,12 +409,20 @@ impl RayCaster {
                     wgpu::BindingResource::TextureView(&target_view),
                 ],
             );
-            submit_compute(
+            let group_1 = super::shadow::bind_group_1(
+                device,
+                &gpu.queue,
+                &self.layout_1,
+                &vol.extras,
+                &self.placeholders,
+                &self.sampler,
+            );
+            submit_compute_groups(
                 device,
                 &gpu.queue,
                 "RayCaster::tile",
                 &self.pipeline,
-                &group,
+                &[&group, &group_1],
                 [tw.div_ceil(8), th.div_ceil(8), 1],
                 |encoder| {
                     encoder.copy_texture_to_buffer(

@@ -1,10 +1,11 @@
 //! Offscreen rendering for the CLI and tests: GPU when an adapter exists, else the CPU twin.
 
 use super::gpu::{GpuVolume, RayCaster};
+use super::shadow::{LightGpu, LightVolume, light_cpu, light_direction, light_lut, quantise};
 use super::texels::{UploadLimits, VolumeTexels};
 use super::{Frame, Image, cpu};
 use crate::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
-use crate::ao::{AoMethod, AoSettings};
+use crate::ao::{AoMethod, AoSettings, vao};
 use crate::gpu::{self, GpuError};
 use crate::tf::TransferFunction;
 use crate::volume::Volume;
@@ -34,6 +35,12 @@ pub fn render(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Rendered, GpuError> {
     let rays = Rays::uniform(ao.rays.directions());
+    if matches!(ao.method, AoMethod::Vao | AoMethod::VaoLive) {
+        ao.vao.validate().map_err(|e| GpuError::Validation {
+            stage: "positional AO settings".into(),
+            message: e.to_string(),
+        })?;
+    }
     if use_gpu {
         match gpu::request_device() {
             Ok(g) => {
@@ -45,6 +52,30 @@ pub fn render(
                     let a = LaoGpu::new(&g.device)?
                         .compute(&g, &vol, &lut, &rays, ao.samples, progress)?;
                     vol.set_ambient_occlusion(&g, &a);
+                }
+                if ao.method == AoMethod::Vao {
+                    let inputs = vao::VaoInputs::new(&g, &vol.texels, tf, &ao.vao)?;
+                    let a = vao::VaoGpu::new(&g.device)?.compute(
+                        &g,
+                        vol.texels.dims,
+                        &inputs,
+                        progress,
+                    )?;
+                    vol.set_ambient_occlusion(&g, &a);
+                }
+                if ao.method == AoMethod::VaoLive {
+                    vol.set_live_vao(&g, tf, Some(&ao.vao))?;
+                }
+                if frame.settings.shadows {
+                    let dir = light_dir(frame)?;
+                    let t = LightGpu::new(&g.device)?.compute(
+                        &g,
+                        &vol.texels,
+                        &light_lut(tf, &vol.texels),
+                        dir,
+                        progress,
+                    )?;
+                    vol.set_light_volume(&g, Some((&t, dir)))?;
                 }
                 let ao_seconds = start.elapsed().as_secs_f64();
                 let image = rc.render(&g, &vol, frame)?;
@@ -77,6 +108,26 @@ pub fn render(
                 .collect(),
         );
     }
+    if ao.method == AoMethod::Vao {
+        let pao = vao::PositionalAo::new(&texels, tf, &ao.vao);
+        let a = vao::vao_cpu(&pao, texels.dims, progress);
+        cv.ao = Some(
+            a.iter()
+                .map(|&x| (x.clamp(0.0, 1.0) * 65535.0).round() / 65535.0)
+                .collect(),
+        );
+    }
+    if ao.method == AoMethod::VaoLive {
+        cv.live_vao = Some(vao::PositionalAo::new(&texels, tf, &ao.vao));
+    }
+    if frame.settings.shadows {
+        let dir = light_dir(frame)?;
+        let t = light_cpu(&texels, &light_lut(tf, &texels), dir, progress);
+        cv.light = Some(LightVolume {
+            direction: dir,
+            values: quantise(&t),
+        });
+    }
     let ao_seconds = start.elapsed().as_secs_f64();
     let threads = rayon::current_num_threads();
     let image = cpu::render(&texels, &cv, &lut, &occ, frame);
@@ -85,5 +136,13 @@ pub fn render(
         device: format!("CPU twin ({threads} threads)"),
         downsampled: 0,
         ao_seconds,
+    })
+}
+
+/// The frame's light direction, checked (shadows need a real direction).
+fn light_dir(frame: &Frame) -> Result<glam::Vec3, GpuError> {
+    light_direction(frame.settings.light_direction).map_err(|message| GpuError::Validation {
+        stage: "shadows".into(),
+        message,
     })
 }

@@ -291,3 +291,218 @@ pub fn shadow_factor(light: &[f32], dims: [usize; 3], uvw: Vec3, half_step: Vec3
         + 0.5 * trilinear(light, dims, uvw)
         + 0.25 * trilinear(light, dims, uvw + half_step)
 }
+
+/// What the ray caster reads in its bind group 1 beyond the core volume: live positional
+/// AO and the light volume. Owned by [`crate::render::gpu::GpuVolume`]; `None` = off.
+#[derive(Debug, Default)]
+pub struct RayExtras {
+    pub live_vao: Option<crate::ao::vao::VaoInputs>,
+    pub light: Option<GpuLight>,
+}
+
+/// A light volume on the GPU (R16Float) with its direction.
+#[derive(Debug)]
+pub struct GpuLight {
+    pub view: wgpu::TextureView,
+    /// Unit direction towards the light.
+    pub direction: Vec3,
+}
+
+/// Uniforms of the ray caster's group 1. Mirrors `struct Extras` in `raycast.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ExtrasParams {
+    /// Live positional AO on, shadows on (0/1).
+    pub flags: [u32; 4],
+    /// Unit direction towards the light.
+    pub light: [f32; 4],
+}
+
+const _: () = assert!(std::mem::size_of::<ExtrasParams>() == 32);
+
+impl RayExtras {
+    pub fn params(&self) -> ExtrasParams {
+        let d = self.light.as_ref().map_or(Vec3::Z, |l| l.direction);
+        ExtrasParams {
+            flags: [
+                u32::from(self.live_vao.is_some()),
+                u32::from(self.light.is_some()),
+                0,
+                0,
+            ],
+            light: [d.x, d.y, d.z, 0.0],
+        }
+    }
+}
+
+/// Stand-ins bound when a feature of group 1 is off (so one pipeline serves all cases).
+#[derive(Debug)]
+pub struct Placeholders {
+    uniform: wgpu::Buffer,
+    texture: wgpu::TextureView,
+    storage: wgpu::Buffer,
+}
+
+impl Placeholders {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let buffer = |label, size, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("RayCaster::placeholder_3d"),
+            size: wgpu::Extent3d {
+                width: 1,
+                height: 1,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::R16Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        Placeholders {
+            uniform: buffer(
+                "RayCaster::placeholder_uniform",
+                std::mem::size_of::<crate::ao::vao::VaoParams>() as u64,
+                wgpu::BufferUsages::UNIFORM,
+            ),
+            texture: texture.create_view(&Default::default()),
+            storage: buffer(
+                "RayCaster::placeholder_storage",
+                16,
+                wgpu::BufferUsages::STORAGE,
+            ),
+        }
+    }
+}
+
+/// Layout entries of the ray caster's group 1: positional AO (0–4), extras uniform (5),
+/// light volume (6).
+pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    let mut entries = crate::ao::vao::layout_entries();
+    entries.push(wgpu::BindGroupLayoutEntry {
+        binding: 5,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    });
+    entries.push(wgpu::BindGroupLayoutEntry {
+        binding: 6,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    });
+    entries
+}
+
+/// The ray caster's bind group 1 for `extras` (placeholders where a feature is off).
+pub fn bind_group_1(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    layout: &wgpu::BindGroupLayout,
+    extras: &RayExtras,
+    placeholders: &Placeholders,
+    sampler: &wgpu::Sampler,
+) -> wgpu::BindGroup {
+    let uniforms = uniform_buffer(
+        device,
+        queue,
+        "RayCaster::extras",
+        bytemuck::bytes_of(&extras.params()),
+    );
+    let mut resources = match &extras.live_vao {
+        Some(v) => v.resources(),
+        None => vec![
+            placeholders.uniform.as_entire_binding(),
+            wgpu::BindingResource::TextureView(&placeholders.texture),
+            wgpu::BindingResource::Sampler(sampler),
+            placeholders.storage.as_entire_binding(),
+            placeholders.storage.as_entire_binding(),
+        ],
+    };
+    resources.push(uniforms.as_entire_binding());
+    resources.push(wgpu::BindingResource::TextureView(
+        extras
+            .light
+            .as_ref()
+            .map_or(&placeholders.texture, |l| &l.view),
+    ));
+    bind_group(device, "RayCaster::bind_group_1", layout, &resources)
+}
+
+impl crate::render::gpu::GpuVolume {
+    /// Turns live positional AO on (`Some`) or off for this volume and transfer function.
+    /// Returns the CPU twin's equivalent of what is now on the GPU.
+    pub fn set_live_vao(
+        &mut self,
+        gpu: &Gpu,
+        tf: &TransferFunction,
+        settings: Option<&crate::ao::vao::VaoSettings>,
+    ) -> Result<(), GpuError> {
+        self.extras.live_vao = match settings {
+            Some(s) => Some(crate::ao::vao::VaoInputs::new(gpu, &self.texels, tf, s)?),
+            None => None,
+        };
+        Ok(())
+    }
+
+    /// Uses `values` (transmittance per voxel, x fastest) as the light volume for shadows
+    /// from `direction` (unit, towards the light); `None` turns shadows off. Returns the
+    /// values as the GPU samples them (for the CPU twin).
+    pub fn set_light_volume(
+        &mut self,
+        gpu: &Gpu,
+        light: Option<(&[f32], Vec3)>,
+    ) -> Result<Option<LightVolume>, GpuError> {
+        let Some((values, direction)) = light else {
+            self.extras.light = None;
+            return Ok(None);
+        };
+        let dims = self.texels.dims;
+        if values.len() != dims.iter().product::<usize>() {
+            return Err(GpuError::Validation {
+                stage: "GpuVolume::set_light_volume".into(),
+                message: format!(
+                    "{} light values for a {}×{}×{} volume",
+                    values.len(),
+                    dims[0],
+                    dims[1],
+                    dims[2]
+                ),
+            });
+        }
+        let bits: Vec<u16> = values
+            .iter()
+            .map(|&v| half::f16::from_f32(v.clamp(0.0, 1.0)).to_bits())
+            .collect();
+        let view = validated(&gpu.device, "GpuVolume::set_light_volume", || {
+            crate::ao::vao::f16_texture(
+                &gpu.device,
+                &gpu.queue,
+                "GpuVolume::light",
+                &[(bits, dims)],
+            )
+            .create_view(&Default::default())
+        })?;
+        self.extras.light = Some(GpuLight { view, direction });
+        Ok(Some(LightVolume {
+            direction,
+            values: quantise(values),
+        }))
+    }
+}
