@@ -8,7 +8,10 @@ use common::data;
 use glam::Vec3;
 use volao::ao::vao::{Isosurface, PositionalAo, VaoGpu, VaoInputs, VaoSettings, vao_cpu};
 use volao::gpu::{self, Gpu};
+use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::image::{Tolerance, check, compare};
 use volao::render::texels::{UploadLimits, VolumeTexels};
+use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
 use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
 
@@ -310,5 +313,155 @@ fn gpu_matches_cpu_twin_on_real_data() {
                 "{name} {what}: the crop should contain occluded voxels ({occluded})"
             );
         }
+    }
+}
+
+fn out_dir() -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("vao")
+}
+
+/// As tests/render.rs: lavapipe filters the 8-bit volume texture in fixed point, so a
+/// sample's opacity and colour may differ slightly from the CPU's f32 trilinear.
+const TWIN: Tolerance = Tolerance {
+    max_channel_diff: 3,
+    max_outlier_fraction: 0.01,
+    max_outlier_diff: 64,
+};
+
+#[test]
+fn live_mode_gpu_matches_cpu_twin() {
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let (_, v, tf) = real_crops().remove(0);
+    let t = texels(&v);
+    let s = VaoSettings {
+        r_max_mm: 8.0,
+        ..Default::default()
+    };
+    let f = Frame {
+        camera: Camera {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            ..Default::default()
+        },
+        settings: RenderSettings {
+            ambient: 0.8,
+            ..Default::default()
+        },
+        width: 64,
+        height: 64,
+    };
+    let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+        .unwrap_or_else(|e| panic!("{e}"));
+    vol.set_live_vao(&gpu, &tf, Some(&s))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let g = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+    let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
+    cv.live_vao = Some(PositionalAo::new(&t, &tf, &s));
+    let c = cpu::render(&t, &cv, &vol.lut, &occ, &f);
+    let cmp = check("live_twin", &g, &c, TWIN, &out_dir()).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!(
+        "live GPU vs CPU: max diff {}, mean {:.3}, outliers {}",
+        cmp.max_diff, cmp.mean_diff, cmp.outliers
+    );
+    // And live AO visibly darkens the image compared with no AO.
+    cv.live_vao = None;
+    let plain = cpu::render(&t, &cv, &vol.lut, &occ, &f);
+    let lum = |img: &Image| img.pixels.iter().map(|p| p[0] as u64).sum::<u64>();
+    assert!(
+        (lum(&c) as f64) < 0.97 * lum(&plain) as f64,
+        "live AO must darken: {} vs {}",
+        lum(&c),
+        lum(&plain)
+    );
+}
+
+#[test]
+fn live_and_precomputed_agree_at_voxel_centres() {
+    // An orthographic camera inside the box, looking along −y, one pixel per voxel and
+    // one ray step per voxel without jitter: every ray-cast sample sits on a voxel centre,
+    // where the precomputed volume's trilinear lookup returns its stored value. So the
+    // live image (A_P evaluated at each sample by the ray caster) must match the image
+    // shaded from the precomputed volume (A_P evaluated by the precompute kernel).
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let full = volume::load(&data("raw/engine.raw"), &LoadOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"))
+        .volume;
+    let n = [16usize, 24, 16];
+    let v = crop(&full, [100, 90, 40], n);
+    let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
+    let t = texels(&v);
+    let half = Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32) * 0.5;
+    let radius = half.length();
+    // Orthographic half height = radius · 1.05 · distance / DEFAULT_DISTANCE = 8 mm.
+    let distance = 8.0 * volao::render::camera::DEFAULT_DISTANCE / (radius * 1.05);
+    let eye_y = half.y - 2.5; // a voxel centre
+    let f = Frame {
+        camera: Camera {
+            orthographic: true,
+            distance,
+            target: [0.0, eye_y - distance * radius, 0.0],
+            ..Default::default()
+        },
+        settings: RenderSettings {
+            shading: Shading::None,
+            ambient: 1.0,
+            step_voxels: 1.0,
+            jitter: false,
+            ..Default::default()
+        },
+        width: n[0] as u32,
+        height: n[2] as u32,
+    };
+    for s in [
+        VaoSettings {
+            r_max_mm: 6.0,
+            ..Default::default()
+        },
+        VaoSettings {
+            directions: 26,
+            samples: 4,
+            r_max_mm: 10.0,
+            ..Default::default()
+        },
+    ] {
+        let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let inputs = VaoInputs::new(&gpu, &t, &tf, &s).unwrap_or_else(|e| panic!("{e}"));
+        let a = VaoGpu::new(&gpu.device)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .compute(&gpu, t.dims, &inputs, &|_, _| {})
+            .unwrap_or_else(|e| panic!("{e}"));
+        vol.set_ambient_occlusion(&gpu, &a);
+        let precomputed = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+            .unwrap_or_else(|e| panic!("{e}"));
+        vol.set_live_vao(&gpu, &tf, Some(&s))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let live = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        // The precomputed volume is stored as 16-bit unorm (±1/131070) and the sample
+        // positions carry f32 rounding of the camera matrices: one level of 255.
+        let cmp = compare(
+            &live,
+            &precomputed,
+            Tolerance {
+                max_channel_diff: 1,
+                max_outlier_fraction: 0.0,
+                max_outlier_diff: 1,
+            },
+        );
+        eprintln!(
+            "live vs precomputed ({} dirs, {} samples): max diff {}, mean {:.3}",
+            s.directions, s.samples, cmp.max_diff, cmp.mean_diff
+        );
+        assert!(cmp.passed, "live vs precomputed: {cmp:?}");
+        let visible = live.pixels.iter().filter(|p| p[3] > 0).count();
+        assert!(visible * 2 > live.pixels.len(), "{visible} visible pixels");
+        // The check has teeth: without AO the image differs.
+        vol.set_live_vao(&gpu, &tf, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let plain = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        assert!(compare(&plain, &precomputed, Tolerance::EXACT).max_diff > 10);
     }
 }
