@@ -6,8 +6,13 @@ mod common;
 use common::data;
 use glam::Vec3;
 use volao::gpu::{self, Gpu};
-use volao::render::shadow::{LightGpu, light_cpu, light_direction, light_lut};
+use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::image::{Tolerance, check};
+use volao::render::shadow::{
+    LightGpu, LightVolume, light_cpu, light_direction, light_lut, quantise, shadow_factor,
+};
 use volao::render::texels::{UploadLimits, VolumeTexels};
+use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
 use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
 
@@ -188,4 +193,111 @@ fn light_volume_gpu_matches_cpu_twin_on_real_data() {
             );
         }
     }
+}
+
+/// As tests/render.rs: lavapipe filters the 8-bit volume texture in fixed point, so a
+/// sample's opacity and colour may differ slightly from the CPU's f32 trilinear.
+const TWIN: Tolerance = Tolerance {
+    max_channel_diff: 3,
+    max_outlier_fraction: 0.01,
+    max_outlier_diff: 64,
+};
+
+#[test]
+fn shadowed_rendering_gpu_matches_cpu_twin_and_darkens() {
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let out = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("shadows");
+    for (name, v, tf) in real_crops() {
+        let t = texels(&v);
+        for shading in [Shading::None, Shading::Phong] {
+            let dir = light_direction([1.0, -0.3, 0.4]).expect("valid");
+            let f = Frame {
+                camera: Camera {
+                    azimuth_deg: 30.0,
+                    elevation_deg: 20.0,
+                    ..Default::default()
+                },
+                settings: RenderSettings {
+                    shading,
+                    ambient: 0.2,
+                    shadows: true,
+                    light_direction: dir.to_array(),
+                    ..Default::default()
+                },
+                width: 64,
+                height: 64,
+            };
+            let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let light = LightGpu::new(&gpu.device)
+                .unwrap_or_else(|e| panic!("{e}"))
+                .compute(&gpu, &t, &light_lut(&tf, &t), dir, &|_, _| {})
+                .unwrap_or_else(|e| panic!("{e}"));
+            let sampled = vol
+                .set_light_volume(&gpu, Some((&light, dir)))
+                .unwrap_or_else(|e| panic!("{e}"));
+            let g = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+            let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
+            cv.light = Some(LightVolume {
+                direction: dir,
+                values: quantise(&light_cpu(&t, &light_lut(&tf, &t), dir, &|_, _| {})),
+            });
+            assert_eq!(sampled.map(|l| l.values.len()), Some(light.len()));
+            let c = cpu::render(&t, &cv, &vol.lut, &occ, &f);
+            let label = format!("shadow_twin_{name}_{shading:?}");
+            let cmp = check(&label, &g, &c, TWIN, &out).unwrap_or_else(|e| panic!("{e}"));
+            eprintln!(
+                "{label}: max diff {}, mean {:.3}, outliers {}",
+                cmp.max_diff, cmp.mean_diff, cmp.outliers
+            );
+            // Shadows darken: the same frame lit without them is brighter.
+            vol.set_light_volume(&gpu, None)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let lit = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+            let lum = |img: &Image| img.pixels.iter().map(|p| p[0] as u64).sum::<u64>();
+            assert!(
+                (lum(&g) as f64) < 0.9 * lum(&lit) as f64,
+                "{label}: shadows must darken ({} vs {})",
+                lum(&g),
+                lum(&lit)
+            );
+        }
+    }
+}
+
+#[test]
+fn imagire_filter_keeps_linear_light_and_softens_a_hard_edge() {
+    // A light volume with a hard shadow edge at x = 8 (two voxels wide along x).
+    let dims = [16, 2, 2];
+    let edge: Vec<f32> = (0..64)
+        .map(|i| if i % 16 < 8 { 0.0 } else { 1.0 })
+        .collect();
+    let linear: Vec<f32> = (0..64).map(|i| (i % 16) as f32 / 15.0).collect();
+    let half_step = Vec3::new(1.0 / 16.0, 0.0, 0.0); // view step of two voxels
+    let at = |x: f32| Vec3::new(x / 16.0, 0.5, 0.5);
+    // Weights ¼ + ½ + ¼ = 1 and symmetric: a linear ramp (inside the clamped border)
+    // comes back unchanged.
+    for i in 4..44 {
+        let x = 1.0 + i as f32 * 0.3;
+        let got = shadow_factor(&linear, dims, at(x), half_step);
+        let want = (x - 0.5) / 15.0;
+        assert!((got - want).abs() < 1e-5, "x = {x}: {got} vs {want}");
+    }
+    // Across the hard edge (a one-voxel ramp once trilinear), the steepest jump between
+    // view samples two voxels apart is 1 without the filter and 3/4 with it.
+    let steepest = |f: &dyn Fn(f32) -> f32| {
+        (0..40)
+            .map(|i| {
+                let x = 5.0 + i as f32 * 0.125;
+                (f(x + 2.0) - f(x)).abs()
+            })
+            .fold(0.0f32, f32::max)
+    };
+    let plain = steepest(&|x| volao::render::cpu::trilinear(&edge, dims, at(x)));
+    let filtered = steepest(&|x| shadow_factor(&edge, dims, at(x), half_step));
+    assert!(
+        (plain - 1.0).abs() < 1e-6 && (filtered - 0.75).abs() < 1e-6,
+        "filtered jump {filtered} vs unfiltered {plain}"
+    );
 }
