@@ -346,6 +346,9 @@ enum BenchCommand {
     Render(volao::bench::RenderBenchArgs),
     /// The CAO paper's Tables 5–6 (LAO accuracy vs rays) on the Engine, and LAO throughput.
     Lao(volao::bench::LaoBenchArgs),
+    /// Positional AO by ray marching (time and RMS vs 512-ray LAO, live vs precomputed
+    /// frame times) and the cost of volumetric shadows, on the Engine.
+    Raymarch(volao::bench::raymarch::RaymarchBenchArgs),
     /// (internal) load one file and print time and peak memory as JSON.
     #[command(hide = true)]
     LoadOne { file: PathBuf },
@@ -428,6 +431,9 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Ao(args)) => ambient_occlusion(&args),
         Some(Command::Bench(BenchCommand::Render(args))) => volao::bench::render_bench(&args),
         Some(Command::Bench(BenchCommand::Lao(args))) => volao::bench::lao_bench(&args),
+        Some(Command::Bench(BenchCommand::Raymarch(args))) => {
+            volao::bench::raymarch::raymarch_bench(&args)
+        }
         Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
     }
