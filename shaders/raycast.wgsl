@@ -32,6 +32,13 @@ struct Extras {
 
 @group(1) @binding(5) var<uniform> extras: Extras;
 @group(1) @binding(6) var light_volume: texture_3d<f32>;
+@group(1) @binding(7) var surface_position: texture_2d<f32>;  // nearest surface, w = covered
+@group(1) @binding(8) var surface_color: texture_2d<f32>;     // its shaded straight RGBA
+
+// Front-to-back "over" of straight colour `c` with opacity `a` behind `acc`.
+fn over(acc: vec4<f32>, rgb: vec3<f32>, a: f32) -> vec4<f32> {
+    return vec4<f32>(acc.rgb + (1.0 - acc.a) * a * rgb, acc.a + (1.0 - acc.a) * a);
+}
 
 const OPAQUE: f32 = 0.99;
 
@@ -141,6 +148,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t_exit = hit.y;
     let dt = p.step.x;
     var acc = vec4<f32>(0.0);
+    // A surface inside the view (render::surface): the valid sampling path ends there.
+    var pending = false;
+    var t_surf = 0.0;
+    var surf = vec4<f32>(0.0);
+    if extras.flags.z != 0u {
+        let sp = textureLoad(surface_position, vec2<u32>(px, py), 0);
+        if sp.w > 0.0 {
+            pending = true;
+            t_surf = dot(sp.xyz - origin, dir);
+            surf = textureLoad(surface_color, vec2<u32>(px, py), 0);
+        }
+    }
     if t_exit > t_enter {
         var offset = 0.0;
         if p.step.y != 0.0 {
@@ -154,6 +173,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 break;
             }
             let t = t_enter + (f32(k) + offset) * dt;
+            if pending && t_surf <= t {
+                // The surface lies before this sample in transparent space (or before the
+                // first one): composite it here.
+                acc = over(acc, surf.rgb, surf.a);
+                pending = false;
+                if surf.a >= 1.0 {
+                    break;
+                }
+            }
             if t >= t_exit {
                 break;
             }
@@ -176,17 +204,34 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if rgba.a > 0.0 {
                 // The last step ends at the box exit: correct its opacity for its length.
                 let len = min(dt, t_exit - t);
-                if len < dt {
-                    rgba.a = 1.0 - pow(1.0 - rgba.a, len / dt);
-                }
                 let rgb = shade(rgba.rgb, uvw, -dir);
-                acc = vec4<f32>(acc.rgb + (1.0 - acc.a) * rgba.a * rgb, acc.a + (1.0 - acc.a) * rgba.a);
+                if pending && t_surf < t + len {
+                    // The surface cuts this step: the part before it, the surface, then
+                    // (if it is translucent) the part behind it, each for its true length.
+                    let before = max(t_surf - t, 0.0);
+                    acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, before / dt));
+                    acc = over(acc, surf.rgb, surf.a);
+                    pending = false;
+                    if surf.a >= 1.0 {
+                        break;
+                    }
+                    acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, (len - before) / dt));
+                } else {
+                    if len < dt {
+                        rgba.a = 1.0 - pow(1.0 - rgba.a, len / dt);
+                    }
+                    acc = vec4<f32>(acc.rgb + (1.0 - acc.a) * rgba.a * rgb, acc.a + (1.0 - acc.a) * rgba.a);
+                }
                 if acc.a > OPAQUE {
                     break;
                 }
             }
             k = k + 1u;
         }
+    }
+    if pending {
+        // Behind the volume (or the ray missed the box).
+        acc = over(acc, surf.rgb, surf.a);
     }
     let bg = p.background;
     let alpha = acc.a + (1.0 - acc.a) * bg.a;

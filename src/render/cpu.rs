@@ -20,6 +20,20 @@ pub struct CpuVolume {
     pub live_vao: Option<crate::ao::vao::PositionalAo>,
     /// Light volume for shadows from a directional light.
     pub light: Option<super::shadow::LightVolume>,
+    /// Geometry drawn inside the volume, with what `nearest_hit` needs besides the ray.
+    pub surfaces: Option<CpuSurfaces>,
+}
+
+/// Surfaces for the CPU twin: the meshes, and the frame and texels that place the camera.
+#[derive(Debug, Clone)]
+pub struct CpuSurfaces {
+    pub surfaces: Vec<super::surface::Surface>,
+    pub frame: Frame,
+    pub texels: VolumeTexels,
+}
+
+fn over(acc: Vec4, rgb: Vec3, a: f32) -> Vec4 {
+    (acc.truncate() + (1.0 - acc.w) * a * rgb).extend(acc.w + (1.0 - acc.w) * a)
 }
 
 impl CpuVolume {
@@ -30,6 +44,7 @@ impl CpuVolume {
             ao: None,
             live_vao: None,
             light: None,
+            surfaces: None,
         }
     }
 }
@@ -141,6 +156,12 @@ pub fn pixel(
     let t_exit = t1;
     let dt = p.step[0];
     let mut acc = Vec4::ZERO;
+    let hit = vol
+        .surfaces
+        .as_ref()
+        .and_then(|s| super::surface::nearest_hit(&s.surfaces, &s.frame, &s.texels, origin, dir));
+    let mut pending = hit.is_some();
+    let (t_surf, surf) = hit.unwrap_or((0.0, Vec4::ZERO));
     if t_exit > t_enter {
         let offset = if p.step[1] != 0.0 {
             jitter(px, py)
@@ -154,6 +175,13 @@ pub fn pixel(
         let mut k = 0u32;
         while k < max_steps {
             let t = t_enter + (k as f32 + offset) * dt;
+            if pending && t_surf <= t {
+                acc = over(acc, surf.truncate(), surf.w);
+                pending = false;
+                if surf.w >= 1.0 {
+                    break;
+                }
+            }
             if t >= t_exit {
                 break;
             }
@@ -179,18 +207,32 @@ pub fn pixel(
             let mut rgba = classify(p, lut, norm);
             if rgba.w > 0.0 {
                 let len = dt.min(t_exit - t);
-                if len < dt {
-                    rgba.w = 1.0 - (1.0 - rgba.w).powf(len / dt);
-                }
                 let rgb = shade(p, vol, rgba.truncate(), uvw, -dir);
-                acc = (acc.truncate() + (1.0 - acc.w) * rgba.w * rgb)
-                    .extend(acc.w + (1.0 - acc.w) * rgba.w);
+                if pending && t_surf < t + len {
+                    let before = (t_surf - t).max(0.0);
+                    acc = over(acc, rgb, 1.0 - (1.0 - rgba.w).powf(before / dt));
+                    acc = over(acc, surf.truncate(), surf.w);
+                    pending = false;
+                    if surf.w >= 1.0 {
+                        break;
+                    }
+                    acc = over(acc, rgb, 1.0 - (1.0 - rgba.w).powf((len - before) / dt));
+                } else {
+                    if len < dt {
+                        rgba.w = 1.0 - (1.0 - rgba.w).powf(len / dt);
+                    }
+                    acc = (acc.truncate() + (1.0 - acc.w) * rgba.w * rgb)
+                        .extend(acc.w + (1.0 - acc.w) * rgba.w);
+                }
                 if acc.w > OPAQUE {
                     break;
                 }
             }
             k += 1;
         }
+    }
+    if pending {
+        acc = over(acc, surf.truncate(), surf.w);
     }
     let bg = Vec4::from(p.background);
     let alpha = acc.w + (1.0 - acc.w) * bg.w;

@@ -26,6 +26,7 @@ pub struct RayCaster {
     /// Group 1: live positional AO and shadows (`render::shadow`).
     layout_1: wgpu::BindGroupLayout,
     placeholders: super::shadow::Placeholders,
+    surfaces: super::surface::SurfaceRenderer,
 }
 
 /// One volume on the GPU with its transfer function baked.
@@ -258,6 +259,7 @@ impl GpuVolume {
 impl RayCaster {
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
         let module = shaders::module(device, "raycast.wgsl")?;
+        let surfaces = super::surface::SurfaceRenderer::new(device)?;
         validated(device, "RayCaster::new", || {
             let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
                 binding,
@@ -335,6 +337,7 @@ impl RayCaster {
                 sampler,
                 layout_1,
                 placeholders: super::shadow::Placeholders::new(device),
+                surfaces,
             }
         })
     }
@@ -347,12 +350,21 @@ impl RayCaster {
             height: h,
             pixels: vec![[0; 4]; (w * h) as usize],
         };
+        let layer = match vol.extras.surfaces.is_empty() {
+            true => None,
+            false => {
+                Some(
+                    self.surfaces
+                        .rasterise(gpu, &vol.extras.surfaces, frame, &vol.texels)?,
+                )
+            }
+        };
         let mut y0 = 0;
         while y0 < h {
             let mut x0 = 0;
             while x0 < w {
                 let size = ((w - x0).min(TILE), (h - y0).min(TILE));
-                let tile = self.render_tile(gpu, vol, frame, (x0, y0), size)?;
+                let tile = self.render_tile(gpu, vol, frame, layer.as_ref(), (x0, y0), size)?;
                 image.blit(&tile, x0, y0);
                 x0 += TILE;
             }
@@ -366,6 +378,7 @@ impl RayCaster {
         gpu: &Gpu,
         vol: &GpuVolume,
         frame: &Frame,
+        layer: Option<&super::surface::SurfaceLayer>,
         (x0, y0): (u32, u32),
         (tw, th): (u32, u32),
     ) -> Result<Image, GpuError> {
@@ -414,6 +427,7 @@ impl RayCaster {
                 &gpu.queue,
                 &self.layout_1,
                 &vol.extras,
+                layer,
                 &self.placeholders,
                 &self.sampler,
             );

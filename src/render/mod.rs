@@ -14,6 +14,7 @@ pub mod gpu;
 pub mod image;
 pub mod offscreen;
 pub mod shadow;
+pub mod surface;
 pub mod texels;
 
 pub use camera::Camera;

@@ -298,6 +298,8 @@ pub fn shadow_factor(light: &[f32], dims: [usize; 3], uvw: Vec3, half_step: Vec3
 pub struct RayExtras {
     pub live_vao: Option<crate::ao::vao::VaoInputs>,
     pub light: Option<GpuLight>,
+    /// Geometry drawn inside the volume (rasterised per frame, see `render::surface`).
+    pub surfaces: Vec<crate::render::surface::Surface>,
 }
 
 /// A light volume on the GPU (R16Float) with its direction.
@@ -312,7 +314,7 @@ pub struct GpuLight {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct ExtrasParams {
-    /// Live positional AO on, shadows on (0/1).
+    /// Live positional AO on, shadows on, surfaces on (0/1).
     pub flags: [u32; 4],
     /// Unit direction towards the light.
     pub light: [f32; 4],
@@ -327,7 +329,7 @@ impl RayExtras {
             flags: [
                 u32::from(self.live_vao.is_some()),
                 u32::from(self.light.is_some()),
-                0,
+                u32::from(!self.surfaces.is_empty()),
                 0,
             ],
             light: [d.x, d.y, d.z, 0.0],
@@ -341,6 +343,7 @@ pub struct Placeholders {
     uniform: wgpu::Buffer,
     texture: wgpu::TextureView,
     storage: wgpu::Buffer,
+    layer: wgpu::TextureView,
 }
 
 impl Placeholders {
@@ -379,12 +382,28 @@ impl Placeholders {
                 16,
                 wgpu::BufferUsages::STORAGE,
             ),
+            layer: device
+                .create_texture(&wgpu::TextureDescriptor {
+                    label: Some("RayCaster::placeholder_2d"),
+                    size: wgpu::Extent3d {
+                        width: 1,
+                        height: 1,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: crate::render::surface::LAYER_FORMAT,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                })
+                .create_view(&Default::default()),
         }
     }
 }
 
 /// Layout entries of the ray caster's group 1: positional AO (0–4), extras uniform (5),
-/// light volume (6).
+/// light volume (6), surface position and colour (7, 8).
 pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     let mut entries = crate::ao::vao::layout_entries();
     entries.push(wgpu::BindGroupLayoutEntry {
@@ -407,15 +426,29 @@ pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
         },
         count: None,
     });
+    for binding in [7, 8] {
+        entries.push(wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        });
+    }
     entries
 }
 
-/// The ray caster's bind group 1 for `extras` (placeholders where a feature is off).
+/// The ray caster's bind group 1 for `extras` (placeholders where a feature is off);
+/// `layer` is this frame's rasterised surfaces.
 pub fn bind_group_1(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     layout: &wgpu::BindGroupLayout,
     extras: &RayExtras,
+    layer: Option<&crate::render::surface::SurfaceLayer>,
     placeholders: &Placeholders,
     sampler: &wgpu::Sampler,
 ) -> wgpu::BindGroup {
@@ -441,6 +474,12 @@ pub fn bind_group_1(
             .light
             .as_ref()
             .map_or(&placeholders.texture, |l| &l.view),
+    ));
+    resources.push(wgpu::BindingResource::TextureView(
+        layer.map_or(&placeholders.layer, |l| &l.position),
+    ));
+    resources.push(wgpu::BindingResource::TextureView(
+        layer.map_or(&placeholders.layer, |l| &l.color),
     ));
     bind_group(device, "RayCaster::bind_group_1", layout, &resources)
 }
