@@ -465,3 +465,194 @@ fn live_and_precomputed_agree_at_voxel_centres() {
         assert!(compare(&plain, &precomputed, Tolerance::EXACT).max_diff > 10);
     }
 }
+
+#[test]
+fn live_mode_follows_a_transfer_function_change_at_once() {
+    // Switch the TF of a live-AO volume: the next frame equals a fresh volume built with
+    // the new TF, and differs from the old one (no precomputation to redo).
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let (_, v, bone) = real_crops().remove(0);
+    let soft = TransferFunction::preset(volao::tf::Preset::CtSoftTissue, &v.stats());
+    let t = texels(&v);
+    let s = VaoSettings {
+        r_max_mm: 8.0,
+        ..Default::default()
+    };
+    let f = Frame {
+        camera: Camera::default(),
+        settings: RenderSettings {
+            ambient: 0.9,
+            ..Default::default()
+        },
+        width: 48,
+        height: 48,
+    };
+    let fresh = |tf: &TransferFunction| {
+        let mut vol = GpuVolume::from_texels(&gpu, t.clone(), tf, f.settings.step_voxels)
+            .unwrap_or_else(|e| panic!("{e}"));
+        vol.set_live_vao(&gpu, tf, Some(&s))
+            .unwrap_or_else(|e| panic!("{e}"));
+        vol
+    };
+    let mut vol = fresh(&bone);
+    let before = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+    vol.set_transfer_function(&gpu, &soft, f.settings.step_voxels);
+    let after = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+    let expected = rc
+        .render(&gpu, &fresh(&soft), &f)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        after.pixels, expected.pixels,
+        "the switched volume renders as a fresh one"
+    );
+    assert!(compare(&after, &before, Tolerance::EXACT).max_diff > 10);
+}
+
+#[test]
+fn scene_files_with_and_without_positional_ao_load() {
+    use volao::ao::AoMethod;
+    use volao::scene::{Light, Scene};
+    let base = r#"{"version": 1, "volume": {"path": null},
+        "transfer_function": {"name": "t", "opacity": [{"value": 0, "alpha": 0}, {"value": 1, "alpha": 1}],
+                              "color": [{"value": 0, "rgb": [1, 1, 1]}]},
+        "width": 8, "height": 8"#;
+    let path = std::path::Path::new("scene.json");
+    // An older scene: no vao block, no light, no shadows.
+    let old = Scene::parse(
+        &format!("{base}, \"ambient_occlusion\": {{\"method\": \"lao\"}}}}"),
+        path,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(old.ambient_occlusion.vao, VaoSettings::default());
+    assert!(!old.render.shadows);
+    // A new one with every field.
+    let new = Scene::parse(
+        &format!(
+            "{base}, \"light\": {{\"kind\": \"directional\", \"direction\": [1, 0, 0]}},
+             \"render\": {{\"shadows\": true}},
+             \"ambient_occlusion\": {{\"method\": \"vao-live\", \"vao\": {{\"directions\": 32,
+               \"samples\": 12, \"r_max_mm\": 10, \"v_thres\": 0.9,
+               \"isosurface\": {{\"value\": 300, \"tolerance\": 40}}}}}}}}"
+        ),
+        path,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(new.ambient_occlusion.method, AoMethod::VaoLive);
+    assert_eq!(new.ambient_occlusion.vao.directions, 32);
+    assert_eq!(
+        new.ambient_occlusion.vao.isosurface.map(|i| i.value),
+        Some(300.0)
+    );
+    assert_eq!(
+        new.light,
+        Light::Directional {
+            direction: [1.0, 0.0, 0.0]
+        }
+    );
+    assert!(new.render.shadows);
+    // A misspelt field is an error that names it.
+    let bad = Scene::parse(
+        &format!(
+            "{base}, \"ambient_occlusion\": {{\"method\": \"vao\", \"vao\": {{\"rays\": 3}}}}}}"
+        ),
+        path,
+    )
+    .expect_err("unknown field");
+    assert!(bad.to_string().contains("rays"), "{bad}");
+}
+
+#[test]
+fn cli_renders_and_computes_positional_ao_and_shadows() {
+    use std::process::Command;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let run = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_volao"))
+            .args(args)
+            .output()
+            .expect("volao runs");
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).into_owned()
+                + &String::from_utf8_lossy(&out.stderr),
+        )
+    };
+    let png = dir.path().join("live.png");
+    let scene = dir.path().join("live.json");
+    let p = |x: &std::path::Path| x.to_str().expect("utf-8").to_owned();
+    let (ok, text) = run(&[
+        "render",
+        "-o",
+        &p(&png),
+        "--width",
+        "48",
+        "--height",
+        "48",
+        "--ao",
+        "vao-live",
+        "--vao-directions",
+        "14",
+        "--vao-samples",
+        "6",
+        "--shadows",
+        "--light",
+        "1,0.5,0.5",
+        "--save-scene",
+        &p(&scene),
+    ]);
+    assert!(ok, "{text}");
+    assert!(
+        text.contains("positional AO live, 14 directions × 6 samples"),
+        "{text}"
+    );
+    let saved = volao::scene::Scene::load(&scene).unwrap_or_else(|e| panic!("{e}"));
+    assert!(saved.render.shadows);
+    assert_eq!(saved.ambient_occlusion.vao.samples, 6);
+    assert!(matches!(
+        saved.light,
+        volao::scene::Light::Directional { .. }
+    ));
+    // The scene reproduces the image.
+    let again = dir.path().join("again.png");
+    let (ok, text) = run(&["render", &p(&scene), "-o", &p(&again)]);
+    assert!(ok, "{text}");
+    let a = Image::load_png(&png).unwrap_or_else(|e| panic!("{e}"));
+    let b = Image::load_png(&again).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(a.pixels, b.pixels);
+    // volao ao --method vao writes a volume of ambient factors.
+    let bucky = data("pvm/Bucky.pvm");
+    let out = dir.path().join("bucky_vao.nii");
+    let (ok, text) = run(&[
+        "ao",
+        &p(&bucky),
+        "-o",
+        &p(&out),
+        "--method",
+        "vao",
+        "--vao-radius",
+        "6",
+    ]);
+    assert!(ok, "{text}");
+    assert!(
+        text.contains("positional AO, 20 directions × 8 samples, r_max 6 mm"),
+        "{text}"
+    );
+    let v = volume::load(&out, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(v.volume.dims, [32, 32, 32]);
+    // Bad values are one-line errors.
+    let (ok, text) = run(&[
+        "render",
+        "-o",
+        &p(&png),
+        "--ao",
+        "vao",
+        "--vao-samples",
+        "0",
+    ]);
+    assert!(
+        !ok && text.contains("positional AO: the number of samples per ray is 0"),
+        "{text}"
+    );
+    let (ok, text) = run(&["render", "-o", &p(&png), "--light", "0,0,0"]);
+    assert!(!ok && text.contains("light direction"), "{text}");
+}

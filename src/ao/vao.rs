@@ -548,6 +548,37 @@ impl VaoInputs {
         })
     }
 
+    /// Re-bakes the opacity table for a new transfer function (the live mode follows TF
+    /// edits at once: nothing else depends on the TF).
+    pub fn set_transfer_function(
+        &mut self,
+        gpu: &Gpu,
+        texels: &VolumeTexels,
+        tf: &TransferFunction,
+    ) {
+        let lut = vao_lut(tf, texels);
+        let alpha: Vec<f32> = lut.rgba.iter().map(|e| e[3]).collect();
+        let (a, b) = texels.lut_map(&lut);
+        self.params.lut_map[0] = a;
+        self.params.lut_map[1] = b;
+        self.params.lut_map[2] = (lut.rgba.len().max(2) - 1) as f32;
+        gpu.queue
+            .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&self.params));
+        if (alpha.len() * 4) as u64 == self.alpha.size() {
+            gpu.queue
+                .write_buffer(&self.alpha, 0, bytemuck::cast_slice(&alpha));
+        } else {
+            self.alpha = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("Vao::alpha"),
+                size: (alpha.len() * 4).max(16) as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            gpu.queue
+                .write_buffer(&self.alpha, 0, bytemuck::cast_slice(&alpha));
+        }
+    }
+
     /// Bindings 0–4 of group 1.
     pub fn resources(&self) -> Vec<wgpu::BindingResource<'_>> {
         vec![

@@ -205,6 +205,9 @@ impl GpuVolume {
         self.lut = bake_lut(tf, &self.texels, step_voxels);
         self.tf = tf.clone();
         self.lut_step = step_voxels;
+        if let Some(live) = &mut self.extras.live_vao {
+            live.set_transfer_function(gpu, &self.texels, tf);
+        }
         gpu.queue
             .write_buffer(&self.lut_buffer, 0, bytemuck::cast_slice(&self.lut.rgba));
         let occ = self.ranges.occupancy(&self.texels, &self.lut);
