@@ -591,8 +591,10 @@ impl VaoInputs {
     }
 }
 
-/// Samples per submission (as LAO): keeps every dispatch short.
-pub const SAMPLES_PER_SUBMISSION: u64 = 1 << 30;
+/// Samples per submission: keeps every dispatch short. Lower than LAO's 2^30 because a
+/// sample here costs more (branches, f16 fetch): at 2^30 one slab of the full Engine
+/// outran the 60 s readback bound on a busy 2-core lavapipe.
+pub const SAMPLES_PER_SUBMISSION: u64 = 1 << 27;
 
 /// Long-lived state of the precompute kernel (`vao.wgsl`).
 #[derive(Debug)]

@@ -31,6 +31,9 @@ pub struct RaymarchBenchArgs {
     /// reference of the full engine takes ~15 min on lavapipe).
     #[arg(long, default_value_t = 128)]
     pub accuracy_dim: usize,
+    /// Only the frame-time table (skips the accuracy table and its LAO reference).
+    #[arg(long)]
+    pub frames_only: bool,
 }
 
 /// `volao bench raymarch`.
@@ -43,7 +46,21 @@ pub fn raymarch_bench(args: &RaymarchBenchArgs) -> Result<()> {
         .to_ras();
     let tf = TransferFunction::preset(Preset::CaoSingleColor, &volume.stats());
 
-    // Accuracy: positional AO (1 − A_P) against 512-ray LAO (A), on a halved engine.
+    let kernel = VaoGpu::new(&gpu.device)?;
+    if !args.frames_only {
+        accuracy(&gpu, &kernel, &volume, &tf, args)?;
+    }
+    frames(&gpu, &kernel, &volume, &tf, args)
+}
+
+/// Accuracy: positional AO (1 − A_P) against 512-ray LAO (A), on a halved engine.
+fn accuracy(
+    gpu: &crate::gpu::Gpu,
+    kernel: &VaoGpu,
+    volume: &crate::volume::Volume,
+    tf: &TransferFunction,
+    args: &RaymarchBenchArgs,
+) -> Result<()> {
     let small = VolumeTexels::new(
         &volume,
         UploadLimits {
@@ -78,7 +95,6 @@ pub fn raymarch_bench(args: &RaymarchBenchArgs) -> Result<()> {
         "| N_dir | N_samples | mip level | time | samples/s | RMS vs LAO-512 | RMS vs VAO-512 dirs | mean 1 − A_P |"
     );
     println!("|---|---|---|---|---|---|---|---|");
-    let kernel = VaoGpu::new(&gpu.device)?;
     let run = |s: &VaoSettings| -> Result<(Vec<f32>, f64, u32)> {
         let inputs = VaoInputs::new(&gpu, &small, &tf, s)?;
         let start = Instant::now();
@@ -111,8 +127,17 @@ pub fn raymarch_bench(args: &RaymarchBenchArgs) -> Result<()> {
     let lao_mean = truth.iter().map(|&x| x as f64).sum::<f64>() / voxels;
     println!();
     println!("LAO-512 mean A = {lao_mean:.4}");
+    Ok(())
+}
 
-    // Frame times on the full engine.
+/// Frame times on the full engine: no AO, precomputed and live positional AO, shadows.
+fn frames(
+    gpu: &crate::gpu::Gpu,
+    kernel: &VaoGpu,
+    volume: &crate::volume::Volume,
+    tf: &TransferFunction,
+    args: &RaymarchBenchArgs,
+) -> Result<()> {
     let rc = RayCaster::new(&gpu.device)?;
     let frame = Frame {
         camera: Camera {

@@ -144,8 +144,8 @@ pub fn light_cpu(
         .collect()
 }
 
-/// Samples per submission: keeps each dispatch short.
-pub const SAMPLES_PER_SUBMISSION: u64 = 1 << 30;
+/// Samples per submission: keeps each dispatch well inside the 60 s readback bound.
+pub const SAMPLES_PER_SUBMISSION: u64 = 1 << 27;
 
 /// Long-lived light-volume compute state.
 #[derive(Debug)]
