@@ -591,6 +591,10 @@ fn render(args: &RenderArgs) -> Result<()> {
         // Shadows of a headlight fall behind what casts them, from the eye's direction.
         Light::Headlight => camera.backward().to_array(),
     };
+    if settings.shadows {
+        volao::render::shadow::light_direction(settings.light_direction)
+            .map_err(anyhow::Error::msg)?;
+    }
     let width = args
         .width
         .or(scene.as_ref().map(|s| s.width))

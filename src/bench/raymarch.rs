@@ -62,19 +62,19 @@ fn accuracy(
     args: &RaymarchBenchArgs,
 ) -> Result<()> {
     let small = VolumeTexels::new(
-        &volume,
+        volume,
         UploadLimits {
             max_dim: args.accuracy_dim.max(8),
             max_bytes: u64::MAX,
         },
     );
-    let small_vol = GpuVolume::from_texels(&gpu, small.clone(), &tf, 0.5)?;
+    let small_vol = GpuVolume::from_texels(gpu, small.clone(), tf, 0.5)?;
     let voxels = small.dims.iter().product::<usize>() as f64;
     let start = Instant::now();
     let truth = LaoGpu::new(&gpu.device)?.compute(
-        &gpu,
+        gpu,
         &small_vol,
-        &lao_lut(&tf, &small),
+        &lao_lut(tf, &small),
         &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
         crate::ao::lao::DEFAULT_SAMPLES,
         &|_, _| {},
@@ -96,9 +96,9 @@ fn accuracy(
     );
     println!("|---|---|---|---|---|---|---|---|");
     let run = |s: &VaoSettings| -> Result<(Vec<f32>, f64, u32)> {
-        let inputs = VaoInputs::new(&gpu, &small, &tf, s)?;
+        let inputs = VaoInputs::new(gpu, &small, tf, s)?;
         let start = Instant::now();
-        let a = kernel.compute(&gpu, small.dims, &inputs, &|_, _| {})?;
+        let a = kernel.compute(gpu, small.dims, &inputs, &|_, _| {})?;
         Ok((a, start.elapsed().as_secs_f64(), inputs.params.counts[2]))
     };
     for samples in [8u32, 12] {
@@ -150,17 +150,17 @@ fn frames(
         height: args.size,
     };
     let time_frames = |vol: &GpuVolume| -> Result<f64> {
-        rc.render(&gpu, vol, &frame)?;
+        rc.render(gpu, vol, &frame)?;
         let mut times = Vec::new();
         for _ in 0..args.runs.max(1) {
             let start = Instant::now();
-            rc.render(&gpu, vol, &frame)?;
+            rc.render(gpu, vol, &frame)?;
             times.push(start.elapsed().as_secs_f64());
         }
         Ok(median(times))
     };
     let s = VaoSettings::default();
-    let mut vol = GpuVolume::new(&gpu, &volume, &tf, frame.settings.step_voxels)?;
+    let mut vol = GpuVolume::new(gpu, volume, tf, frame.settings.step_voxels)?;
     println!();
     println!(
         "Full engine {:?}, {}² frames, Phong, step 0.5 voxel, skipping on; median of {} after a warm-up",
@@ -174,10 +174,10 @@ fn frames(
     let plain = time_frames(&vol)?;
     println!("| no AO, no shadows | — | {:.0} ms |", plain * 1e3);
     let start = Instant::now();
-    let inputs = VaoInputs::new(&gpu, &vol.texels, &tf, &s)?;
-    let a = kernel.compute(&gpu, vol.texels.dims, &inputs, &|_, _| {})?;
+    let inputs = VaoInputs::new(gpu, &vol.texels, tf, &s)?;
+    let a = kernel.compute(gpu, vol.texels.dims, &inputs, &|_, _| {})?;
     let t_pre = start.elapsed().as_secs_f64();
-    vol.set_ambient_occlusion(&gpu, &a);
+    vol.set_ambient_occlusion(gpu, &a);
     let pre = time_frames(&vol)?;
     println!(
         "| positional AO precomputed ({} dirs × {} samples) | {:.1} s | {:.0} ms |",
@@ -186,9 +186,9 @@ fn frames(
         t_pre,
         pre * 1e3
     );
-    let mut live_vol = GpuVolume::new(&gpu, &volume, &tf, frame.settings.step_voxels)?;
+    let mut live_vol = GpuVolume::new(gpu, volume, tf, frame.settings.step_voxels)?;
     let start = Instant::now();
-    live_vol.set_live_vao(&gpu, &tf, Some(&s))?;
+    live_vol.set_live_vao(gpu, tf, Some(&s))?;
     let t_live_setup = start.elapsed().as_secs_f64();
     let live = time_frames(&live_vol)?;
     println!(
@@ -201,13 +201,13 @@ fn frames(
     let dir = light_direction(crate::render::shadow::DEFAULT_LIGHT).map_err(anyhow::Error::msg)?;
     let start = Instant::now();
     let light = LightGpu::new(&gpu.device)?.compute(
-        &gpu,
+        gpu,
         &vol.texels,
-        &light_lut(&tf, &vol.texels),
+        &light_lut(tf, &vol.texels),
         dir,
         &|_, _| {},
     )?;
-    vol.set_light_volume(&gpu, Some((&light, dir)))?;
+    vol.set_light_volume(gpu, Some((&light, dir)))?;
     let t_light = start.elapsed().as_secs_f64();
     let shadowed = time_frames(&vol)?;
     println!(

@@ -15,7 +15,10 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("smoke.wgsl", include_str!("../../shaders/smoke.wgsl")),
     ("surface.wgsl", include_str!("../../shaders/surface.wgsl")),
     ("vao.wgsl", include_str!("../../shaders/vao.wgsl")),
-    ("vao_common.wgsl", include_str!("../../shaders/vao_common.wgsl")),
+    (
+        "vao_common.wgsl",
+        include_str!("../../shaders/vao_common.wgsl"),
+    ),
 ];
 
 const DIRECTIVE: &str = "//!include ";
