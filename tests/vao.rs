@@ -656,3 +656,81 @@ fn cli_renders_and_computes_positional_ao_and_shadows() {
     let (ok, text) = run(&["render", "-o", &p(&png), "--light", "0,0,0"]);
     assert!(!ok && text.contains("light direction"), "{text}");
 }
+
+#[test]
+fn float_volumes_beyond_the_f16_range_give_the_same_ao_and_light() {
+    // The f16 copy normalises float texels by their range: values up to 255 000 (far
+    // above f16's 65 504) must give what the 8-bit original gives with the same ramp.
+    let (_, v, _) = real_crops().remove(0);
+    let VoxelData::U8(mut bytes) = v.data.clone() else {
+        panic!("the engine is u8")
+    };
+    bytes[0] = 0;
+    bytes[1] = 255;
+    let small = Volume::new(v.dims, v.spacing, VoxelData::U8(bytes.clone())).expect("valid");
+    let big = Volume::new(
+        v.dims,
+        v.spacing,
+        VoxelData::F32(bytes.iter().map(|&b| b as f32 * 1000.0).collect()),
+    )
+    .expect("valid");
+    let ramp = |top: f64| TransferFunction {
+        name: "ramp".into(),
+        opacity: vec![
+            OpacityPoint {
+                value: 0.0,
+                alpha: 0.0,
+            },
+            OpacityPoint {
+                value: top,
+                alpha: 0.9,
+            },
+        ],
+        color: vec![ColorStop {
+            value: 0.0,
+            rgb: [1.0; 3],
+        }],
+    };
+    let gpu = device();
+    let s = VaoSettings::default();
+    let a8 = gpu_vao(&gpu, &small, &ramp(255.0), &s);
+    let a32 = gpu_vao(&gpu, &big, &ramp(255_000.0), &s);
+    let (t8, t32) = (texels(&small), texels(&big));
+    let c32 = vao_cpu(
+        &PositionalAo::new(&t32, &ramp(255_000.0), &s),
+        t32.dims,
+        &|_, _| {},
+    );
+    let max = |x: &[f32], y: &[f32]| {
+        x.iter()
+            .zip(y)
+            .map(|(a, b)| (a - b).abs())
+            .fold(
+                0.0f32,
+                |m, d| if d.is_nan() { f32::INFINITY } else { m.max(d) },
+            )
+    };
+    eprintln!(
+        "VAO u8 vs f32×1000: {:.2e}; f32 GPU vs CPU {:.2e}",
+        max(&a8, &a32),
+        max(&a32, &c32)
+    );
+    assert!(max(&a8, &a32) <= 1e-3, "u8 vs f32: {}", max(&a8, &a32));
+    // Measured 1.6e-4: the float LUT map's last bits (the GPU may fuse `norm·a + b`)
+    // tip one of Eq. 4's near-equal comparisons; still far below what shading can show.
+    assert!(
+        max(&a32, &c32) <= 1e-3,
+        "f32 GPU vs CPU: {}",
+        max(&a32, &c32)
+    );
+    assert!(a32.iter().any(|&a| a < 0.9), "some occlusion");
+    use volao::render::shadow::{light_cpu, light_direction, light_lut};
+    let dir = light_direction([0.3, 0.2, 1.0]).expect("valid");
+    let l8 = light_cpu(&t8, &light_lut(&ramp(255.0), &t8), dir, &|_, _| {});
+    let l32 = light_cpu(&t32, &light_lut(&ramp(255_000.0), &t32), dir, &|_, _| {});
+    assert!(
+        max(&l8, &l32) <= 1e-3,
+        "light u8 vs f32: {}",
+        max(&l8, &l32)
+    );
+}

@@ -167,22 +167,48 @@ pub fn mip_level(stratum_mm: f32, v_s: f32, dims: [usize; 3]) -> u32 {
         .min(available)
 }
 
+/// The map from texel values to the f16 copy: `stored = (norm − lo) / scale`. Unorm
+/// texels are already in [0, 1] (identity); float texels hold physical values, which
+/// may exceed f16's range (65504), so they are normalised by their own range.
+pub fn f16_map(texels: &VolumeTexels) -> (f64, f64) {
+    match texels.format {
+        crate::render::texels::TexelFormat::R32Float => {
+            let (lo, hi) = texels.norm_range();
+            let (lo, hi) = (lo as f64, hi as f64);
+            if lo.is_finite() && hi > lo {
+                (lo, hi - lo)
+            } else {
+                (if lo.is_finite() { lo } else { 0.0 }, 1.0)
+            }
+        }
+        _ => (0.0, 1.0),
+    }
+}
+
+/// The LUT map `t = stored · a + b` for values of the f16 copy (see [`f16_map`]).
+pub fn f16_lut_map(texels: &VolumeTexels, lut: &Lut) -> (f32, f32) {
+    let (a, b) = texels.lut_map(lut);
+    let (lo, scale) = f16_map(texels);
+    ((a as f64 * scale) as f32, (b as f64 + a as f64 * lo) as f32)
+}
+
 /// Rounds to the nearest f16 (what an R16Float texel holds).
 fn to_f16(x: f32) -> u16 {
     half::f16::from_f32(x).to_bits()
 }
 
 /// Mip levels 0..=`levels` of the texel values as R16Float bits: level 0 the texels
-/// rounded to f16, each next one a 2×2×2 box filter of the one before (sizes halved
+/// mapped by [`f16_map`] and rounded to f16, each next one a 2×2×2 box filter of the one before (sizes halved
 /// and rounded down, as a GPU's mip chain is), each with its dims.
 ///
 /// f16 rather than the volume's own texture: lavapipe filters 8-bit unorm textures in
 /// fixed point, which flips Eq. 4's comparisons of equal neighbours between GPU and CPU;
 /// float texels filter identically on both. 11 significant bits are plenty for AO.
 pub fn mip_chain(texels: &VolumeTexels, levels: u32) -> Vec<(Vec<u16>, [usize; 3])> {
+    let (lo, scale) = f16_map(texels);
     let level0: Vec<u16> = (0..texels.dims.iter().product::<usize>())
         .into_par_iter()
-        .map(|i| to_f16(texels.norm_at(i)))
+        .map(|i| to_f16(((texels.norm_at(i) as f64 - lo) / scale) as f32))
         .collect();
     let mut chain = vec![(level0, texels.dims)];
     for _ in 0..levels {
@@ -287,7 +313,8 @@ const _: () = assert!(std::mem::size_of::<VaoParams>() == 80);
 /// The uniforms for `texels` with opacity table `lut`.
 pub fn params(texels: &VolumeTexels, lut: &Lut, s: &VaoSettings) -> VaoParams {
     let extent = texels.extent();
-    let (a, b) = texels.lut_map(lut);
+    let (a, b) = f16_lut_map(texels, lut);
+    let (lo, scale) = f16_map(texels);
     let v_s = min_spacing(texels);
     let samples = s.samples.max(1);
     let stratum = s.r_max_mm / samples as f32;
@@ -295,8 +322,8 @@ pub fn params(texels: &VolumeTexels, lut: &Lut, s: &VaoSettings) -> VaoParams {
     let (mode, iso, tol) = match s.isosurface {
         Some(i) => (
             1,
-            ((i.value - texels.value_offset) / texels.value_scale) as f32,
-            (i.tolerance / texels.value_scale.abs()) as f32,
+            (((i.value - texels.value_offset) / texels.value_scale - lo) / scale) as f32,
+            (i.tolerance / (texels.value_scale * scale).abs()) as f32,
         ),
         None => (0, 0.0, 0.0),
     };
@@ -558,7 +585,7 @@ impl VaoInputs {
     ) {
         let lut = vao_lut(tf, texels);
         let alpha: Vec<f32> = lut.rgba.iter().map(|e| e[3]).collect();
-        let (a, b) = texels.lut_map(&lut);
+        let (a, b) = f16_lut_map(texels, &lut);
         self.params.lut_map[0] = a;
         self.params.lut_map[1] = b;
         self.params.lut_map[2] = (lut.rgba.len().max(2) - 1) as f32;

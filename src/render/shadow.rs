@@ -61,7 +61,7 @@ fn params(texels: &VolumeTexels, lut: &Lut, direction: Vec3) -> LightParams {
     let extent = texels.extent();
     let h = LIGHT_STEP_VOXELS * texels.spacing.iter().copied().fold(f32::INFINITY, f32::min);
     let diag = Vec3::from(extent).length();
-    let (a, b) = texels.lut_map(lut);
+    let (a, b) = crate::ao::vao::f16_lut_map(texels, lut);
     let step = direction * h / Vec3::from(extent);
     LightParams {
         dims: [
