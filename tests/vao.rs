@@ -734,3 +734,36 @@ fn float_volumes_beyond_the_f16_range_give_the_same_ao_and_light() {
         max(&l8, &l32)
     );
 }
+
+#[test]
+fn v_thres_and_near_full_obscurance_stop_a_ray() {
+    // Uniform medium, as in the closed-form test. With V ≥ V_thres the first (accepted)
+    // sample ends every ray: γ = 1 − (1 − V)^(Δ / v_s), one stratum's worth. With a dense
+    // medium and V_thres = 1 the rays stop once γ ≥ 1 − 1/256 instead of running on.
+    let n = 40;
+    let v = filled([n, n, n], |_, _, _| 128);
+    let t = texels(&v);
+    let at = centre([20, 20, 20], t.dims);
+    let s = VaoSettings {
+        samples: 8,
+        r_max_mm: 12.0,
+        v_thres: 0.25,
+        ..Default::default()
+    };
+    let stratum = 12.0f32 / 8.0;
+    let stopped = PositionalAo::new(&t, &flat_tf(0.3), &s).positional_ao(at);
+    let one_stratum = 1.0 - 0.7f32.powf(stratum);
+    assert!(
+        (stopped - one_stratum).abs() < 1e-5,
+        "V_thres: A_P = {stopped}, one stratum {one_stratum}"
+    );
+    let g = gpu_vao(&device(), &v, &flat_tf(0.3), &s);
+    let gpu_a = 1.0 - g[20 + n * (20 + n * 20)];
+    assert!((gpu_a - one_stratum).abs() < 1e-5, "GPU: {gpu_a}");
+    let dense = PositionalAo::new(&t, &flat_tf(0.6), &VaoSettings { v_thres: 1.0, ..s });
+    let a = dense.positional_ao(at);
+    // Without the stop: 1 − 0.4^12 = 0.99998; with it the ray ends at the first sample
+    // where γ ≥ 1 − 1/256: after 5 samples, γ = 1 − 0.4^7.5 = 0.99899.
+    let five = 1.0 - 0.4f32.powf(5.0 * stratum);
+    assert!((a - five).abs() < 1e-5, "A_P = {a}, five samples {five}");
+}
