@@ -116,6 +116,13 @@ struct RenderArgs {
     /// patient's left, y anterior, z superior), e.g. -0.5,0.6,0.62.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_light, allow_hyphen_values = true)]
     light: Option<[f32; 3]>,
+    /// Draw a Wavefront OBJ mesh inside the volume (repeatable). Coordinates in mm, in the
+    /// volume's RAS frame with the origin at the volume's centre.
+    #[arg(long, value_name = "FILE.obj")]
+    mesh: Vec<PathBuf>,
+    /// Colour of the meshes: straight R,G,B,A in 0…1 (A < 1: translucent).
+    #[arg(long, value_name = "R,G,B,A", value_parser = parse_rgba, default_value = "0.9,0.9,0.9,1")]
+    mesh_rgba: [f32; 4],
     /// Render on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
@@ -195,6 +202,20 @@ fn parse_iso(s: &str) -> Result<(f64, f64), String> {
         [value, tol] if value.is_finite() && tol.is_finite() && *tol > 0.0 => Ok((*value, *tol)),
         _ => Err(format!(
             "{s:?}: expected VALUE,TOL with a positive tolerance, e.g. 300,50"
+        )),
+    }
+}
+
+fn parse_rgba(s: &str) -> Result<[f32; 4], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    match v.as_slice() {
+        [r, g, b, a] if v.iter().all(|x| (0.0..=1.0).contains(x)) => Ok([*r, *g, *b, *a]),
+        _ => Err(format!(
+            "{s:?}: expected four numbers from 0 to 1, R,G,B,A, e.g. 1,0.8,0.2,1"
         )),
     }
 }
@@ -631,13 +652,25 @@ fn render(args: &RenderArgs) -> Result<()> {
     }
     args.vao.apply(&mut ao.vao)?;
 
+    let meshes = args
+        .mesh
+        .iter()
+        .map(|p| volao::render::surface::load_obj(p, args.mesh_rgba))
+        .collect::<Result<Vec<_>, _>>()?;
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", ao.method != volao::ao::AoMethod::None);
-    let out =
-        volao::render::offscreen::render(&volume, &tf, &frame, &ao, !args.cpu, &|done, total| {
+    let out = volao::render::offscreen::render_with_surfaces(
+        &volume,
+        &tf,
+        &frame,
+        &ao,
+        &meshes,
+        !args.cpu,
+        &|done, total| {
             bar.set_length(total as u64);
             bar.set_position(done as u64);
-        })?;
+        },
+    )?;
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     if out.downsampled > 0 {

@@ -210,3 +210,90 @@ fn surfaces_in_real_data_gpu_matches_cpu_twin() {
         assert!(changed * 10 > g.pixels.len(), "{changed} pixels changed");
     }
 }
+
+#[test]
+fn obj_meshes_load_and_bad_ones_are_refused_with_the_line() {
+    use volao::render::surface::parse_obj;
+    let quad =
+        "# a square\nv -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nvn 0 1 0\nf 1//1 2//1 3//1 4//1\n";
+    let s = parse_obj(quad, "quad.obj", [1.0; 4]).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.triangles.len(), 2, "a quad is a fan of two triangles");
+    assert_eq!(s.triangles[1][2], Vec3::new(-1.0, 0.0, 1.0));
+    let neg = parse_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n", "n.obj", [1.0; 4])
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(neg.triangles[0][1], Vec3::X);
+    for (text, want) in [
+        ("v 0 0\n", "line 1: a vertex needs three finite coordinates"),
+        (
+            "v 0 0 0\nv 1 0 0\nf 1 2 3\n",
+            "line 3: face index 3 refers to no vertex (2 so far)",
+        ),
+        (
+            "v 0 0 0\nf 1 1\n",
+            "line 2: a face needs 3 vertices, this one has 2",
+        ),
+        ("v 0 x 0\n", "line 1: vertex \"x\""),
+        ("v 0 0 0\n", "no faces"),
+    ] {
+        let e = parse_obj(text, "m.obj", [1.0; 4]).expect_err(want);
+        assert!(e.to_string().contains(want), "{e} (want {want})");
+    }
+}
+
+#[test]
+fn cli_draws_a_mesh_inside_the_volume() {
+    use std::process::Command;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let obj = dir.path().join("plane.obj");
+    std::fs::write(
+        &obj,
+        "v -150 0 -150\nv 150 0 -150\nv 150 0 150\nv -150 0 150\nf 1 2 3 4\n",
+    )
+    .expect("write");
+    let run = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_volao"))
+            .args(args)
+            .output()
+            .expect("volao runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let p = |x: &std::path::Path| x.to_str().expect("utf-8").to_owned();
+    let (with, without) = (dir.path().join("with.png"), dir.path().join("without.png"));
+    let common = ["--width", "40", "--height", "40", "--camera", "20,30,3.2"];
+    let mut a = vec!["render", "-o"];
+    let w = p(&with);
+    a.push(&w);
+    a.extend(common);
+    let o = p(&obj);
+    a.extend(["--mesh", &o, "--mesh-rgba", "1,0.2,0.2,1"]);
+    run(&a);
+    let mut b = vec!["render", "-o"];
+    let wo = p(&without);
+    b.push(&wo);
+    b.extend(common);
+    run(&b);
+    let a = Image::load_png(&with).unwrap_or_else(|e| panic!("{e}"));
+    let b = Image::load_png(&without).unwrap_or_else(|e| panic!("{e}"));
+    let reddish = |img: &Image| {
+        img.pixels
+            .iter()
+            .filter(|p| p[0] as i32 > p[1] as i32 + 60)
+            .count()
+    };
+    assert!(
+        reddish(&a) > reddish(&b) + 100,
+        "the red plane shows: {} vs {} reddish pixels",
+        reddish(&a),
+        reddish(&b)
+    );
+    let bad = Command::new(env!("CARGO_BIN_EXE_volao"))
+        .args(["render", "-o", &w, "--mesh", "/nonexistent.obj"])
+        .output()
+        .expect("volao runs");
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("/nonexistent.obj"));
+}

@@ -34,6 +34,19 @@ pub fn render(
     use_gpu: bool,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Rendered, GpuError> {
+    render_with_surfaces(volume, tf, frame, ao, &[], use_gpu, progress)
+}
+
+/// As [`render`], with triangle meshes drawn inside the volume (see `render::surface`).
+pub fn render_with_surfaces(
+    volume: &Volume,
+    tf: &TransferFunction,
+    frame: &Frame,
+    ao: &AoSettings,
+    surfaces: &[super::surface::Surface],
+    use_gpu: bool,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Rendered, GpuError> {
     let rays = Rays::uniform(ao.rays.directions());
     if matches!(ao.method, AoMethod::Vao | AoMethod::VaoLive) {
         ao.vao.validate().map_err(|e| GpuError::Validation {
@@ -46,6 +59,7 @@ pub fn render(
             Ok(g) => {
                 let rc = RayCaster::new(&g.device)?;
                 let mut vol = GpuVolume::new(&g, volume, tf, frame.settings.step_voxels)?;
+                vol.extras.surfaces = surfaces.to_vec();
                 let start = std::time::Instant::now();
                 if ao.method == AoMethod::Lao {
                     let lut = lao_lut(tf, &vol.texels);
@@ -98,6 +112,13 @@ pub fn render(
     );
     let lut = super::gpu::bake_lut(tf, &texels, frame.settings.step_voxels);
     let (mut cv, occ) = cpu::prepare(&texels, &lut);
+    if !surfaces.is_empty() {
+        cv.surfaces = Some(cpu::CpuSurfaces {
+            surfaces: surfaces.to_vec(),
+            frame: *frame,
+            texels: texels.clone(),
+        });
+    }
     let start = std::time::Instant::now();
     if ao.method == AoMethod::Lao {
         let a = lao_cpu(&texels, &lao_lut(tf, &texels), &rays, ao.samples, progress);

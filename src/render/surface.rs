@@ -20,6 +20,100 @@ pub struct Surface {
     pub rgba: [f32; 4],
 }
 
+/// Why a mesh file was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum SurfaceError {
+    #[error("{path}: {message}")]
+    Io { path: String, message: String },
+    #[error("{path}, line {line}: {message}")]
+    Parse {
+        path: String,
+        line: usize,
+        message: String,
+    },
+    #[error("{path}: no faces (a mesh needs `f` lines with at least three vertices)")]
+    Empty { path: String },
+}
+
+/// Reads a Wavefront OBJ mesh: `v x y z` vertices (mm, volume RAS frame, origin at the
+/// volume's centre — the space the camera orbits) and `f` faces (`i`, `i/t`, `i//n`,
+/// `i/t/n`, negative indices relative to the end), polygons split into fans. Other
+/// statements (normals, texture coordinates, groups, materials) are ignored.
+pub fn load_obj(path: &std::path::Path, rgba: [f32; 4]) -> Result<Surface, SurfaceError> {
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| SurfaceError::Io {
+        path: name.clone(),
+        message: e.to_string(),
+    })?;
+    parse_obj(&text, &name, rgba)
+}
+
+/// [`load_obj`] on text; `name` names it in errors.
+pub fn parse_obj(text: &str, name: &str, rgba: [f32; 4]) -> Result<Surface, SurfaceError> {
+    let mut vertices: Vec<Vec3> = Vec::new();
+    let mut triangles = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let err = |message: String| SurfaceError::Parse {
+            path: name.to_owned(),
+            line: i + 1,
+            message,
+        };
+        let line = raw.split('#').next().unwrap_or("").trim();
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => {
+                let c: Vec<f32> = words
+                    .take(3)
+                    .map(|w| {
+                        w.parse::<f32>()
+                            .map_err(|e| err(format!("vertex {w:?}: {e}")))
+                    })
+                    .collect::<Result<_, _>>()?;
+                match c.as_slice() {
+                    [x, y, z] if c.iter().all(|v| v.is_finite()) => {
+                        vertices.push(Vec3::new(*x, *y, *z));
+                    }
+                    _ => return Err(err("a vertex needs three finite coordinates".into())),
+                }
+            }
+            Some("f") => {
+                let idx: Vec<Vec3> = words
+                    .map(|w| {
+                        let first = w.split('/').next().unwrap_or("");
+                        let k: i64 = first
+                            .parse()
+                            .map_err(|e| err(format!("face index {w:?}: {e}")))?;
+                        let n = vertices.len() as i64;
+                        let at = if k > 0 { k - 1 } else { n + k };
+                        if k == 0 || at < 0 || at >= n {
+                            return Err(err(format!(
+                                "face index {k} refers to no vertex ({n} so far)"
+                            )));
+                        }
+                        Ok(vertices[at as usize])
+                    })
+                    .collect::<Result<_, _>>()?;
+                if idx.len() < 3 {
+                    return Err(err(format!(
+                        "a face needs 3 vertices, this one has {}",
+                        idx.len()
+                    )));
+                }
+                for k in 1..idx.len() - 1 {
+                    triangles.push([idx[0], idx[k], idx[k + 1]]);
+                }
+            }
+            _ => {}
+        }
+    }
+    if triangles.is_empty() {
+        return Err(SurfaceError::Empty {
+            path: name.to_owned(),
+        });
+    }
+    Ok(Surface { triangles, rgba })
+}
+
 /// Unit face normal, or zero for a degenerate triangle.
 fn normal(t: &[Vec3; 3]) -> Vec3 {
     (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero()
