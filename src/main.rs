@@ -97,8 +97,11 @@ struct RenderArgs {
     /// Ambient coefficient k of k·A(x)·C_TF(x), 0 to 1 (1: ambient occlusion only).
     #[arg(long)]
     ambient: Option<f32>,
-    /// Ambient occlusion: none, lao, cao (exact under clipping) or lao-full (LAO of every
-    /// voxel each frame, CAO's baseline).
+    /// Ambient occlusion: none, lao, cao (exact under clipping), lao-full (LAO of every
+    /// voxel each frame, CAO's baseline), vao (positional AO, precomputed) or vao-live
+    /// (positional AO at every ray-cast sample).
+    /// Ambient occlusion: none, lao, vao (positional AO, precomputed) or vao-live
+    /// (positional AO at every ray-cast sample).
     #[arg(long, value_parser = volao::ao::AoMethod::parse)]
     ao: Option<volao::ao::AoMethod>,
     /// AO ray pattern: 6, 14, 26, 54 (the CAO paper's) or fib:N (Fibonacci lattice).
@@ -109,6 +112,22 @@ struct RenderArgs {
     samples: Option<u32>,
     #[command(flatten)]
     clip: ClipArgs,
+    #[command(flatten)]
+    vao: VaoArgs,
+    /// Volumetric shadows from a directional light (see --light).
+    #[arg(long)]
+    shadows: bool,
+    /// Directional light: the direction towards the light in volume space (RAS: x to the
+    /// patient's left, y anterior, z superior), e.g. -0.5,0.6,0.62.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_light, allow_hyphen_values = true)]
+    light: Option<[f32; 3]>,
+    /// Draw a Wavefront OBJ mesh inside the volume (repeatable). Coordinates in mm, in the
+    /// volume's RAS frame with the origin at the volume's centre.
+    #[arg(long, value_name = "FILE.obj")]
+    mesh: Vec<PathBuf>,
+    /// Colour of the meshes: straight R,G,B,A in 0…1 (A < 1: translucent).
+    #[arg(long, value_name = "R,G,B,A", value_parser = parse_rgba, default_value = "0.9,0.9,0.9,1")]
+    mesh_rgba: [f32; 4],
     /// Render on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
@@ -129,6 +148,93 @@ fn parse_camera(s: &str) -> Result<[f32; 3], String> {
         [a, e, d] if v.iter().all(|x| x.is_finite()) => Ok([*a, *e, *d]),
         _ => Err(format!(
             "{s:?}: expected three numbers AZIMUTH,ELEVATION,DISTANCE, e.g. 30,20,3.2"
+        )),
+    }
+}
+
+/// Positional AO (`--ao vao`, `vao-live`) parameters; unset flags keep the scene's or the
+/// defaults.
+#[derive(Args, Debug, Default)]
+struct VaoArgs {
+    /// Positional AO: rays over the sphere, N_dir (default 20).
+    #[arg(long)]
+    vao_directions: Option<u32>,
+    /// Positional AO: stratified samples per ray, N_samples (default 8).
+    #[arg(long)]
+    vao_samples: Option<u32>,
+    /// Positional AO: ray length r_max in mm (default 20).
+    #[arg(long, value_name = "MM")]
+    vao_radius: Option<f32>,
+    /// Positional AO: an accepted sample at least this opaque stops a ray (default 0.95).
+    #[arg(long)]
+    vao_threshold: Option<f32>,
+    /// Positional AO, isosurface variant: occluded where a sample lies within TOL of
+    /// VALUE (data units).
+    #[arg(long, value_name = "VALUE,TOL", value_parser = parse_iso, allow_hyphen_values = true)]
+    vao_iso: Option<(f64, f64)>,
+}
+
+impl VaoArgs {
+    /// Applies the flags to `s` and checks the result.
+    fn apply(&self, s: &mut volao::ao::vao::VaoSettings) -> Result<()> {
+        if let Some(n) = self.vao_directions {
+            s.directions = n;
+        }
+        if let Some(n) = self.vao_samples {
+            s.samples = n;
+        }
+        if let Some(r) = self.vao_radius {
+            s.r_max_mm = r;
+        }
+        if let Some(t) = self.vao_threshold {
+            s.v_thres = t;
+        }
+        if let Some((value, tolerance)) = self.vao_iso {
+            s.isosurface = Some(volao::ao::vao::Isosurface { value, tolerance });
+        }
+        s.validate()?;
+        Ok(())
+    }
+}
+
+fn parse_iso(s: &str) -> Result<(f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    match v.as_slice() {
+        [value, tol] if value.is_finite() && tol.is_finite() && *tol > 0.0 => Ok((*value, *tol)),
+        _ => Err(format!(
+            "{s:?}: expected VALUE,TOL with a positive tolerance, e.g. 300,50"
+        )),
+    }
+}
+
+fn parse_rgba(s: &str) -> Result<[f32; 4], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    match v.as_slice() {
+        [r, g, b, a] if v.iter().all(|x| (0.0..=1.0).contains(x)) => Ok([*r, *g, *b, *a]),
+        _ => Err(format!(
+            "{s:?}: expected four numbers from 0 to 1, R,G,B,A, e.g. 1,0.8,0.2,1"
+        )),
+    }
+}
+
+fn parse_light(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    match v.as_slice() {
+        [x, y, z] => volao::render::shadow::light_direction([*x, *y, *z]).map(|d| d.to_array()),
+        _ => Err(format!(
+            "{s:?}: expected three numbers X,Y,Z, e.g. -0.5,0.6,0.62"
         )),
     }
 }
@@ -184,7 +290,7 @@ struct AoArgs {
     /// Output volume (.nii.gz, .nii or .raw), f32 values in [0, 1].
     #[arg(short, long)]
     output: PathBuf,
-    /// AO method.
+    /// AO method: lao, or vao (positional AO; vao-live gives the same volume).
     #[arg(long, default_value = "lao", value_parser = volao::ao::AoMethod::parse)]
     method: volao::ao::AoMethod,
     /// Ray pattern: 6, 14, 26, 54 or fib:N.
@@ -198,6 +304,8 @@ struct AoArgs {
     tf: Option<String>,
     #[command(flatten)]
     clip: ClipArgs,
+    #[command(flatten)]
+    vao: VaoArgs,
     /// Compute on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
@@ -337,6 +445,9 @@ enum BenchCommand {
     /// The CAO paper's Tables 2–4: voxels recomputed, LAO every frame vs CAO, one vs
     /// two meshes, per-stage times and GPU memory.
     Cao(volao::bench_cao::CaoBenchArgs),
+    /// Positional AO by ray marching (time and RMS vs 512-ray LAO, live vs precomputed
+    /// frame times) and the cost of volumetric shadows, on the Engine.
+    Raymarch(volao::bench::raymarch::RaymarchBenchArgs),
     /// (internal) load one file and print time and peak memory as JSON.
     #[command(hide = true)]
     LoadOne { file: PathBuf },
@@ -419,6 +530,9 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Ao(args)) => ambient_occlusion(&args),
         Some(Command::Bench(BenchCommand::Render(args))) => volao::bench::render_bench(&args),
         Some(Command::Bench(BenchCommand::Lao(args))) => volao::bench::lao_bench(&args),
+        Some(Command::Bench(BenchCommand::Raymarch(args))) => {
+            volao::bench::raymarch::raymarch_bench(&args)
+        }
         Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
         Some(Command::Bench(BenchCommand::Cao(args))) => volao::bench_cao::cao_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
@@ -429,7 +543,7 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
     use volao::ao::{AoMethod, AoSettings};
     use volao::tf::{Preset, TransferFunction};
     if args.method == AoMethod::None {
-        bail!("--method none computes nothing; use lao");
+        bail!("--method none computes nothing; use lao or vao");
     }
     if args.samples == 0 {
         bail!("--samples must be at least 1");
@@ -447,6 +561,7 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
         samples: args.samples,
         ..Default::default()
     };
+    args.vao.apply(&mut settings.vao)?;
     args.clip.apply(&mut settings)?;
     let clip = args.clip.shapes_or(Vec::new());
     if !clip.is_empty() && !matches!(args.method, AoMethod::Cao | AoMethod::LaoFull) {
@@ -477,17 +592,26 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
         eprintln!("warning: {}: {w}", args.output.display());
     }
     let s = ao.stats();
+    let what = match settings.method {
+        AoMethod::Vao | AoMethod::VaoLive => format!(
+            "positional AO, {} directions × {} samples, r_max {} mm",
+            settings.vao.directions, settings.vao.samples, settings.vao.r_max_mm
+        ),
+        method => format!(
+            "{}, {} rays × {} samples",
+            match method {
+                AoMethod::Cao => "CAO",
+                AoMethod::LaoFull => "LAO (every voxel, clipped)",
+                _ => "LAO",
+            },
+            settings.rays.name(),
+            settings.samples
+        ),
+    };
     println!(
-        "{}: {} {}, {} rays × {} samples, TF {}, in {:.1} s on {device}; A from {:.4} to {:.4}, mean {:.4}",
+        "{}: {} {what}, TF {}, in {:.1} s on {device}; A from {:.4} to {:.4}, mean {:.4}",
         args.output.display(),
         fmt_dims(ao.dims),
-        match args.method {
-            AoMethod::Cao => "CAO",
-            AoMethod::LaoFull => "LAO (every voxel, clipped)",
-            _ => "LAO",
-        },
-        settings.rays.name(),
-        settings.samples,
         tf.name,
         seconds,
         s.min,
@@ -578,6 +702,21 @@ fn render(args: &RenderArgs) -> Result<()> {
         }
         settings.step_voxels = step;
     }
+    settings.shadows |= args.shadows;
+    let light = match (args.light, scene.as_ref().map(|s| s.light)) {
+        (Some(direction), _) => Light::Directional { direction },
+        (None, Some(l)) => l,
+        (None, None) => Light::Headlight,
+    };
+    settings.light_direction = match light {
+        Light::Directional { direction } => direction,
+        // Shadows of a headlight fall behind what casts them, from the eye's direction.
+        Light::Headlight => camera.backward().to_array(),
+    };
+    if settings.shadows {
+        volao::render::shadow::light_direction(settings.light_direction)
+            .map_err(anyhow::Error::msg)?;
+    }
     let width = args
         .width
         .or(scene.as_ref().map(|s| s.width))
@@ -612,6 +751,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         }
         ao.samples = m;
     }
+    args.vao.apply(&mut ao.vao)?;
 
     args.clip.apply(&mut ao)?;
     let scene_clip = match (&scene, scene_path) {
@@ -619,15 +759,23 @@ fn render(args: &RenderArgs) -> Result<()> {
         _ => Vec::new(),
     };
     let clip = args.clip.shapes_or(scene_clip);
+    let meshes = args
+        .mesh
+        .iter()
+        .map(|p| volao::render::surface::load_obj(p, args.mesh_rgba))
+        .collect::<Result<Vec<_>, _>>()?;
 
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", ao.method != volao::ao::AoMethod::None);
-    let out = volao::render::offscreen::render_clipped(
+    let out = volao::render::offscreen::render_with(
         &volume,
         &tf,
         &frame,
         &ao,
-        &clip,
+        volao::render::offscreen::Extras {
+            clip: &clip,
+            surfaces: &meshes,
+        },
         !args.cpu,
         &|done, total| {
             bar.set_length(total as u64);
@@ -648,6 +796,22 @@ fn render(args: &RenderArgs) -> Result<()> {
     out.image.save_png(&args.output)?;
     let ao_note = if ao.method == volao::ao::AoMethod::None {
         String::new()
+    } else if matches!(
+        ao.method,
+        volao::ao::AoMethod::Vao | volao::ao::AoMethod::VaoLive
+    ) {
+        format!(
+            " (positional AO{}, {} directions × {} samples, r_max {} mm: {:.0} ms)",
+            if ao.method == volao::ao::AoMethod::VaoLive {
+                " live"
+            } else {
+                ""
+            },
+            ao.vao.directions,
+            ao.vao.samples,
+            ao.vao.r_max_mm,
+            out.ao_seconds * 1e3
+        )
     } else {
         format!(
             " (AO {} rays × {} samples: {:.0} ms)",
@@ -676,7 +840,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             },
             transfer_function: tf,
             camera,
-            light: Light::Headlight,
+            light,
             render: settings,
             width,
             height,

@@ -76,12 +76,14 @@ pub struct VolumeSource {
     pub raw: Option<RawLayout>,
 }
 
-/// The light. Only a headlight exists today; the field keeps scenes forward-compatible.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+/// The light: a headlight, or a directional light (which volumetric shadows use).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase", tag = "kind")]
 pub enum Light {
     #[default]
     Headlight,
+    /// Parallel light arriving from `direction` (towards the light, volume RAS space).
+    Directional { direction: [f32; 3] },
 }
 
 /// A complete, reproducible view.

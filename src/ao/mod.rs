@@ -6,6 +6,7 @@
 pub mod cao;
 pub mod lao;
 pub mod rays;
+pub mod vao;
 
 use rays::RaySet;
 
@@ -24,6 +25,10 @@ pub enum AoMethod {
     /// The same clipping with a full LAO ray cast of every voxel each frame (the CAO
     /// paper's baseline).
     LaoFull,
+    /// Positional AO by ray marching (Papaioannou et al. Eq. 8), precomputed per voxel.
+    Vao,
+    /// The same positional AO evaluated at every ray-cast sample, no precomputation.
+    VaoLive,
 }
 
 impl AoMethod {
@@ -33,8 +38,10 @@ impl AoMethod {
             "lao" => Ok(AoMethod::Lao),
             "cao" => Ok(AoMethod::Cao),
             "lao-full" => Ok(AoMethod::LaoFull),
+            "vao" => Ok(AoMethod::Vao),
+            "vao-live" => Ok(AoMethod::VaoLive),
             other => Err(format!(
-                "unknown AO method {other:?} (available: none, lao, cao, lao-full)"
+                "unknown AO method {other:?} (available: none, lao, cao, lao-full, vao, vao-live)"
             )),
         }
     }
@@ -54,6 +61,8 @@ pub struct AoSettings {
     pub msaa: u32,
     /// CAO: size of each clip shape's depth and dilation maps (pixels, square).
     pub clip_resolution: u32,
+    /// Parameters of positional AO (`vao`, `vao-live`).
+    pub vao: vao::VaoSettings,
 }
 
 impl Default for AoSettings {
@@ -64,6 +73,7 @@ impl Default for AoSettings {
             samples: lao::DEFAULT_SAMPLES,
             msaa: cao::DEFAULT_MSAA,
             clip_resolution: crate::clip::gpu::DEFAULT_RESOLUTION,
+            vao: vao::VaoSettings::default(),
         }
     }
 }
@@ -107,6 +117,10 @@ pub fn compute_volume_clipped(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(crate::volume::Volume, String, Option<cao::CaoStats>), crate::gpu::GpuError> {
     use crate::render::texels::{UploadLimits, VolumeTexels};
+    if matches!(settings.method, AoMethod::Vao | AoMethod::VaoLive) {
+        return vao::compute_volume(volume, tf, &settings.vao, use_gpu, progress)
+            .map(|(v, d)| (v, d, None));
+    }
     let rays = lao::Rays::uniform(settings.rays.directions());
     if matches!(settings.method, AoMethod::Cao | AoMethod::LaoFull) {
         let (values, device, stats) =

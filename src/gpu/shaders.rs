@@ -24,8 +24,15 @@ pub const SOURCES: &[(&str, &str)] = &[
     ),
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
     ("lao.wgsl", include_str!("../../shaders/lao.wgsl")),
+    ("light.wgsl", include_str!("../../shaders/light.wgsl")),
     ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
     ("smoke.wgsl", include_str!("../../shaders/smoke.wgsl")),
+    ("surface.wgsl", include_str!("../../shaders/surface.wgsl")),
+    ("vao.wgsl", include_str!("../../shaders/vao.wgsl")),
+    (
+        "vao_common.wgsl",
+        include_str!("../../shaders/vao_common.wgsl"),
+    ),
 ];
 
 const DIRECTIVE: &str = "//!include ";

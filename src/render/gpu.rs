@@ -26,6 +26,10 @@ pub struct RayCaster {
     /// `@group(1)` with no clip shapes (zeroed uniforms, a blank map).
     no_clip: wgpu::BindGroup,
     sampler: wgpu::Sampler,
+    /// Group 2: live positional AO and shadows (`render::shadow`).
+    layout_2: wgpu::BindGroupLayout,
+    placeholders: super::shadow::Placeholders,
+    surfaces: super::surface::SurfaceRenderer,
 }
 
 /// One volume on the GPU with its transfer function baked.
@@ -42,6 +46,8 @@ pub struct GpuVolume {
     pub lut: Lut,
     lut_step: f32,
     tf: TransferFunction,
+    /// Live positional AO and the light volume (bind group 1), see `render::shadow`.
+    pub extras: super::shadow::RayExtras,
 }
 
 fn texture_3d(
@@ -187,6 +193,7 @@ impl GpuVolume {
                 lut,
                 lut_step: step_voxels,
                 tf: tf.clone(),
+                extras: Default::default(),
                 ranges,
                 texels,
             }
@@ -201,6 +208,9 @@ impl GpuVolume {
         self.lut = bake_lut(tf, &self.texels, step_voxels);
         self.tf = tf.clone();
         self.lut_step = step_voxels;
+        if let Some(live) = &mut self.extras.live_vao {
+            live.set_transfer_function(gpu, &self.texels, tf);
+        }
         gpu.queue
             .write_buffer(&self.lut_buffer, 0, bytemuck::cast_slice(&self.lut.rgba));
         let occ = self.ranges.occupancy(&self.texels, &self.lut);
@@ -249,6 +259,7 @@ impl GpuVolume {
 impl RayCaster {
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
         let module = shaders::module(device, "raycast.wgsl")?;
+        let surfaces = super::surface::SurfaceRenderer::new(device)?;
         validated(device, "RayCaster::new", || {
             let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
                 binding,
@@ -301,9 +312,13 @@ impl RayCaster {
                 label: Some("RayCaster::clip_layout"),
                 entries: &crate::clip::gpu::layout_entries(wgpu::ShaderStages::COMPUTE),
             });
+            let layout_2 = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("RayCaster::layout_2"),
+                entries: &super::shadow::layout_entries(),
+            });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("RayCaster::pipeline_layout"),
-                bind_group_layouts: &[Some(&layout), Some(&clip_layout)],
+                bind_group_layouts: &[Some(&layout), Some(&clip_layout), Some(&layout_2)],
                 immediate_size: 0,
             });
             let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -361,6 +376,9 @@ impl RayCaster {
                 clip_layout,
                 no_clip,
                 sampler,
+                layout_2,
+                placeholders: super::shadow::Placeholders::new(device),
+                surfaces,
             }
         })
     }
@@ -386,12 +404,22 @@ impl RayCaster {
             height: h,
             pixels: vec![[0; 4]; (w * h) as usize],
         };
+        let layer = match vol.extras.surfaces.is_empty() {
+            true => None,
+            false => {
+                Some(
+                    self.surfaces
+                        .rasterise(gpu, &vol.extras.surfaces, frame, &vol.texels)?,
+                )
+            }
+        };
         let mut y0 = 0;
         while y0 < h {
             let mut x0 = 0;
             while x0 < w {
                 let size = ((w - x0).min(TILE), (h - y0).min(TILE));
-                let tile = self.render_tile(gpu, vol, frame, clip_group, (x0, y0), size)?;
+                let tile =
+                    self.render_tile(gpu, vol, frame, clip_group, layer.as_ref(), (x0, y0), size)?;
                 image.blit(&tile, x0, y0);
                 x0 += TILE;
             }
@@ -406,6 +434,7 @@ impl RayCaster {
         vol: &GpuVolume,
         frame: &Frame,
         clip_group: &wgpu::BindGroup,
+        layer: Option<&super::surface::SurfaceLayer>,
         (x0, y0): (u32, u32),
         (tw, th): (u32, u32),
     ) -> Result<Image, GpuError> {
@@ -449,12 +478,21 @@ impl RayCaster {
                     wgpu::BindingResource::TextureView(&target_view),
                 ],
             );
+            let group_2 = super::shadow::bind_group_2(
+                device,
+                &gpu.queue,
+                &self.layout_2,
+                &vol.extras,
+                layer,
+                &self.placeholders,
+                &self.sampler,
+            );
             crate::gpu::submit_compute_with(
                 device,
                 &gpu.queue,
                 "RayCaster::tile",
                 &self.pipeline,
-                &[&group, clip_group],
+                &[&group, clip_group, &group_2],
                 [tw.div_ceil(8), th.div_ceil(8), 1],
                 |encoder| {
                     encoder.copy_texture_to_buffer(

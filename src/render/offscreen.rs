@@ -1,11 +1,12 @@
 //! Offscreen rendering for the CLI and tests: GPU when an adapter exists, else the CPU twin.
 
 use super::gpu::{GpuVolume, RayCaster};
+use super::shadow::{LightGpu, LightVolume, light_cpu, light_direction, light_lut, quantise};
 use super::texels::{UploadLimits, VolumeTexels};
 use super::{Frame, Image, cpu};
 use crate::ao::cao::{CaoGpu, CaoMode};
 use crate::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
-use crate::ao::{AoMethod, AoSettings};
+use crate::ao::{AoMethod, AoSettings, vao};
 use crate::clip::ClipShape;
 use crate::clip::gpu::ClipMaps;
 use crate::gpu::{self, GpuError};
@@ -28,6 +29,15 @@ pub struct Rendered {
     pub clip_errors: Vec<String>,
 }
 
+/// What is drawn besides the volume.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Extras<'a> {
+    /// Clip shapes (mm from the volume's centre).
+    pub clip: &'a [ClipShape],
+    /// Triangle meshes drawn inside the volume (see `render::surface`).
+    pub surfaces: &'a [super::surface::Surface],
+}
+
 /// Renders `volume` (already in RAS order) with ambient occlusion as `ao` says.
 ///
 /// With `use_gpu` and no usable adapter, falls back to the CPU twin with a warning.
@@ -40,11 +50,11 @@ pub fn render(
     use_gpu: bool,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Rendered, GpuError> {
-    render_clipped(volume, tf, frame, ao, &[], use_gpu, progress)
+    render_with(volume, tf, frame, ao, Extras::default(), use_gpu, progress)
 }
 
-/// [`render`] with clip shapes (mm from the volume's centre). Clipping, CAO and its
-/// baseline need the GPU: the clip shapes' depth maps are rasterised.
+/// [`render`] with clip shapes. Clipping, CAO and its baseline need the GPU: the clip
+/// shapes' depth maps are rasterised.
 pub fn render_clipped(
     volume: &Volume,
     tf: &TransferFunction,
@@ -54,7 +64,48 @@ pub fn render_clipped(
     use_gpu: bool,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Rendered, GpuError> {
+    let extras = Extras {
+        clip,
+        ..Default::default()
+    };
+    render_with(volume, tf, frame, ao, extras, use_gpu, progress)
+}
+
+/// As [`render`], with triangle meshes drawn inside the volume (see `render::surface`).
+pub fn render_with_surfaces(
+    volume: &Volume,
+    tf: &TransferFunction,
+    frame: &Frame,
+    ao: &AoSettings,
+    surfaces: &[super::surface::Surface],
+    use_gpu: bool,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Rendered, GpuError> {
+    let extras = Extras {
+        surfaces,
+        ..Default::default()
+    };
+    render_with(volume, tf, frame, ao, extras, use_gpu, progress)
+}
+
+/// [`render`] with clip shapes and surfaces.
+pub fn render_with(
+    volume: &Volume,
+    tf: &TransferFunction,
+    frame: &Frame,
+    ao: &AoSettings,
+    extras: Extras<'_>,
+    use_gpu: bool,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Rendered, GpuError> {
+    let Extras { clip, surfaces } = extras;
     let rays = Rays::uniform(ao.rays.directions());
+    if matches!(ao.method, AoMethod::Vao | AoMethod::VaoLive) {
+        ao.vao.validate().map_err(|e| GpuError::Validation {
+            stage: "positional AO settings".into(),
+            message: e.to_string(),
+        })?;
+    }
     let clipped = !clip.is_empty() || matches!(ao.method, AoMethod::Cao | AoMethod::LaoFull);
     if clipped && !use_gpu {
         return Err(GpuError::Unsupported {
@@ -66,6 +117,7 @@ pub fn render_clipped(
             Ok(g) => {
                 let rc = RayCaster::new(&g.device)?;
                 let mut vol = GpuVolume::new(&g, volume, tf, frame.settings.step_voxels)?;
+                vol.extras.surfaces = surfaces.to_vec();
                 let start = std::time::Instant::now();
                 let mut cao_stats = None;
                 let mut clip_errors = Vec::new();
@@ -94,6 +146,17 @@ pub fn render_clipped(
                         cao_stats = Some(stats);
                         cao_state = Some(c);
                     }
+                    AoMethod::Vao => {
+                        let inputs = vao::VaoInputs::new(&g, &vol.texels, tf, &ao.vao)?;
+                        let a = vao::VaoGpu::new(&g.device)?.compute(
+                            &g,
+                            vol.texels.dims,
+                            &inputs,
+                            progress,
+                        )?;
+                        vol.set_ambient_occlusion(&g, &a);
+                    }
+                    AoMethod::VaoLive => vol.set_live_vao(&g, tf, Some(&ao.vao))?,
                     AoMethod::None => {}
                 }
                 if cao_state.is_none() && !clip.is_empty() {
@@ -103,6 +166,17 @@ pub fn render_clipped(
                     let update = m.update(&g, clip, radius, 1.0, ao.clip_resolution)?;
                     clip_errors = update.errors.iter().map(|e| e.to_string()).collect();
                     maps = Some(m);
+                }
+                if frame.settings.shadows {
+                    let dir = light_dir(frame)?;
+                    let t = LightGpu::new(&g.device)?.compute(
+                        &g,
+                        &vol.texels,
+                        &light_lut(tf, &vol.texels),
+                        dir,
+                        progress,
+                    )?;
+                    vol.set_light_volume(&g, Some((&t, dir)))?;
                 }
                 let ao_seconds = start.elapsed().as_secs_f64();
                 let clip_maps = cao_state.as_ref().map(|c| &c.clip).or(maps.as_ref());
@@ -129,10 +203,38 @@ pub fn render_clipped(
     );
     let lut = super::gpu::bake_lut(tf, &texels, frame.settings.step_voxels);
     let (mut cv, occ) = cpu::prepare(&texels, &lut);
+    if !surfaces.is_empty() {
+        cv.surfaces = Some(cpu::CpuSurfaces {
+            surfaces: surfaces.to_vec(),
+            frame: *frame,
+            texels: texels.clone(),
+        });
+    }
     let start = std::time::Instant::now();
+    // The GPU keeps AO volumes as f32 (R32Float), so the twin uses them as computed.
     if ao.method == AoMethod::Lao {
-        let a = lao_cpu(&texels, &lao_lut(tf, &texels), &rays, ao.samples, progress);
-        cv.ao = Some(a);
+        cv.ao = Some(lao_cpu(
+            &texels,
+            &lao_lut(tf, &texels),
+            &rays,
+            ao.samples,
+            progress,
+        ));
+    }
+    if ao.method == AoMethod::Vao {
+        let pao = vao::PositionalAo::new(&texels, tf, &ao.vao);
+        cv.ao = Some(vao::vao_cpu(&pao, texels.dims, progress));
+    }
+    if ao.method == AoMethod::VaoLive {
+        cv.live_vao = Some(vao::PositionalAo::new(&texels, tf, &ao.vao));
+    }
+    if frame.settings.shadows {
+        let dir = light_dir(frame)?;
+        let t = light_cpu(&texels, &light_lut(tf, &texels), dir, progress);
+        cv.light = Some(LightVolume {
+            direction: dir,
+            values: quantise(&t),
+        });
     }
     let ao_seconds = start.elapsed().as_secs_f64();
     let threads = rayon::current_num_threads();
@@ -144,5 +246,13 @@ pub fn render_clipped(
         ao_seconds,
         cao: None,
         clip_errors: Vec::new(),
+    })
+}
+
+/// The frame's light direction, checked (shadows need a real direction).
+fn light_dir(frame: &Frame) -> Result<glam::Vec3, GpuError> {
+    light_direction(frame.settings.light_direction).map_err(|message| GpuError::Validation {
+        stage: "shadows".into(),
+        message,
     })
 }
