@@ -428,6 +428,10 @@ impl RayCaster {
         Ok(image)
     }
 
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "one tile of one frame: every argument is a different input"
+    )]
     fn render_tile(
         &self,
         gpu: &Gpu,
