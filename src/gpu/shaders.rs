@@ -8,6 +8,11 @@ use super::GpuError;
 /// Every shader in `shaders/`, embedded at build time. A test checks this list against
 /// the directory so a new file cannot be forgotten.
 pub const SOURCES: &[(&str, &str)] = &[
+    (
+        "ambient_maps.wgsl",
+        include_str!("../../shaders/ambient_maps.wgsl"),
+    ),
+    ("box_stats.wgsl", include_str!("../../shaders/box_stats.wgsl")),
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
     ("lao.wgsl", include_str!("../../shaders/lao.wgsl")),
     ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
