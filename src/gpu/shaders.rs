@@ -14,6 +14,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ),
     ("box_stats.wgsl", include_str!("../../shaders/box_stats.wgsl")),
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
+    ("cone.wgsl", include_str!("../../shaders/cone.wgsl")),
     ("lao.wgsl", include_str!("../../shaders/lao.wgsl")),
     ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
     ("smoke.wgsl", include_str!("../../shaders/smoke.wgsl")),
