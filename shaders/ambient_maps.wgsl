@@ -15,7 +15,7 @@ struct Params {
 @group(0) @binding(4) var out_map: texture_storage_3d<r32float, write>;
 
 const VARIANCE_FLOOR: f32 = 1e-12;
-const ERF_A: f32 = 0.14001229;
+const ERF_A: f32 = 0.1400123;
 const FOUR_OVER_PI: f32 = 1.2732395;
 const SQRT_2: f32 = 1.4142135;
 

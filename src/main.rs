@@ -97,7 +97,7 @@ struct RenderArgs {
     /// Ambient coefficient k of k·A(x)·C_TF(x), 0 to 1 (1: ambient occlusion only).
     #[arg(long)]
     ambient: Option<f32>,
-    /// Ambient occlusion: none or lao.
+    /// Ambient occlusion: none, lao, cdf, gauss, penner or cone.
     #[arg(long, value_parser = volao::ao::AoMethod::parse)]
     ao: Option<volao::ao::AoMethod>,
     /// AO ray pattern: 6, 14, 26, 54 (the CAO paper's) or fib:N (Fibonacci lattice).
@@ -106,6 +106,12 @@ struct RenderArgs {
     /// AO samples per ray (1 mm apart).
     #[arg(long)]
     samples: Option<u32>,
+    #[command(flatten)]
+    fast_ao: FastAoArgs,
+    /// Opacity modulation by local variance: α · min(σ²/σ²_max, 1) (Ruiz et al. §4.2),
+    /// σ² of the normalised density in a box of radius RADIUS voxels (default 10).
+    #[arg(long, value_name = "SIGMA2_MAX[,RADIUS]", value_parser = parse_modulation)]
+    opacity_modulation: Option<volao::ao::filter::OpacityModulation>,
     /// Render on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
@@ -114,6 +120,72 @@ struct RenderArgs {
     save_scene: Option<PathBuf>,
     #[command(flatten)]
     load: LoadArgs,
+}
+
+/// Flags of the filter-map and cone-traced AO methods (`volao render` and `volao ao`).
+#[derive(Args, Debug)]
+struct FastAoArgs {
+    /// Filter maps (cdf, gauss, penner): box radius r, side 2r + 1 (default 10 voxels).
+    #[arg(long)]
+    radius: Option<f32>,
+    /// The radius is in mm (rounded to voxels per axis) instead of voxels.
+    #[arg(long)]
+    radius_mm: bool,
+    /// Filter maps: statistics of the density (the paper) or of the TF opacity.
+    #[arg(long, value_parser = volao::ao::filter::StatisticSource::parse)]
+    statistic: Option<volao::ao::filter::StatisticSource>,
+    /// Cone tracing: 6, 14 or 26 cones (default 6).
+    #[arg(long, value_parser = volao::ao::cone::ConeSet::parse)]
+    cones: Option<volao::ao::cone::ConeSet>,
+    /// Cone tracing: low, medium or high = 3, 5 or 7 spheres per cone (default medium).
+    #[arg(long, value_parser = volao::ao::cone::ConePreset::parse)]
+    cone_preset: Option<volao::ao::cone::ConePreset>,
+}
+
+impl FastAoArgs {
+    fn apply(&self, ao: &mut volao::ao::AoSettings) -> Result<()> {
+        if let Some(r) = self.radius {
+            if !r.is_finite() || !(0.0..=1000.0).contains(&r) {
+                bail!("--radius must be between 0 and 1000");
+            }
+            ao.radius = r;
+        }
+        if self.radius_mm {
+            ao.radius_unit = volao::ao::filter::RadiusUnit::Mm;
+        }
+        if let Some(s) = self.statistic {
+            ao.statistic = s;
+        }
+        if let Some(c) = self.cones {
+            ao.cones = c;
+        }
+        if let Some(p) = self.cone_preset {
+            ao.cone_preset = p;
+        }
+        Ok(())
+    }
+}
+
+fn parse_modulation(s: &str) -> Result<volao::ao::filter::OpacityModulation, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    let mut m = volao::ao::filter::OpacityModulation::default();
+    match v.as_slice() {
+        [s2] if *s2 > 0.0 && s2.is_finite() => m.sigma2_max = *s2,
+        [s2, r] if *s2 > 0.0 && s2.is_finite() && (0.0..=1000.0).contains(r) => {
+            m.sigma2_max = *s2;
+            m.radius = *r;
+        }
+        _ => {
+            return Err(format!(
+                "{s:?}: expected SIGMA2_MAX[,RADIUS] with σ²_max > 0 and a radius of 0 to 1000 voxels, e.g. 0.001,10"
+            ));
+        }
+    }
+    Ok(m)
 }
 
 fn parse_camera(s: &str) -> Result<[f32; 3], String> {
@@ -181,8 +253,8 @@ struct AoArgs {
     /// Output volume (.nii.gz, .nii or .raw), f32 values in [0, 1].
     #[arg(short, long)]
     output: PathBuf,
-    /// AO method.
-    #[arg(long, default_value = "lao", value_parser = volao::ao::AoMethod::parse)]
+    /// AO method: lao, cdf, gauss, penner or cone.
+    #[arg(long, alias = "ao", default_value = "lao", value_parser = volao::ao::AoMethod::parse)]
     method: volao::ao::AoMethod,
     /// Ray pattern: 6, 14, 26, 54 or fib:N.
     #[arg(long, default_value = "54", value_parser = parse_rays)]
@@ -193,6 +265,8 @@ struct AoArgs {
     /// Transfer-function preset giving the opacity (default: by the data's range).
     #[arg(long)]
     tf: Option<String>,
+    #[command(flatten)]
+    fast_ao: FastAoArgs,
     /// Compute on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
@@ -352,7 +426,7 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
     use volao::ao::{AoMethod, AoSettings};
     use volao::tf::{Preset, TransferFunction};
     if args.method == AoMethod::None {
-        bail!("--method none computes nothing; use lao");
+        bail!("--method none computes nothing; use lao, cdf, gauss, penner or cone");
     }
     if args.samples == 0 {
         bail!("--samples must be at least 1");
@@ -364,11 +438,13 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
         None => Preset::default_for(&stats),
     };
     let tf = TransferFunction::preset(preset, &stats);
-    let settings = AoSettings {
+    let mut settings = AoSettings {
         method: args.method,
         rays: args.rays,
         samples: args.samples,
+        ..AoSettings::default()
     };
+    args.fast_ao.apply(&mut settings)?;
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", true);
     let (ao, device) =
@@ -382,12 +458,19 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
         eprintln!("warning: {}: {w}", args.output.display());
     }
     let s = ao.stats();
+    let what = if volao::ao::fast::handles(settings.method) {
+        volao::ao::fast::describe(&settings)
+    } else {
+        format!(
+            "LAO, {} rays × {} samples",
+            settings.rays.name(),
+            settings.samples
+        )
+    };
     println!(
-        "{}: {} LAO, {} rays × {} samples, TF {}, in {:.1} s on {device}; A from {:.4} to {:.4}, mean {:.4}",
+        "{}: {} {what}, TF {}, in {:.1} s on {device}; A from {:.4} to {:.4}, mean {:.4}",
         args.output.display(),
         fmt_dims(ao.dims),
-        settings.rays.name(),
-        settings.samples,
         tf.name,
         seconds,
         s.min,
@@ -478,6 +561,9 @@ fn render(args: &RenderArgs) -> Result<()> {
         }
         settings.step_voxels = step;
     }
+    if args.opacity_modulation.is_some() {
+        settings.opacity_modulation = args.opacity_modulation;
+    }
     let width = args
         .width
         .or(scene.as_ref().map(|s| s.width))
@@ -512,6 +598,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         }
         ao.samples = m;
     }
+    args.fast_ao.apply(&mut ao)?;
 
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", ao.method != volao::ao::AoMethod::None);
@@ -531,6 +618,12 @@ fn render(args: &RenderArgs) -> Result<()> {
     out.image.save_png(&args.output)?;
     let ao_note = if ao.method == volao::ao::AoMethod::None {
         String::new()
+    } else if volao::ao::fast::handles(ao.method) {
+        format!(
+            " (AO {}: {:.0} ms)",
+            volao::ao::fast::describe(&ao),
+            out.ao_seconds * 1e3
+        )
     } else {
         format!(
             " (AO {} rays × {} samples: {:.0} ms)",

@@ -247,6 +247,7 @@ mod tests {
                 method: crate::ao::AoMethod::Lao,
                 rays: crate::ao::rays::RaySet::Fibonacci(96),
                 samples: 12,
+                ..Default::default()
             },
             clip_shapes: vec![serde_json::json!({"shape": "sphere"})],
         }

@@ -389,3 +389,286 @@ fn gpu_matches_cpu_twin_for_every_map_on_real_data() {
         }
     }
 }
+
+/// The filter maps, cone tracing and opacity modulation through `volao render`'s path
+/// (`offscreen::render`), GPU against the CPU twin.
+#[test]
+fn offscreen_render_gpu_matches_cpu_for_every_method_and_modulation() {
+    use volao::ao::filter::OpacityModulation;
+    use volao::ao::{AoMethod, AoSettings};
+    use volao::render::image::{Tolerance, check};
+    use volao::render::offscreen::render;
+    use volao::render::{Camera, Frame, Image, RenderSettings};
+    // As tests/render.rs TWIN: the GPU's reduced-precision filtering weights move a few
+    // surface pixels.
+    const TWIN: Tolerance = Tolerance {
+        max_channel_diff: 3,
+        max_outlier_fraction: 0.01,
+        max_outlier_diff: 64,
+    };
+    let out = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("filter");
+    let v = volume::demo::head_phantom(48);
+    let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
+    let frame = |modulation| Frame {
+        camera: Camera {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            ..Default::default()
+        },
+        settings: RenderSettings {
+            ambient: 0.8,
+            opacity_modulation: modulation,
+            ..Default::default()
+        },
+        width: 96,
+        height: 96,
+    };
+    let lum = |img: &Image| {
+        img.pixels
+            .iter()
+            .map(|p| p[0] as u64 + p[1] as u64 + p[2] as u64)
+            .sum::<u64>()
+    };
+    let plain = render(
+        &v,
+        &tf,
+        &frame(None),
+        &AoSettings::default(),
+        false,
+        &|_, _| {},
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    for method in [
+        AoMethod::Cdf,
+        AoMethod::Gauss,
+        AoMethod::Penner,
+        AoMethod::Cone,
+    ] {
+        let ao = AoSettings {
+            method,
+            radius: 4.0,
+            samples: 8,
+            ..AoSettings::default()
+        };
+        let g =
+            render(&v, &tf, &frame(None), &ao, true, &|_, _| {}).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            !g.device.starts_with("CPU twin"),
+            "the GPU path must run: {}",
+            g.device
+        );
+        let c =
+            render(&v, &tf, &frame(None), &ao, false, &|_, _| {}).unwrap_or_else(|e| panic!("{e}"));
+        let label = format!("twin_{method:?}");
+        let cmp = check(&label, &g.image, &c.image, TWIN, &out).unwrap_or_else(|e| panic!("{e}"));
+        eprintln!(
+            "{label}: max diff {}, outliers {}",
+            cmp.max_diff, cmp.outliers
+        );
+        assert!(lum(&c.image) < lum(&plain.image), "{method:?} must darken");
+    }
+    let m = OpacityModulation {
+        // σ² of a [0, 1] density is at most 1/4, so every opacity drops to a quarter or
+        // less: the volume must turn clearly more transparent.
+        sigma2_max: 1.0,
+        radius: 3.0,
+        ..Default::default()
+    };
+    let ao = AoSettings::default();
+    let g =
+        render(&v, &tf, &frame(Some(m)), &ao, true, &|_, _| {}).unwrap_or_else(|e| panic!("{e}"));
+    let c =
+        render(&v, &tf, &frame(Some(m)), &ao, false, &|_, _| {}).unwrap_or_else(|e| panic!("{e}"));
+    let cmp =
+        check("twin_modulation", &g.image, &c.image, TWIN, &out).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!(
+        "twin_modulation: max diff {}, outliers {}",
+        cmp.max_diff, cmp.outliers
+    );
+    // The volume fades into the black background: the image darkens.
+    assert!(
+        lum(&c.image) * 10 < lum(&plain.image) * 9,
+        "modulation must make the volume more transparent ({} vs {})",
+        lum(&c.image),
+        lum(&plain.image)
+    );
+}
+
+fn volao_cli(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_volao"))
+        .args(args)
+        .output()
+        .expect("volao runs")
+}
+
+#[test]
+fn volao_ao_writes_the_map_the_cpu_twin_computes() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = data("pvm/Bucky.pvm");
+    let src = volume::load(&input, &LoadOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"))
+        .volume;
+    let t = texels(&src);
+    let tf = TransferFunction::preset(Preset::default_for(&src.stats()), &src.stats());
+    for (flag, map) in [
+        ("cdf", AmbientMap::Cdf),
+        ("gauss", AmbientMap::Gauss),
+        ("penner", AmbientMap::Penner),
+    ] {
+        let out_path = dir.path().join(format!("{flag}.nii"));
+        let out = volao_cli(&[
+            "ao",
+            input.to_str().expect("utf-8 path"),
+            "-o",
+            out_path.to_str().expect("utf-8 path"),
+            "--ao",
+            flag,
+            "--radius",
+            "3",
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{stderr}");
+        let ao = volume::load(&out_path, &LoadOptions::default())
+            .unwrap_or_else(|e| panic!("{e}"))
+            .volume;
+        assert_eq!(ao.dims, src.dims);
+        let want = compute_cpu(
+            &t,
+            &Source::new(&t, &tf, StatisticSource::Density),
+            [3; 3],
+            &[map],
+        )
+        .pop()
+        .expect("one map");
+        let max = (0..want.len())
+            .map(|i| (ao.data.get_f64(i) as f32 - want[i]).abs())
+            .fold(0.0f32, f32::max);
+        // GPU (or CPU) result vs the CPU twin: as in the twin test above.
+        assert!(max <= 1e-3, "{flag}: max difference {max}");
+    }
+}
+
+#[test]
+fn volao_render_with_cone_and_modulation_saves_a_scene_that_reproduces_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let p = |p: &std::path::Path| p.to_str().expect("utf-8 path").to_owned();
+    let (png, again, scene) = (
+        dir.path().join("a.png"),
+        dir.path().join("b.png"),
+        dir.path().join("s.json"),
+    );
+    let bucky = data("pvm/Bucky.pvm");
+    let out = volao_cli(&[
+        "render",
+        &p(&bucky),
+        "-o",
+        &p(&png),
+        "--width",
+        "48",
+        "--height",
+        "48",
+        "--ao",
+        "cone",
+        "--cones",
+        "14",
+        "--cone-preset",
+        "high",
+        "--samples",
+        "8",
+        "--opacity-modulation",
+        "0.01,4",
+        "--save-scene",
+        &p(&scene),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("14 cones × 7 spheres"), "{stdout}");
+    let out = volao_cli(&["render", &p(&scene), "-o", &p(&again)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        std::fs::read(&png).expect("png"),
+        std::fs::read(&again).expect("png"),
+        "the saved scene reproduces the image byte for byte"
+    );
+    let text = std::fs::read_to_string(&scene).expect("scene");
+    let j: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    assert_eq!(j["ambient_occlusion"]["method"], "cone");
+    assert_eq!(j["ambient_occlusion"]["cones"], "14");
+    assert_eq!(j["ambient_occlusion"]["cone_preset"], "high");
+    assert_eq!(j["render"]["opacity_modulation"]["radius"], 4.0);
+    // A scene written before these fields existed still loads, with the defaults.
+    let mut old = j.clone();
+    for key in ["radius", "radius_unit", "statistic", "cones", "cone_preset"] {
+        old["ambient_occlusion"]
+            .as_object_mut()
+            .expect("object")
+            .remove(key);
+    }
+    old["render"]
+        .as_object_mut()
+        .expect("object")
+        .remove("opacity_modulation");
+    let s = volao::scene::Scene::parse(&old.to_string(), &scene).unwrap_or_else(|e| panic!("{e}"));
+    let d = volao::ao::AoSettings::default();
+    assert_eq!(
+        (s.ambient_occlusion.radius, s.ambient_occlusion.cones),
+        (d.radius, d.cones)
+    );
+    assert_eq!(s.render.opacity_modulation, None);
+}
+
+#[test]
+fn bad_filter_and_cone_flags_fail_with_one_error_line() {
+    for args in [
+        vec!["render", "-o", "/tmp/x.png", "--ao", "box"],
+        vec!["render", "-o", "/tmp/x.png", "--ao", "cone", "--cones", "7"],
+        vec![
+            "render",
+            "-o",
+            "/tmp/x.png",
+            "--ao",
+            "cone",
+            "--cone-preset",
+            "max",
+        ],
+        vec![
+            "render",
+            "-o",
+            "/tmp/x.png",
+            "--ao",
+            "cdf",
+            "--radius",
+            "-2",
+        ],
+        vec![
+            "render",
+            "-o",
+            "/tmp/x.png",
+            "--ao",
+            "cdf",
+            "--statistic",
+            "gradient",
+        ],
+        vec!["render", "-o", "/tmp/x.png", "--opacity-modulation", "0"],
+        vec![
+            "render",
+            "-o",
+            "/tmp/x.png",
+            "--opacity-modulation",
+            "0.1,-3",
+        ],
+    ] {
+        let out = volao_cli(&args);
+        assert!(!out.status.success(), "{args:?} should fail");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("error"), "{args:?}: {err}");
+    }
+}

@@ -4,6 +4,7 @@
 //! per voxel in [0, 1] (1 = unoccluded).
 
 pub mod cone;
+pub mod fast;
 pub mod filter;
 pub mod lao;
 pub mod rays;
@@ -19,6 +20,14 @@ pub enum AoMethod {
     None,
     /// Local Ambient Occlusion, precomputed once per transfer function.
     Lao,
+    /// Ruiz et al.'s CDF reconstruction `t^β` from box min/max/mean.
+    Cdf,
+    /// Ruiz et al.'s Gaussian CDF from box mean/variance.
+    Gauss,
+    /// Penner's one-tailed Chebyshev bound (the baseline of Ruiz et al.).
+    Penner,
+    /// Cone tracing with tangent spheres on an opacity mip pyramid (Dalla Favera & Celes).
+    Cone,
 }
 
 impl AoMethod {
@@ -26,8 +35,12 @@ impl AoMethod {
         match s {
             "none" => Ok(AoMethod::None),
             "lao" => Ok(AoMethod::Lao),
+            "cdf" => Ok(AoMethod::Cdf),
+            "gauss" => Ok(AoMethod::Gauss),
+            "penner" => Ok(AoMethod::Penner),
+            "cone" => Ok(AoMethod::Cone),
             other => Err(format!(
-                "unknown AO method {other:?} (available: none, lao)"
+                "unknown AO method {other:?} (available: none, lao, cdf, gauss, penner, cone)"
             )),
         }
     }
@@ -41,8 +54,16 @@ pub struct AoSettings {
     /// Ray pattern (K rays): "6", "14", "26", "54" or "fib:N".
     #[serde(with = "ray_set_name")]
     pub rays: RaySet,
-    /// Samples per ray (M), 1 mm apart.
+    /// Samples per ray (M), 1 mm apart; also the reach of the cones (M mm).
     pub samples: u32,
+    /// Filter maps: box radius r (side 2r + 1).
+    pub radius: f32,
+    pub radius_unit: filter::RadiusUnit,
+    /// Filter maps: statistics of the density or of the TF's opacity.
+    pub statistic: filter::StatisticSource,
+    /// Cone tracing: number of cones and spheres per cone.
+    pub cones: cone::ConeSet,
+    pub cone_preset: cone::ConePreset,
 }
 
 impl Default for AoSettings {
@@ -51,6 +72,11 @@ impl Default for AoSettings {
             method: AoMethod::None,
             rays: RaySet::FiftyFour,
             samples: lao::DEFAULT_SAMPLES,
+            radius: 10.0,
+            radius_unit: filter::RadiusUnit::Voxels,
+            statistic: filter::StatisticSource::Density,
+            cones: cone::ConeSet::Six,
+            cone_preset: cone::ConePreset::Medium,
         }
     }
 }
@@ -87,7 +113,10 @@ pub fn compute_volume(
         match crate::gpu::request_device() {
             Ok(g) => {
                 let vol = crate::render::gpu::GpuVolume::new(&g, volume, tf, 0.5)?;
-                if vol.texels.downsampled == 0 {
+                if vol.texels.downsampled == 0 && fast::handles(settings.method) {
+                    computed =
+                        fast::compute_gpu(&g, &vol, tf, settings)?.map(|a| (a, g.describe()));
+                } else if vol.texels.downsampled == 0 {
                     let lut = lao::lao_lut(tf, &vol.texels);
                     let a = lao::LaoGpu::new(&g.device)?.compute(
                         &g,
@@ -117,13 +146,17 @@ pub fn compute_volume(
                     max_bytes: u64::MAX,
                 },
             );
-            let a = lao::lao_cpu(
-                &texels,
-                &lao::lao_lut(tf, &texels),
-                &rays,
-                settings.samples,
-                progress,
-            );
+            let a = if fast::handles(settings.method) {
+                fast::compute_cpu(&texels, tf, settings).unwrap_or_default()
+            } else {
+                lao::lao_cpu(
+                    &texels,
+                    &lao::lao_lut(tf, &texels),
+                    &rays,
+                    settings.samples,
+                    progress,
+                )
+            };
             (
                 a,
                 format!("CPU twin ({} threads)", rayon::current_num_threads()),
@@ -138,12 +171,20 @@ pub fn compute_volume(
         orientation: volume.orientation,
         descriptions: vec![(
             "description".into(),
-            format!(
-                "LAO ambient factor, {} rays x {} samples, TF {}",
-                settings.rays.name(),
-                settings.samples,
-                tf.name
-            ),
+            if fast::handles(settings.method) {
+                format!(
+                    "ambient factor: {}, TF {}",
+                    fast::describe(settings),
+                    tf.name
+                )
+            } else {
+                format!(
+                    "LAO ambient factor, {} rays x {} samples, TF {}",
+                    settings.rays.name(),
+                    settings.samples,
+                    tf.name
+                )
+            },
         )],
     };
     Ok((out, device))

@@ -15,6 +15,8 @@ pub struct CpuVolume {
     pub norm: Vec<f32>,
     /// Ambient occlusion per voxel in [0, 1]; `None` means 1 everywhere.
     pub ao: Option<Vec<f32>>,
+    /// Opacity factor per voxel in [0, 1] (variance modulation); `None` means 1.
+    pub modulation: Option<Vec<f32>>,
 }
 
 impl CpuVolume {
@@ -23,6 +25,7 @@ impl CpuVolume {
             dims: texels.dims,
             norm: texels.norm_values(),
             ao: None,
+            modulation: None,
         }
     }
 }
@@ -156,6 +159,9 @@ pub fn pixel(
             let norm = trilinear(&vol.norm, vol.dims, uvw);
             let mut rgba = classify(p, lut, norm);
             if rgba.w > 0.0 {
+                if let Some(m) = &vol.modulation {
+                    rgba.w *= trilinear(m, vol.dims, uvw);
+                }
                 let len = dt.min(t_exit - t);
                 if len < dt {
                     rgba.w = 1.0 - (1.0 - rgba.w).powf(len / dt);

@@ -52,6 +52,10 @@ pub struct RenderSettings {
     pub empty_space_skipping: bool,
     /// Straight RGBA; alpha 0 gives a transparent background.
     pub background: [f32; 4],
+    /// Multiply each sample's opacity by `min(σ²/σ²_max, 1)` (Ruiz et al. §4.2); off
+    /// when absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub opacity_modulation: Option<crate::ao::filter::OpacityModulation>,
 }
 
 impl Default for RenderSettings {
@@ -65,6 +69,7 @@ impl Default for RenderSettings {
             jitter: true,
             empty_space_skipping: true,
             background: [0.0, 0.0, 0.0, 1.0],
+            opacity_modulation: None,
         }
     }
 }

@@ -45,6 +45,12 @@ pub fn render(
                     let a = LaoGpu::new(&g.device)?
                         .compute(&g, &vol, &lut, &rays, ao.samples, progress)?;
                     vol.set_ambient_occlusion(&g, &a);
+                } else if let Some(a) = crate::ao::fast::compute_gpu(&g, &vol, tf, ao)? {
+                    vol.set_ambient_occlusion(&g, &a);
+                }
+                if let Some(m) = &frame.settings.opacity_modulation {
+                    let f = crate::ao::fast::modulation_gpu(&g, &vol, tf, m)?;
+                    vol.set_opacity_modulation(&g, &f);
                 }
                 let ao_seconds = start.elapsed().as_secs_f64();
                 let image = rc.render(&g, &vol, frame)?;
@@ -76,6 +82,11 @@ pub fn render(
                 .map(|&x| (x.clamp(0.0, 1.0) * 65535.0).round() / 65535.0)
                 .collect(),
         );
+    } else if let Some(a) = crate::ao::fast::compute_cpu(&texels, tf, ao) {
+        cv.ao = Some(quantise16(&a));
+    }
+    if let Some(m) = &frame.settings.opacity_modulation {
+        cv.modulation = Some(quantise16(&crate::ao::fast::modulation_cpu(&texels, tf, m)));
     }
     let ao_seconds = start.elapsed().as_secs_f64();
     let threads = rayon::current_num_threads();
@@ -86,4 +97,12 @@ pub fn render(
         downsampled: 0,
         ao_seconds,
     })
+}
+
+/// As the GPU path stores AO and modulation volumes (R16Unorm).
+fn quantise16(values: &[f32]) -> Vec<f32> {
+    values
+        .iter()
+        .map(|&x| (x.clamp(0.0, 1.0) * 65535.0).round() / 65535.0)
+        .collect()
 }
