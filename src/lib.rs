@@ -16,6 +16,7 @@
 
 pub mod ao;
 pub mod bench;
+pub mod bench_filter;
 pub mod gpu;
 pub mod render;
 pub mod scene;

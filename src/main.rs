@@ -335,6 +335,9 @@ enum BenchCommand {
     Render(volao::bench::RenderBenchArgs),
     /// The CAO paper's Tables 5–6 (LAO accuracy vs rays) on the Engine, and LAO throughput.
     Lao(volao::bench::LaoBenchArgs),
+    /// Ruiz et al.'s Table 1 (filter maps on the cranium CT) and every cheap AO method's
+    /// RMS against 512-ray LAO with its compute time.
+    Filter(volao::bench_filter::FilterBenchArgs),
     /// (internal) load one file and print time and peak memory as JSON.
     #[command(hide = true)]
     LoadOne { file: PathBuf },
@@ -417,6 +420,9 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Ao(args)) => ambient_occlusion(&args),
         Some(Command::Bench(BenchCommand::Render(args))) => volao::bench::render_bench(&args),
         Some(Command::Bench(BenchCommand::Lao(args))) => volao::bench::lao_bench(&args),
+        Some(Command::Bench(BenchCommand::Filter(args))) => {
+            volao::bench_filter::filter_bench(&args)
+        }
         Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
     }

@@ -1,0 +1,246 @@
+//! `volao bench filter`: Ruiz et al.'s Table 1 (ms per ambient map on the cranium CT)
+//! for the CPU twin and the GPU, and a quality/time table of every cheap AO method
+//! against 512-ray LAO. Results go to `docs/benchmarks.md`, never into test assertions.
+
+use crate::ao::cone::{ConeGpu, ConePreset, ConeSet, MipPyramid, cone_cpu, opacity};
+use crate::ao::filter::{self, AmbientMap, FilterGpu, Source, StatisticSource};
+use crate::ao::lao::{LaoGpu, Rays, lao_lut};
+use crate::ao::rays::RaySet;
+use crate::render::gpu::GpuVolume;
+use crate::render::texels::{UploadLimits, VolumeTexels};
+use crate::tf::{Preset, TransferFunction};
+use crate::volume::{self, LoadOptions, RawOverrides};
+use anyhow::Result;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Arguments of `volao bench filter`.
+#[derive(Debug, clap::Args)]
+pub struct FilterBenchArgs {
+    /// Folder with the shared test data (raw/cranium-ct.raw, raw/engine.raw).
+    #[arg(long, default_value = "../shared/data")]
+    pub data: PathBuf,
+    /// Runs per measurement after one warm-up; the median is reported.
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Largest engine side for the quality table (the engine is halved until it fits;
+    /// 128 gives 128×128×55, where 512-ray LAO takes about a minute and a half).
+    #[arg(long, default_value_t = 128)]
+    pub engine_max_dim: usize,
+    /// LAO samples per ray (1 mm apart) for the ground truth and the cones' reach.
+    #[arg(long, default_value_t = crate::ao::lao::DEFAULT_SAMPLES)]
+    pub samples: u32,
+}
+
+/// Ruiz et al. Table 1, CT-head (256×256×113) on a GTX 280, ms: (r, Penner, CDF, Gauss).
+const PAPER_TABLE_1: [(u32, [f64; 3]); 2] =
+    [(5, [200.0, 161.0, 203.0]), (10, [268.0, 205.0, 270.0])];
+
+fn median_ms(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    f()?;
+    let mut t = Vec::with_capacity(runs.max(1));
+    for _ in 0..runs.max(1) {
+        let start = Instant::now();
+        f()?;
+        t.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    t.sort_by(f64::total_cmp);
+    Ok(t[t.len() / 2])
+}
+
+fn rms(a: &[f32], b: &[f32], mask: Option<&[bool]>) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for i in 0..a.len() {
+        if mask.is_none_or(|m| m[i]) {
+            sum += ((a[i] - b[i]) as f64).powi(2);
+            n += 1;
+        }
+    }
+    (sum / n.max(1) as f64).sqrt()
+}
+
+/// `volao bench filter`.
+pub fn filter_bench(args: &FilterBenchArgs) -> Result<()> {
+    let gpu = crate::gpu::request_device()?;
+    let fg = FilterGpu::new(&gpu.device)?;
+    let cg = ConeGpu::new(&gpu.device)?;
+    println!("adapter: {}", gpu.describe());
+    println!("CPU twin: {} rayon threads", rayon::current_num_threads());
+
+    // Table 1 on the cranium CT, density statistics as in the paper.
+    let opts = LoadOptions {
+        raw: RawOverrides {
+            dims: Some([256, 256, 108]),
+            ty: Some(volume::VoxelType::I16),
+            endian: Some(volume::Endian::Little),
+            spacing: Some([0.957_031, 0.957_031, 1.5]),
+            offset: None,
+        },
+        ..Default::default()
+    };
+    let cranium = volume::load(&args.data.join("raw/cranium-ct.raw"), &opts)?.volume;
+    let tf = TransferFunction::preset(Preset::CtBone, &cranium.stats());
+    let vol = GpuVolume::new(&gpu, &cranium, &tf, 0.5)?;
+    let texels = &vol.texels;
+    let source = Source::new(texels, &tf, StatisticSource::Density);
+    println!();
+    println!(
+        "Cranium CT {:?}, density statistics, median of {} runs (ms per map: statistics + map; GPU includes reading the map back, not the volume upload)",
+        texels.dims, args.runs
+    );
+    println!();
+    println!("| r | map | CPU twin | GPU | paper (GTX 280, CT-head 256×256×113) |");
+    println!("|---|---|---|---|---|");
+    let maps = [
+        ("Penner", AmbientMap::Penner),
+        ("CDF", AmbientMap::Cdf),
+        ("Gaussian", AmbientMap::Gauss),
+    ];
+    for (r, paper) in PAPER_TABLE_1 {
+        for (k, (name, map)) in maps.iter().enumerate() {
+            let cpu = median_ms(args.runs, || {
+                filter::compute_cpu(texels, &source, [r; 3], &[*map]);
+                Ok(())
+            })?;
+            let gpu_ms = median_ms(args.runs, || {
+                fg.compute(&gpu, &vol, &source, [r; 3], &[*map])?;
+                Ok(())
+            })?;
+            println!(
+                "| {r} | {name} | {cpu:.1} ms | {gpu_ms:.1} ms | {:.0} ms |",
+                paper[k]
+            );
+        }
+    }
+    // Where the CPU twin's time goes (r = 10).
+    let values = source.values(texels);
+    let t_src = median_ms(args.runs, || {
+        source.values(texels);
+        Ok(())
+    })?;
+    let t_stats = median_ms(args.runs, || {
+        filter::box_stats_cpu(&values, texels.dims, [10; 3]);
+        Ok(())
+    })?;
+    let stats = filter::box_stats_cpu(&values, texels.dims, [10; 3]);
+    let t_map = median_ms(args.runs, || {
+        filter::map_cpu(AmbientMap::Cdf, &stats, &values);
+        Ok(())
+    })?;
+    println!();
+    println!(
+        "CPU twin at r = 10, by stage: source values {t_src:.1} ms, box statistics (3 passes) {t_stats:.1} ms, CDF map {t_map:.1} ms"
+    );
+
+    // Quality against 512-ray LAO on a downsampled engine.
+    let engine = volume::load(&args.data.join("raw/engine.raw"), &LoadOptions::default())?
+        .volume
+        .to_ras();
+    let etf = TransferFunction::preset(Preset::CaoSingleColor, &engine.stats());
+    let et = VolumeTexels::new(
+        &engine,
+        UploadLimits {
+            max_dim: args.engine_max_dim.max(8),
+            max_bytes: u64::MAX,
+        },
+    );
+    let evol = GpuVolume::from_texels(&gpu, et.clone(), &etf, 0.5)?;
+    let lao = LaoGpu::new(&gpu.device)?;
+    let lut = lao_lut(&etf, &et);
+    let m = args.samples.max(1);
+    let start = Instant::now();
+    let truth = lao.compute(
+        &gpu,
+        &evol,
+        &lut,
+        &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
+        m,
+        &|_, _| {},
+    )?;
+    let t_truth = start.elapsed().as_secs_f64();
+    let alpha = opacity(&et, &etf);
+    let visible: Vec<bool> = alpha.iter().map(|&a| a > 0.0).collect();
+    println!();
+    println!(
+        "Engine halved {}× to {:?} (spacing {:?} mm), TF {}, ground truth: LAO fib:512 × {m} samples (reach {m} mm) in {t_truth:.1} s on the GPU; {} of {} voxels visible (α > 0)",
+        et.downsampled,
+        et.dims,
+        et.spacing,
+        etf.name,
+        visible.iter().filter(|&&v| v).count(),
+        visible.len()
+    );
+    println!();
+    println!("| method | parameters | RMS, all voxels | RMS, visible voxels | GPU | CPU twin |");
+    println!("|---|---|---|---|---|---|");
+    let row = |method: &str, params: String, a: &[f32], gpu_ms: f64, cpu_ms: f64| {
+        println!(
+            "| {method} | {params} | {:.4} | {:.4} | {gpu_ms:.1} ms | {cpu_ms:.1} ms |",
+            rms(a, &truth, None),
+            rms(a, &truth, Some(&visible))
+        );
+    };
+    for set in [RaySet::Six, RaySet::Fourteen, RaySet::TwentySix] {
+        let rays = Rays::uniform(set.directions());
+        let a = lao.compute(&gpu, &evol, &lut, &rays, m, &|_, _| {})?;
+        let g = median_ms(1, || {
+            lao.compute(&gpu, &evol, &lut, &rays, m, &|_, _| {})?;
+            Ok(())
+        })?;
+        let c = median_ms(1, || {
+            crate::ao::lao::lao_cpu(&et, &lut, &rays, m, &|_, _| {});
+            Ok(())
+        })?;
+        row("LAO", format!("{} rays × {m}", set.name()), &a, g, c);
+    }
+    for kind in [StatisticSource::Density, StatisticSource::Opacity] {
+        let src = Source::new(&et, &etf, kind);
+        for r in [5u32, 10] {
+            for (name, map) in maps {
+                let a = fg
+                    .compute(&gpu, &evol, &src, [r; 3], &[map])?
+                    .pop()
+                    .unwrap_or_default();
+                let g = median_ms(args.runs, || {
+                    fg.compute(&gpu, &evol, &src, [r; 3], &[map])?;
+                    Ok(())
+                })?;
+                let c = median_ms(args.runs, || {
+                    filter::compute_cpu(&et, &src, [r; 3], &[map]);
+                    Ok(())
+                })?;
+                row(name, format!("{kind:?}, r = {r}").to_lowercase(), &a, g, c);
+            }
+        }
+    }
+    let reach = m as f32 * crate::ao::lao::STEP_MM;
+    for cones in [ConeSet::Six, ConeSet::Fourteen, ConeSet::TwentySix] {
+        for preset in [ConePreset::Low, ConePreset::Medium, ConePreset::High] {
+            // Timed from the opacity volume on: pyramid (CPU) + cones (GPU or CPU).
+            let build = || MipPyramid::new(et.dims, opacity(&et, &etf));
+            let pyramid = build();
+            let a = cg.compute(&gpu, &et, &pyramid, cones, preset, reach)?;
+            let g = median_ms(args.runs, || {
+                cg.compute(&gpu, &et, &build(), cones, preset, reach)?;
+                Ok(())
+            })?;
+            let c = median_ms(args.runs, || {
+                cone_cpu(&et, &build(), cones, preset, reach);
+                Ok(())
+            })?;
+            row(
+                "cone",
+                format!(
+                    "{} cones, {} ({} spheres), reach {reach} mm",
+                    cones.count(),
+                    preset.name(),
+                    preset.spheres()
+                ),
+                &a,
+                g,
+                c,
+            );
+        }
+    }
+    Ok(())
+}
