@@ -30,22 +30,58 @@ pub struct FilterBenchArgs {
     /// LAO samples per ray (1 mm apart) for the ground truth and the cones' reach.
     #[arg(long, default_value_t = crate::ao::lao::DEFAULT_SAMPLES)]
     pub samples: u32,
+    /// Cache of the 512-ray ground truth (raw little-endian f32): read if it exists and
+    /// has the right size, else computed and written there.
+    #[arg(long)]
+    pub truth_cache: Option<PathBuf>,
+    /// Skip Table 1 (only the quality table).
+    #[arg(long)]
+    pub skip_table_1: bool,
 }
 
 /// Ruiz et al. Table 1, CT-head (256×256×113) on a GTX 280, ms: (r, Penner, CDF, Gauss).
 const PAPER_TABLE_1: [(u32, [f64; 3]); 2] =
     [(5, [200.0, 161.0, 203.0]), (10, [268.0, 205.0, 270.0])];
 
-fn median_ms(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+const MAPS: [(&str, AmbientMap); 3] = [
+    ("Penner", AmbientMap::Penner),
+    ("CDF", AmbientMap::Cdf),
+    ("Gaussian", AmbientMap::Gauss),
+];
+
+/// CPU time of this process so far, all threads, in ms (from the scheduler's
+/// nanosecond counters in /proc; 0 where they are missing). On a machine shared with
+/// other work, wall-clock times stretch with the load but CPU time does not.
+fn cpu_ms() -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return 0.0;
+    };
+    tasks
+        .filter_map(|t| t.ok())
+        .filter_map(|t| std::fs::read_to_string(t.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<f64>().ok())
+        .sum::<f64>()
+        / 1e6
+}
+
+/// Median wall-clock ms of `runs` runs after a warm-up.
+fn median_ms(runs: usize, f: impl FnMut() -> Result<()>) -> Result<f64> {
+    Ok(timed(runs, f)?.0)
+}
+
+/// Median wall-clock ms and median CPU ms (all threads) of `runs` runs after a warm-up.
+fn timed(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<(f64, f64)> {
     f()?;
-    let mut t = Vec::with_capacity(runs.max(1));
+    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
     for _ in 0..runs.max(1) {
-        let start = Instant::now();
+        let (start, c0) = (Instant::now(), cpu_ms());
         f()?;
-        t.push(start.elapsed().as_secs_f64() * 1e3);
+        wall.push(start.elapsed().as_secs_f64() * 1e3);
+        cpu.push(cpu_ms() - c0);
     }
-    t.sort_by(f64::total_cmp);
-    Ok(t[t.len() / 2])
+    wall.sort_by(f64::total_cmp);
+    cpu.sort_by(f64::total_cmp);
+    Ok((wall[wall.len() / 2], cpu[cpu.len() / 2]))
 }
 
 fn rms(a: &[f32], b: &[f32], mask: Option<&[bool]>) -> f64 {
@@ -67,7 +103,14 @@ pub fn filter_bench(args: &FilterBenchArgs) -> Result<()> {
     println!("adapter: {}", gpu.describe());
     println!("CPU twin: {} rayon threads", rayon::current_num_threads());
 
-    // Table 1 on the cranium CT, density statistics as in the paper.
+    if !args.skip_table_1 {
+        table_1(args, &gpu, &fg)?;
+    }
+    quality(args, &gpu, &fg, &cg)
+}
+
+/// Ruiz et al.'s Table 1 on the cranium CT, density statistics as in the paper.
+fn table_1(args: &FilterBenchArgs, gpu: &crate::gpu::Gpu, fg: &FilterGpu) -> Result<()> {
     let opts = LoadOptions {
         raw: RawOverrides {
             dims: Some([256, 256, 108]),
@@ -89,16 +132,14 @@ pub fn filter_bench(args: &FilterBenchArgs) -> Result<()> {
         texels.dims, args.runs
     );
     println!();
-    println!("| r | map | CPU twin | GPU | paper (GTX 280, CT-head 256×256×113) |");
-    println!("|---|---|---|---|---|");
-    let maps = [
-        ("Penner", AmbientMap::Penner),
-        ("CDF", AmbientMap::Cdf),
-        ("Gaussian", AmbientMap::Gauss),
-    ];
+    println!(
+        "| r | map | CPU twin, wall | CPU twin, CPU time / threads | GPU, wall | paper (GTX 280, CT-head 256×256×113) |"
+    );
+    println!("|---|---|---|---|---|---|");
+    let threads = rayon::current_num_threads() as f64;
     for (r, paper) in PAPER_TABLE_1 {
-        for (k, (name, map)) in maps.iter().enumerate() {
-            let cpu = median_ms(args.runs, || {
+        for (k, (name, map)) in MAPS.iter().enumerate() {
+            let (cpu, cpu_time) = timed(args.runs, || {
                 filter::compute_cpu(texels, &source, [r; 3], &[*map]);
                 Ok(())
             })?;
@@ -107,32 +148,43 @@ pub fn filter_bench(args: &FilterBenchArgs) -> Result<()> {
                 Ok(())
             })?;
             println!(
-                "| {r} | {name} | {cpu:.1} ms | {gpu_ms:.1} ms | {:.0} ms |",
+                "| {r} | {name} | {cpu:.1} ms | {:.1} ms | {gpu_ms:.1} ms | {:.0} ms |",
+                cpu_time / threads,
                 paper[k]
             );
         }
     }
     // Where the CPU twin's time goes (r = 10).
     let values = source.values(texels);
-    let t_src = median_ms(args.runs, || {
+    let t_src = timed(args.runs, || {
         source.values(texels);
         Ok(())
     })?;
-    let t_stats = median_ms(args.runs, || {
+    let t_stats = timed(args.runs, || {
         filter::box_stats_cpu(&values, texels.dims, [10; 3]);
         Ok(())
     })?;
     let stats = filter::box_stats_cpu(&values, texels.dims, [10; 3]);
-    let t_map = median_ms(args.runs, || {
+    let t_map = timed(args.runs, || {
         filter::map_cpu(AmbientMap::Cdf, &stats, &values);
         Ok(())
     })?;
     println!();
     println!(
-        "CPU twin at r = 10, by stage: source values {t_src:.1} ms, box statistics (3 passes) {t_stats:.1} ms, CDF map {t_map:.1} ms"
+        "CPU twin at r = 10, by stage (wall / CPU time): source values {:.1} / {:.1} ms, box statistics (3 passes × 4 statistics) {:.1} / {:.1} ms, CDF map {:.1} / {:.1} ms",
+        t_src.0, t_src.1, t_stats.0, t_stats.1, t_map.0, t_map.1
     );
 
-    // Quality against 512-ray LAO on a downsampled engine.
+    Ok(())
+}
+
+/// Every cheap method's RMS against 512-ray LAO on a downsampled engine, with its time.
+fn quality(
+    args: &FilterBenchArgs,
+    gpu: &crate::gpu::Gpu,
+    fg: &FilterGpu,
+    cg: &ConeGpu,
+) -> Result<()> {
     let engine = volume::load(&args.data.join("raw/engine.raw"), &LoadOptions::default())?
         .volume
         .to_ras();
@@ -149,20 +201,42 @@ pub fn filter_bench(args: &FilterBenchArgs) -> Result<()> {
     let lut = lao_lut(&etf, &et);
     let m = args.samples.max(1);
     let start = Instant::now();
-    let truth = lao.compute(
-        &gpu,
-        &evol,
-        &lut,
-        &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
-        m,
-        &|_, _| {},
-    )?;
+    let voxels = et.dims.iter().product::<usize>();
+    let cached = args
+        .truth_cache
+        .as_ref()
+        .and_then(|p| std::fs::read(p).ok())
+        .filter(|b| b.len() == voxels * 4)
+        .map(|b| bytemuck::pod_collect_to_vec::<u8, f32>(&b));
+    let from_cache = cached.is_some();
+    let truth = match cached {
+        Some(t) => t,
+        None => {
+            let t = lao.compute(
+                &gpu,
+                &evol,
+                &lut,
+                &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
+                m,
+                &|_, _| {},
+            )?;
+            if let Some(p) = &args.truth_cache {
+                std::fs::write(p, bytemuck::cast_slice(&t))?;
+            }
+            t
+        }
+    };
     let t_truth = start.elapsed().as_secs_f64();
+    let truth_note = if from_cache {
+        " (read from the cache)"
+    } else {
+        ""
+    };
     let alpha = opacity(&et, &etf);
     let visible: Vec<bool> = alpha.iter().map(|&a| a > 0.0).collect();
     println!();
     println!(
-        "Engine halved {}× to {:?} (spacing {:?} mm), TF {}, ground truth: LAO fib:512 × {m} samples (reach {m} mm) in {t_truth:.1} s on the GPU; {} of {} voxels visible (α > 0)",
+        "Engine halved {}× to {:?} (spacing {:?} mm), TF {}, ground truth: LAO fib:512 × {m} samples (reach {m} mm) in {t_truth:.1} s on the GPU{truth_note}; {} of {} voxels visible (α > 0)",
         et.downsampled,
         et.dims,
         et.spacing,
@@ -196,7 +270,7 @@ pub fn filter_bench(args: &FilterBenchArgs) -> Result<()> {
     for kind in [StatisticSource::Density, StatisticSource::Opacity] {
         let src = Source::new(&et, &etf, kind);
         for r in [5u32, 10] {
-            for (name, map) in maps {
+            for (name, map) in MAPS {
                 let a = fg
                     .compute(&gpu, &evol, &src, [r; 3], &[map])?
                     .pop()

@@ -76,7 +76,7 @@ fn assert_matches_brute(what: &str, stats: &BoxStats, values: &[f32]) {
             i / (dims[0] * dims[1]),
         ];
         let [mn, mx, s, s2, n] = brute(values, dims, stats.radius, at);
-        let got = stats.raw[i];
+        let got = stats.raw(i);
         assert_eq!(got[0] as f64, mn, "{what}: min at {at:?}");
         assert_eq!(got[1] as f64, mx, "{what}: max at {at:?}");
         assert_eq!(

@@ -36,7 +36,7 @@ use rayon::prelude::*;
 /// Most outputs one segment (one GPU invocation) produces; bounds its private array.
 pub const SEGMENT_MAX: usize = 64;
 
-/// Identity of `min` / `max` in [`combine`] (finite, so WGSL can write it too).
+/// Identity of `min` / `max` in the passes (finite, so WGSL can write it too).
 const BIG: f32 = 3.0e38;
 
 /// Variance floor for the Gaussian and Penner maps.
@@ -194,20 +194,25 @@ impl Source {
 
     /// `v` for every voxel, x fastest.
     pub fn values(&self, texels: &VolumeTexels) -> Vec<f32> {
-        (0..texels.dims.iter().product::<usize>())
-            .into_par_iter()
-            .map(|i| self.value(texels.norm_at(i)))
-            .collect()
+        use crate::render::texels::TexelFormat;
+        let b = &texels.bytes;
+        // Decoded per format (the same numbers as `VolumeTexels::norm_at`).
+        match texels.format {
+            TexelFormat::R8Unorm => b
+                .par_iter()
+                .map(|&x| self.value(x as f32 / 255.0))
+                .collect(),
+            TexelFormat::R16Unorm => b
+                .par_chunks_exact(2)
+                .map(|c| self.value(u16::from_le_bytes([c[0], c[1]]) as f32 / 65535.0))
+                .collect(),
+            TexelFormat::R32Float => b
+                .par_chunks_exact(4)
+                .map(|c| self.value(f32::from_le_bytes([c[0], c[1], c[2], c[3]])))
+                .collect(),
+        }
     }
 }
-
-/// `(min, max, Σv, Σv²)` of two disjoint runs.
-#[inline]
-pub fn combine(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
-    [a[0].min(b[0]), a[1].max(b[1]), a[2] + b[2], a[3] + b[3]]
-}
-
-const IDENTITY: [f32; 4] = [BIG, -BIG, 0.0, 0.0];
 
 /// Number of voxels of the cropped window `[i − r, i + r] ∩ [0, n)`.
 #[inline]
@@ -220,54 +225,112 @@ pub fn segment_len(r: usize) -> usize {
     (2 * r + 1).min(SEGMENT_MAX)
 }
 
-/// One segment of one line: outputs `i ∈ [c, c + L)` of the windows `[i − r, i + r]`,
-/// written through `write(i, value)`. Mirrors `box_axis` in `box_stats.wgsl`.
-fn segment(
-    fetch: &dyn Fn(usize) -> [f32; 4],
+/// One segment of a line of `n` elements, each `elem` contiguous floats (1 for an
+/// x-line, a row for y, a z-slice for z, so the CPU works on whole rows and slices at
+/// once): writes the windows `[i − r, i + r]` of outputs `i ∈ [c, c + L)` into `out`.
+/// The same runs in the same order as `main` in `box_stats.wgsl`: suffixes
+/// `S = op(v, S)` backward from the pivot, prefixes `P = op(P, v)` forward, `op(S, P)`.
+#[allow(
+    clippy::too_many_arguments,
+    reason = "one flat kernel; a struct would hide the loop it mirrors"
+)]
+fn segment<F: Fn(f32, f32) -> f32>(
+    input: &[f32],
+    out: &mut [f32],
+    acc: &mut [f32],
     n: usize,
+    elem: usize,
     r: usize,
     c: usize,
-    write: &mut dyn FnMut(usize, [f32; 4]),
+    (op, identity): (F, f32),
 ) {
-    let len = segment_len(r);
-    let (c, r_i, n_i) = (c as i64, r as i64, n as i64);
-    let m = c + r_i;
-    let first = c - r_i;
-    let mut s = [IDENTITY; SEGMENT_MAX];
-    let mut acc = IDENTITY;
+    let outs = segment_len(r).min(n - c);
+    let (ci, ri, ni) = (c as i64, r as i64, n as i64);
+    let (m, first) = (ci + ri, ci - ri);
+    // S[j] for j = a − first; the run reaches j ≤ 2r − 1, so S[2r] (when L = 2r + 1) is
+    // the empty suffix.
+    for j in (2 * r).min(outs)..outs {
+        out[j * elem..(j + 1) * elem].fill(identity);
+    }
+    acc.fill(identity);
     let mut a = m - 1;
     while a >= first {
         // Outside the line the run is cropped: a < 0 repeats S[0], a ≥ n adds nothing.
-        if a >= 0 && a < n_i {
-            let v = fetch(a as usize);
-            acc = combine(v, acc);
+        if a >= 0 && a < ni {
+            let src = &input[a as usize * elem..][..elem];
+            for (x, &v) in acc.iter_mut().zip(src) {
+                *x = op(v, *x);
+            }
         }
         let j = a - first;
-        if j < len as i64 {
-            s[j as usize] = acc;
+        if j < outs as i64 {
+            out[j as usize * elem..][..elem].copy_from_slice(acc);
         }
         a -= 1;
     }
-    let mut acc = IDENTITY;
-    for j in 0..len as i64 {
-        let b = m + j;
-        if b < n_i {
-            acc = combine(acc, fetch(b as usize));
+    acc.fill(identity);
+    for j in 0..outs {
+        let b = m as usize + j;
+        if b < n {
+            let src = &input[b * elem..][..elem];
+            for (x, &v) in acc.iter_mut().zip(src) {
+                *x = op(*x, v);
+            }
         }
-        let i = c + j;
-        if i >= n_i {
-            break;
+        for (o, &p) in out[j * elem..][..elem].iter_mut().zip(acc.iter()) {
+            *o = op(*o, p);
         }
-        write(i as usize, combine(s[j as usize], acc));
     }
 }
 
-/// Box statistics: per voxel `(v_min, v_max, Σv, Σv²)` over the cropped box, x fastest.
+/// [`segment`] for single-float elements (the x pass), without the per-element slices.
+fn segment_scalar<F: Fn(f32, f32) -> f32>(
+    input: &[f32],
+    out: &mut [f32],
+    r: usize,
+    c: usize,
+    (op, identity): (F, f32),
+) {
+    let n = input.len();
+    let outs = segment_len(r).min(n - c);
+    let (ci, ri, ni) = (c as i64, r as i64, n as i64);
+    let (m, first) = (ci + ri, ci - ri);
+    for o in out.iter_mut().take(outs).skip((2 * r).min(outs)) {
+        *o = identity;
+    }
+    let mut acc = identity;
+    let mut a = m - 1;
+    while a >= first {
+        if a >= 0 && a < ni {
+            acc = op(input[a as usize], acc);
+        }
+        let j = a - first;
+        if j < outs as i64 {
+            out[j as usize] = acc;
+        }
+        a -= 1;
+    }
+    let mut acc = identity;
+    for (j, o) in out.iter_mut().enumerate().take(outs) {
+        let b = m as usize + j;
+        if b < n {
+            acc = op(acc, input[b]);
+        }
+        *o = op(*o, acc);
+    }
+}
+
+/// Box statistics over the cropped box of every voxel, x fastest, one array per
+/// statistic.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BoxStats {
     pub dims: [usize; 3],
     pub radius: [u32; 3],
-    pub raw: Vec<[f32; 4]>,
+    pub min: Vec<f32>,
+    pub max: Vec<f32>,
+    /// Σv and Σv² (divide by [`BoxStats::count`] for the means).
+    pub sum: Vec<f32>,
+    pub sum_sq: Vec<f32>,
 }
 
 /// `(v_min, v_max, E[v], E[v²])` of one voxel's box.
@@ -282,60 +345,100 @@ impl BoxStats {
             * window_count(z, r[2], self.dims[2])
     }
 
-    /// Moments of voxel `i` (x fastest). Mirrors `moments` in `ambient_maps.wgsl`.
+    /// `(v_min, v_max, Σv, Σv²)` of voxel `i`.
+    pub fn raw(&self, i: usize) -> [f32; 4] {
+        [self.min[i], self.max[i], self.sum[i], self.sum_sq[i]]
+    }
+
+    /// Moments of voxel `i` (x fastest). Mirrors `main` in `ambient_maps.wgsl`.
     pub fn moments(&self, i: usize) -> Moments {
         let [nx, ny, _] = self.dims;
         let n = self.count(i % nx, (i / nx) % ny, i / (nx * ny)) as f32;
-        let s = self.raw[i];
-        [s[0], s[1], s[2] / n, s[3] / n]
+        [
+            self.min[i],
+            self.max[i],
+            self.sum[i] / n,
+            self.sum_sq[i] / n,
+        ]
     }
 }
 
-/// CPU twin of the three `box_stats.wgsl` passes (x, then y, then z), on rayon.
-pub fn box_stats_cpu(values: &[f32], dims: [usize; 3], radius: [u32; 3]) -> BoxStats {
+/// One statistic through the three separable passes (x, then y, then z).
+fn separable<F: Fn(f32, f32) -> f32 + Copy + Sync>(
+    values: &[f32],
+    dims: [usize; 3],
+    r: [usize; 3],
+    op: (F, f32),
+) -> Vec<f32> {
     let [nx, ny, nz] = dims;
-    let r = radius.map(|r| r as usize);
-    // x: one chunk per line.
-    let mut a = vec![IDENTITY; nx * ny * nz];
-    a.par_chunks_mut(nx).enumerate().for_each(|(line, out)| {
-        let base = line * nx;
-        let fetch = |i: usize| {
-            let v = values[base + i];
-            [v, v, v, v * v]
-        };
-        for c in (0..nx).step_by(segment_len(r[0])) {
-            segment(&fetch, nx, r[0], c, &mut |i, v| out[i] = v);
-        }
-    });
-    // y: one chunk per z-slice.
-    let mut b = vec![IDENTITY; nx * ny * nz];
-    b.par_chunks_mut(nx * ny).enumerate().for_each(|(z, out)| {
-        let src = &a[z * nx * ny..(z + 1) * nx * ny];
-        for x in 0..nx {
-            let fetch = |y: usize| src[x + nx * y];
-            for c in (0..ny).step_by(segment_len(r[1])) {
-                segment(&fetch, ny, r[1], c, &mut |y, v| out[x + nx * y] = v);
-            }
-        }
-    });
-    // z: one chunk per segment of z-slices.
-    let len = segment_len(r[2]);
     let slice = nx * ny;
+    // x: one chunk per line.
+    let mut a = vec![0.0; slice * nz];
+    a.par_chunks_mut(nx).enumerate().for_each(|(line, out)| {
+        let input = &values[line * nx..(line + 1) * nx];
+        let len = segment_len(r[0]);
+        for c in (0..nx).step_by(len) {
+            let end = (c + len).min(nx);
+            segment_scalar(input, &mut out[c..end], r[0], c, op);
+        }
+    });
+    // y: one chunk per z-slice; elements are rows.
+    let mut b = vec![0.0; slice * nz];
+    b.par_chunks_mut(slice).enumerate().for_each(|(z, out)| {
+        let input = &a[z * slice..(z + 1) * slice];
+        let len = segment_len(r[1]);
+        let mut acc = vec![0.0; nx];
+        for c in (0..ny).step_by(len) {
+            let end = (c + len).min(ny);
+            segment(
+                input,
+                &mut out[c * nx..end * nx],
+                &mut acc,
+                ny,
+                nx,
+                r[1],
+                c,
+                op,
+            );
+        }
+    });
+    // z: one chunk per segment of z-slices; elements are slices.
+    let len = segment_len(r[2]);
     a.par_chunks_mut(slice * len)
         .enumerate()
         .for_each(|(k, out)| {
-            let c = k * len;
-            for xy in 0..slice {
-                let fetch = |z: usize| b[xy + slice * z];
-                segment(&fetch, nz, r[2], c, &mut |z, v| {
-                    out[xy + slice * (z - c)] = v
-                });
-            }
+            let mut acc = vec![0.0; slice];
+            segment(&b, out, &mut acc, nz, slice, r[2], k * len, op);
         });
+    a
+}
+
+/// CPU twin of the three `box_stats.wgsl` passes, on rayon. Each statistic runs on its
+/// own arrays, whole rows and slices at a time, so the loops vectorise.
+pub fn box_stats_cpu(values: &[f32], dims: [usize; 3], radius: [u32; 3]) -> BoxStats {
+    let r = radius.map(|r| r as usize);
+    let squares: Vec<f32> = values.par_iter().map(|v| v * v).collect();
+    let ((min, max), (sum, sum_sq)) = rayon::join(
+        || {
+            rayon::join(
+                || separable(values, dims, r, (f32::min, BIG)),
+                || separable(values, dims, r, (f32::max, -BIG)),
+            )
+        },
+        || {
+            rayon::join(
+                || separable(values, dims, r, (|a, b| a + b, 0.0)),
+                || separable(&squares, dims, r, (|a, b| a + b, 0.0)),
+            )
+        },
+    );
     BoxStats {
         dims,
         radius,
-        raw: a,
+        min,
+        max,
+        sum,
+        sum_sq,
     }
 }
 
@@ -393,10 +496,30 @@ pub fn ambient(map: AmbientMap, v_x: f32, m: Moments) -> f32 {
 
 /// A map from statistics and source values on the CPU (rayon), x fastest.
 pub fn map_cpu(map: AmbientMap, stats: &BoxStats, values: &[f32]) -> Vec<f32> {
-    (0..values.len())
-        .into_par_iter()
-        .map(|i| ambient(map, values[i], stats.moments(i)))
-        .collect()
+    let [nx, ny, nz] = stats.dims;
+    let r = stats.radius.map(|r| r as usize);
+    let counts = |axis: usize, n: usize| -> Vec<usize> {
+        (0..n).map(|i| window_count(i, r[axis], n)).collect()
+    };
+    let (cx, cy, cz) = (counts(0, nx), counts(1, ny), counts(2, nz));
+    let mut out = vec![0.0; values.len()];
+    out.par_chunks_mut(nx).enumerate().for_each(|(line, row)| {
+        let (y, z) = (line % ny, line / ny);
+        let base = line * nx;
+        for (x, o) in row.iter_mut().enumerate() {
+            // As the shader: the count as an integer product, then one f32 division each.
+            let n = (cx[x] * cy[y] * cz[z]) as f32;
+            let i = base + x;
+            let m = [
+                stats.min[i],
+                stats.max[i],
+                stats.sum[i] / n,
+                stats.sum_sq[i] / n,
+            ];
+            *o = ambient(map, values[i], m);
+        }
+    });
+    out
 }
 
 /// Everything on the CPU: source values, statistics, then each of `maps`.
@@ -723,10 +846,15 @@ impl FilterGpu {
             rb
         })?;
         let bytes = read_buffer(device, &readback, "Filter::stats_readback")?;
+        let raw = unpad::<[f32; 4]>(&bytes, row, nx, 16);
+        let channel = |k: usize| raw.iter().map(|v| v[k]).collect();
         Ok(BoxStats {
             dims: vol.texels.dims,
             radius,
-            raw: unpad::<[f32; 4]>(&bytes, row, nx, 16),
+            min: channel(0),
+            max: channel(1),
+            sum: channel(2),
+            sum_sq: channel(3),
         })
     }
 }
