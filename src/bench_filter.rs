@@ -123,7 +123,7 @@ fn table_1(args: &FilterBenchArgs, gpu: &crate::gpu::Gpu, fg: &FilterGpu) -> Res
     };
     let cranium = volume::load(&args.data.join("raw/cranium-ct.raw"), &opts)?.volume;
     let tf = TransferFunction::preset(Preset::CtBone, &cranium.stats());
-    let vol = GpuVolume::new(&gpu, &cranium, &tf, 0.5)?;
+    let vol = GpuVolume::new(gpu, &cranium, &tf, 0.5)?;
     let texels = &vol.texels;
     let source = Source::new(texels, &tf, StatisticSource::Density);
     println!();
@@ -144,7 +144,7 @@ fn table_1(args: &FilterBenchArgs, gpu: &crate::gpu::Gpu, fg: &FilterGpu) -> Res
                 Ok(())
             })?;
             let gpu_ms = median_ms(args.runs, || {
-                fg.compute(&gpu, &vol, &source, [r; 3], &[*map])?;
+                fg.compute(gpu, &vol, &source, [r; 3], &[*map])?;
                 Ok(())
             })?;
             println!(
@@ -196,7 +196,7 @@ fn quality(
             max_bytes: u64::MAX,
         },
     );
-    let evol = GpuVolume::from_texels(&gpu, et.clone(), &etf, 0.5)?;
+    let evol = GpuVolume::from_texels(gpu, et.clone(), &etf, 0.5)?;
     let lao = LaoGpu::new(&gpu.device)?;
     let lut = lao_lut(&etf, &et);
     let m = args.samples.max(1);
@@ -213,7 +213,7 @@ fn quality(
         Some(t) => t,
         None => {
             let t = lao.compute(
-                &gpu,
+                gpu,
                 &evol,
                 &lut,
                 &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
@@ -256,9 +256,9 @@ fn quality(
     };
     for set in [RaySet::Six, RaySet::Fourteen, RaySet::TwentySix] {
         let rays = Rays::uniform(set.directions());
-        let a = lao.compute(&gpu, &evol, &lut, &rays, m, &|_, _| {})?;
+        let a = lao.compute(gpu, &evol, &lut, &rays, m, &|_, _| {})?;
         let g = median_ms(1, || {
-            lao.compute(&gpu, &evol, &lut, &rays, m, &|_, _| {})?;
+            lao.compute(gpu, &evol, &lut, &rays, m, &|_, _| {})?;
             Ok(())
         })?;
         let c = median_ms(1, || {
@@ -272,11 +272,11 @@ fn quality(
         for r in [5u32, 10] {
             for (name, map) in MAPS {
                 let a = fg
-                    .compute(&gpu, &evol, &src, [r; 3], &[map])?
+                    .compute(gpu, &evol, &src, [r; 3], &[map])?
                     .pop()
                     .unwrap_or_default();
                 let g = median_ms(args.runs, || {
-                    fg.compute(&gpu, &evol, &src, [r; 3], &[map])?;
+                    fg.compute(gpu, &evol, &src, [r; 3], &[map])?;
                     Ok(())
                 })?;
                 let c = median_ms(args.runs, || {
@@ -293,9 +293,9 @@ fn quality(
             // Timed from the opacity volume on: pyramid (CPU) + cones (GPU or CPU).
             let build = || MipPyramid::new(et.dims, opacity(&et, &etf));
             let pyramid = build();
-            let a = cg.compute(&gpu, &et, &pyramid, cones, preset, reach)?;
+            let a = cg.compute(gpu, &et, &pyramid, cones, preset, reach)?;
             let g = median_ms(args.runs, || {
-                cg.compute(&gpu, &et, &build(), cones, preset, reach)?;
+                cg.compute(gpu, &et, &build(), cones, preset, reach)?;
                 Ok(())
             })?;
             let c = median_ms(args.runs, || {
