@@ -9,7 +9,7 @@ struct Params {
     dims: vec4<u32>,    // x, y, z, axis
     run: vec4<u32>,     // r, segment length L, segments per line, first pass (1)
     source: vec4<f32>,  // a, b, entries - 1, opacity (1) or density (0)
-    count: vec4<u32>,   // invocations, invocations per dispatch row
+    count: vec4<u32>,   // invocations, invocations per dispatch row, lines
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
@@ -62,8 +62,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let n = p.dims[axis];
     let r = i32(p.run.x);
     let len = i32(p.run.y);
-    let segment = index % p.run.z;
-    let line_index = index / p.run.z;
+    // Neighbouring invocations take neighbouring lines (x fastest for the y and z
+    // passes), so their loads and stores touch neighbouring texels.
+    let segment = index / p.count.z;
+    let line_index = index % p.count.z;
     // The line: the two other coordinates, in x, y, z order.
     var line = vec3<u32>(0u);
     if axis == 0u {

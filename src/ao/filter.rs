@@ -550,7 +550,7 @@ struct BoxParams {
     run: [u32; 4],
     /// Source map: a, b, entries − 1, opacity (1) or density (0).
     source: [f32; 4],
-    /// Invocations in this pass, invocations per dispatch row.
+    /// Invocations in this pass, invocations per dispatch row, lines.
     count: [u32; 4],
 }
 
@@ -702,7 +702,8 @@ impl FilterGpu {
             let len = segment_len(r as usize) as u32;
             let n = dims[axis];
             let segments = n.div_ceil(len);
-            let count = segments * (nx * ny * nz / n);
+            let lines = nx * ny * nz / n;
+            let count = segments * lines;
             let groups = count.div_ceil(64);
             let gx = groups.min(65535);
             let gy = groups.div_ceil(gx);
@@ -710,7 +711,7 @@ impl FilterGpu {
                 dims: [nx, ny, nz, axis as u32],
                 run: [r, len, segments, u32::from(axis == 0)],
                 source: source.params,
-                count: [count, gx * 64, 0, 0],
+                count: [count, gx * 64, lines, 0],
             };
             validated(device, "Filter::box_stats", || {
                 let uniforms = uniform_buffer(
