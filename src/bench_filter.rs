@@ -84,6 +84,25 @@ fn timed(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<(f64, f64)> {
     Ok((wall[wall.len() / 2], cpu[cpu.len() / 2]))
 }
 
+/// Mean of `a` and Pearson correlation of `a` with `b` over the voxels in `mask`.
+fn mean_and_correlation(a: &[f32], b: &[f32], mask: &[bool]) -> (f64, f64) {
+    let pairs: Vec<(f64, f64)> = (0..a.len())
+        .filter(|&i| mask[i])
+        .map(|i| (a[i] as f64, b[i] as f64))
+        .collect();
+    let n = pairs.len().max(1) as f64;
+    let (ma, mb) = pairs
+        .iter()
+        .fold((0.0, 0.0), |(x, y), (p, q)| (x + p / n, y + q / n));
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (p, q) in &pairs {
+        sab += (p - ma) * (q - mb);
+        saa += (p - ma).powi(2);
+        sbb += (q - mb).powi(2);
+    }
+    (ma, sab / (saa * sbb).sqrt().max(f64::MIN_POSITIVE))
+}
+
 fn rms(a: &[f32], b: &[f32], mask: Option<&[bool]>) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
     for i in 0..a.len() {
@@ -245,11 +264,17 @@ fn quality(
         visible.len()
     );
     println!();
-    println!("| method | parameters | RMS, all voxels | RMS, visible voxels | GPU | CPU twin |");
-    println!("|---|---|---|---|---|---|");
+    let (truth_mean, _) = mean_and_correlation(&truth, &truth, &visible);
+    println!("mean A of the ground truth over visible voxels: {truth_mean:.3}");
+    println!();
+    println!(
+        "| method | parameters | RMS, all voxels | RMS, visible voxels | mean A, visible | correlation with LAO, visible | GPU | CPU twin |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
     let row = |method: &str, params: String, a: &[f32], gpu_ms: f64, cpu_ms: f64| {
+        let (mean, corr) = mean_and_correlation(a, &truth, &visible);
         println!(
-            "| {method} | {params} | {:.4} | {:.4} | {gpu_ms:.1} ms | {cpu_ms:.1} ms |",
+            "| {method} | {params} | {:.4} | {:.4} | {mean:.3} | {corr:.3} | {gpu_ms:.1} ms | {cpu_ms:.1} ms |",
             rms(a, &truth, None),
             rms(a, &truth, Some(&visible))
         );
