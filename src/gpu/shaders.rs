@@ -12,7 +12,10 @@ pub const SOURCES: &[(&str, &str)] = &[
         "ambient_maps.wgsl",
         include_str!("../../shaders/ambient_maps.wgsl"),
     ),
-    ("box_stats.wgsl", include_str!("../../shaders/box_stats.wgsl")),
+    (
+        "box_stats.wgsl",
+        include_str!("../../shaders/box_stats.wgsl"),
+    ),
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
     ("cone.wgsl", include_str!("../../shaders/cone.wgsl")),
     ("lao.wgsl", include_str!("../../shaders/lao.wgsl")),
