@@ -23,6 +23,8 @@ struct Params {
 @group(0) @binding(4) var ambient_occlusion: texture_3d<f32>;
 @group(0) @binding(5) var occupancy: texture_3d<u32>;
 @group(0) @binding(6) var out_image: texture_storage_2d<rgba8unorm, write>;
+// min(σ²/σ²_max, 1) per voxel (Ruiz et al. §4.2); a single texel of 1 when off.
+@group(0) @binding(7) var opacity_modulation: texture_3d<f32>;
 
 // Group 2 (src/render/shadow.rs): live positional AO (vao_common.wgsl, bindings 0–4)
 // and the light volume for shadows.
@@ -208,6 +210,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let norm = sample_norm(uvw);
             var rgba = classify(norm);
             if rgba.a > 0.0 {
+                rgba.a = rgba.a * textureSampleLevel(opacity_modulation, linear_clamp, uvw, 0.0).r;
                 // The last step ends at the box exit: correct its opacity for its length.
                 let len = min(dt, t_exit - t);
                 let rgb = shade(rgba.rgb, uvw, -dir);

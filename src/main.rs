@@ -98,10 +98,8 @@ struct RenderArgs {
     #[arg(long)]
     ambient: Option<f32>,
     /// Ambient occlusion: none, lao, cao (exact under clipping), lao-full (LAO of every
-    /// voxel each frame, CAO's baseline), vao (positional AO, precomputed) or vao-live
-    /// (positional AO at every ray-cast sample).
-    /// Ambient occlusion: none, lao, vao (positional AO, precomputed) or vao-live
-    /// (positional AO at every ray-cast sample).
+    /// voxel each frame, CAO's baseline), vao / vao-live (positional AO, precomputed or
+    /// at every sample), cdf, gauss, penner (filter maps) or cone (cone-traced).
     #[arg(long, value_parser = volao::ao::AoMethod::parse)]
     ao: Option<volao::ao::AoMethod>,
     /// AO ray pattern: 6, 14, 26, 54 (the CAO paper's) or fib:N (Fibonacci lattice).
@@ -128,6 +126,12 @@ struct RenderArgs {
     /// Colour of the meshes: straight R,G,B,A in 0…1 (A < 1: translucent).
     #[arg(long, value_name = "R,G,B,A", value_parser = parse_rgba, default_value = "0.9,0.9,0.9,1")]
     mesh_rgba: [f32; 4],
+    #[command(flatten)]
+    fast_ao: FastAoArgs,
+    /// Opacity modulation by local variance: α · min(σ²/σ²_max, 1) (Ruiz et al. §4.2),
+    /// σ² of the normalised density in a box of radius RADIUS voxels (default 10).
+    #[arg(long, value_name = "SIGMA2_MAX[,RADIUS]", value_parser = parse_modulation)]
+    opacity_modulation: Option<volao::ao::filter::OpacityModulation>,
     /// Render on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
@@ -136,6 +140,72 @@ struct RenderArgs {
     save_scene: Option<PathBuf>,
     #[command(flatten)]
     load: LoadArgs,
+}
+
+/// Flags of the filter-map and cone-traced AO methods (`volao render` and `volao ao`).
+#[derive(Args, Debug)]
+struct FastAoArgs {
+    /// Filter maps (cdf, gauss, penner): box radius r, side 2r + 1 (default 10 voxels).
+    #[arg(long)]
+    radius: Option<f32>,
+    /// The radius is in mm (rounded to voxels per axis) instead of voxels.
+    #[arg(long)]
+    radius_mm: bool,
+    /// Filter maps: statistics of the density (the paper) or of the TF opacity.
+    #[arg(long, value_parser = volao::ao::filter::StatisticSource::parse)]
+    statistic: Option<volao::ao::filter::StatisticSource>,
+    /// Cone tracing: 6, 14 or 26 cones (default 6).
+    #[arg(long, value_parser = volao::ao::cone::ConeSet::parse)]
+    cones: Option<volao::ao::cone::ConeSet>,
+    /// Cone tracing: low, medium or high = 3, 5 or 7 spheres per cone (default medium).
+    #[arg(long, value_parser = volao::ao::cone::ConePreset::parse)]
+    cone_preset: Option<volao::ao::cone::ConePreset>,
+}
+
+impl FastAoArgs {
+    fn apply(&self, ao: &mut volao::ao::AoSettings) -> Result<()> {
+        if let Some(r) = self.radius {
+            if !r.is_finite() || !(0.0..=1000.0).contains(&r) {
+                bail!("--radius must be between 0 and 1000");
+            }
+            ao.radius = r;
+        }
+        if self.radius_mm {
+            ao.radius_unit = volao::ao::filter::RadiusUnit::Mm;
+        }
+        if let Some(s) = self.statistic {
+            ao.statistic = s;
+        }
+        if let Some(c) = self.cones {
+            ao.cones = c;
+        }
+        if let Some(p) = self.cone_preset {
+            ao.cone_preset = p;
+        }
+        Ok(())
+    }
+}
+
+fn parse_modulation(s: &str) -> Result<volao::ao::filter::OpacityModulation, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    let mut m = volao::ao::filter::OpacityModulation::default();
+    match v.as_slice() {
+        [s2] if *s2 > 0.0 && s2.is_finite() => m.sigma2_max = *s2,
+        [s2, r] if *s2 > 0.0 && s2.is_finite() && (0.0..=1000.0).contains(r) => {
+            m.sigma2_max = *s2;
+            m.radius = *r;
+        }
+        _ => {
+            return Err(format!(
+                "{s:?}: expected SIGMA2_MAX[,RADIUS] with σ²_max > 0 and a radius of 0 to 1000 voxels, e.g. 0.001,10"
+            ));
+        }
+    }
+    Ok(m)
 }
 
 fn parse_camera(s: &str) -> Result<[f32; 3], String> {
@@ -290,8 +360,9 @@ struct AoArgs {
     /// Output volume (.nii.gz, .nii or .raw), f32 values in [0, 1].
     #[arg(short, long)]
     output: PathBuf,
-    /// AO method: lao, or vao (positional AO; vao-live gives the same volume).
-    #[arg(long, default_value = "lao", value_parser = volao::ao::AoMethod::parse)]
+    /// AO method: lao, cao, lao-full (with --clip), vao (positional AO; vao-live gives the
+    /// same volume), cdf, gauss, penner or cone.
+    #[arg(long, alias = "ao", default_value = "lao", value_parser = volao::ao::AoMethod::parse)]
     method: volao::ao::AoMethod,
     /// Ray pattern: 6, 14, 26, 54 or fib:N.
     #[arg(long, default_value = "54", value_parser = parse_rays)]
@@ -306,6 +377,8 @@ struct AoArgs {
     clip: ClipArgs,
     #[command(flatten)]
     vao: VaoArgs,
+    #[command(flatten)]
+    fast_ao: FastAoArgs,
     /// Compute on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
@@ -448,6 +521,9 @@ enum BenchCommand {
     /// Positional AO by ray marching (time and RMS vs 512-ray LAO, live vs precomputed
     /// frame times) and the cost of volumetric shadows, on the Engine.
     Raymarch(volao::bench::raymarch::RaymarchBenchArgs),
+    /// Ruiz et al.'s Table 1 (filter maps on the cranium CT) and every cheap AO method's
+    /// RMS against 512-ray LAO with its compute time.
+    Filter(volao::bench_filter::FilterBenchArgs),
     /// (internal) load one file and print time and peak memory as JSON.
     #[command(hide = true)]
     LoadOne { file: PathBuf },
@@ -533,6 +609,9 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Bench(BenchCommand::Raymarch(args))) => {
             volao::bench::raymarch::raymarch_bench(&args)
         }
+        Some(Command::Bench(BenchCommand::Filter(args))) => {
+            volao::bench_filter::filter_bench(&args)
+        }
         Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
         Some(Command::Bench(BenchCommand::Cao(args))) => volao::bench_cao::cao_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
@@ -543,7 +622,7 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
     use volao::ao::{AoMethod, AoSettings};
     use volao::tf::{Preset, TransferFunction};
     if args.method == AoMethod::None {
-        bail!("--method none computes nothing; use lao or vao");
+        bail!("--method none computes nothing; use lao, cao, vao, cdf, gauss, penner or cone");
     }
     if args.samples == 0 {
         bail!("--samples must be at least 1");
@@ -567,6 +646,7 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
     if !clip.is_empty() && !matches!(args.method, AoMethod::Cao | AoMethod::LaoFull) {
         bail!("--clip needs --method cao or lao-full (plain LAO ignores clipping)");
     }
+    args.fast_ao.apply(&mut settings)?;
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", true);
     let (ao, device, cao) = volao::ao::compute_volume_clipped(
@@ -592,21 +672,25 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
         eprintln!("warning: {}: {w}", args.output.display());
     }
     let s = ao.stats();
-    let what = match settings.method {
-        AoMethod::Vao | AoMethod::VaoLive => format!(
-            "positional AO, {} directions × {} samples, r_max {} mm",
-            settings.vao.directions, settings.vao.samples, settings.vao.r_max_mm
-        ),
-        method => format!(
-            "{}, {} rays × {} samples",
-            match method {
-                AoMethod::Cao => "CAO",
-                AoMethod::LaoFull => "LAO (every voxel, clipped)",
-                _ => "LAO",
-            },
-            settings.rays.name(),
-            settings.samples
-        ),
+    let what = if volao::ao::fast::handles(settings.method) {
+        volao::ao::fast::describe(&settings)
+    } else {
+        match settings.method {
+            AoMethod::Vao | AoMethod::VaoLive => format!(
+                "positional AO, {} directions × {} samples, r_max {} mm",
+                settings.vao.directions, settings.vao.samples, settings.vao.r_max_mm
+            ),
+            method => format!(
+                "{}, {} rays × {} samples",
+                match method {
+                    AoMethod::Cao => "CAO",
+                    AoMethod::LaoFull => "LAO (every voxel, clipped)",
+                    _ => "LAO",
+                },
+                settings.rays.name(),
+                settings.samples
+            ),
+        }
     };
     println!(
         "{}: {} {what}, TF {}, in {:.1} s on {device}; A from {:.4} to {:.4}, mean {:.4}",
@@ -717,6 +801,9 @@ fn render(args: &RenderArgs) -> Result<()> {
         volao::render::shadow::light_direction(settings.light_direction)
             .map_err(anyhow::Error::msg)?;
     }
+    if args.opacity_modulation.is_some() {
+        settings.opacity_modulation = args.opacity_modulation;
+    }
     let width = args
         .width
         .or(scene.as_ref().map(|s| s.width))
@@ -764,6 +851,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         .iter()
         .map(|p| volao::render::surface::load_obj(p, args.mesh_rgba))
         .collect::<Result<Vec<_>, _>>()?;
+    args.fast_ao.apply(&mut ao)?;
 
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", ao.method != volao::ao::AoMethod::None);
@@ -810,6 +898,12 @@ fn render(args: &RenderArgs) -> Result<()> {
             ao.vao.directions,
             ao.vao.samples,
             ao.vao.r_max_mm,
+            out.ao_seconds * 1e3
+        )
+    } else if volao::ao::fast::handles(ao.method) {
+        format!(
+            " (AO {}: {:.0} ms)",
+            volao::ao::fast::describe(&ao),
             out.ao_seconds * 1e3
         )
     } else {

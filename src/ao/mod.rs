@@ -4,6 +4,9 @@
 //! per voxel in [0, 1] (1 = unoccluded).
 
 pub mod cao;
+pub mod cone;
+pub mod fast;
+pub mod filter;
 pub mod lao;
 pub mod rays;
 pub mod vao;
@@ -29,6 +32,14 @@ pub enum AoMethod {
     Vao,
     /// The same positional AO evaluated at every ray-cast sample, no precomputation.
     VaoLive,
+    /// Ruiz et al.'s CDF reconstruction `t^β` from box min/max/mean.
+    Cdf,
+    /// Ruiz et al.'s Gaussian CDF from box mean/variance.
+    Gauss,
+    /// Penner's one-tailed Chebyshev bound (the baseline of Ruiz et al.).
+    Penner,
+    /// Cone tracing with tangent spheres on an opacity mip pyramid (Dalla Favera & Celes).
+    Cone,
 }
 
 impl AoMethod {
@@ -40,8 +51,12 @@ impl AoMethod {
             "lao-full" => Ok(AoMethod::LaoFull),
             "vao" => Ok(AoMethod::Vao),
             "vao-live" => Ok(AoMethod::VaoLive),
+            "cdf" => Ok(AoMethod::Cdf),
+            "gauss" => Ok(AoMethod::Gauss),
+            "penner" => Ok(AoMethod::Penner),
+            "cone" => Ok(AoMethod::Cone),
             other => Err(format!(
-                "unknown AO method {other:?} (available: none, lao, cao, lao-full, vao, vao-live)"
+                "unknown AO method {other:?} (available: none, lao, cao, lao-full, vao, vao-live, cdf, gauss, penner, cone)"
             )),
         }
     }
@@ -55,7 +70,7 @@ pub struct AoSettings {
     /// Ray pattern (K rays): "6", "14", "26", "54" or "fib:N".
     #[serde(with = "ray_set_name")]
     pub rays: RaySet,
-    /// Samples per ray (M), 1 mm apart.
+    /// Samples per ray (M), 1 mm apart; also the reach of the cones (M mm).
     pub samples: u32,
     /// CAO: extra anti-aliasing samples for partly clipped voxels (N; 9 + N in all).
     pub msaa: u32,
@@ -63,6 +78,14 @@ pub struct AoSettings {
     pub clip_resolution: u32,
     /// Parameters of positional AO (`vao`, `vao-live`).
     pub vao: vao::VaoSettings,
+    /// Filter maps: box radius r (side 2r + 1).
+    pub radius: f32,
+    pub radius_unit: filter::RadiusUnit,
+    /// Filter maps: statistics of the density or of the TF's opacity.
+    pub statistic: filter::StatisticSource,
+    /// Cone tracing: number of cones and spheres per cone.
+    pub cones: cone::ConeSet,
+    pub cone_preset: cone::ConePreset,
 }
 
 impl Default for AoSettings {
@@ -71,6 +94,11 @@ impl Default for AoSettings {
             method: AoMethod::None,
             rays: RaySet::FiftyFour,
             samples: lao::DEFAULT_SAMPLES,
+            radius: 10.0,
+            radius_unit: filter::RadiusUnit::Voxels,
+            statistic: filter::StatisticSource::Density,
+            cones: cone::ConeSet::Six,
+            cone_preset: cone::ConePreset::Medium,
             msaa: cao::DEFAULT_MSAA,
             clip_resolution: crate::clip::gpu::DEFAULT_RESOLUTION,
             vao: vao::VaoSettings::default(),
@@ -133,7 +161,10 @@ pub fn compute_volume_clipped(
         match crate::gpu::request_device() {
             Ok(g) => {
                 let vol = crate::render::gpu::GpuVolume::new(&g, volume, tf, 0.5)?;
-                if vol.texels.downsampled == 0 {
+                if vol.texels.downsampled == 0 && fast::handles(settings.method) {
+                    computed =
+                        fast::compute_gpu(&g, &vol, tf, settings)?.map(|a| (a, g.describe()));
+                } else if vol.texels.downsampled == 0 {
                     let lut = lao::lao_lut(tf, &vol.texels);
                     let a = lao::LaoGpu::new(&g.device)?.compute(
                         &g,
@@ -163,13 +194,17 @@ pub fn compute_volume_clipped(
                     max_bytes: u64::MAX,
                 },
             );
-            let a = lao::lao_cpu(
-                &texels,
-                &lao::lao_lut(tf, &texels),
-                &rays,
-                settings.samples,
-                progress,
-            );
+            let a = if fast::handles(settings.method) {
+                fast::compute_cpu(&texels, tf, settings).unwrap_or_default()
+            } else {
+                lao::lao_cpu(
+                    &texels,
+                    &lao::lao_lut(tf, &texels),
+                    &rays,
+                    settings.samples,
+                    progress,
+                )
+            };
             (
                 a,
                 format!("CPU twin ({} threads)", rayon::current_num_threads()),
@@ -242,12 +277,20 @@ fn ao_volume(
         orientation: volume.orientation,
         descriptions: vec![(
             "description".into(),
-            format!(
-                "{method} ambient factor, {} rays x {} samples, TF {}",
-                settings.rays.name(),
-                settings.samples,
-                tf.name
-            ),
+            if fast::handles(settings.method) {
+                format!(
+                    "ambient factor: {}, TF {}",
+                    fast::describe(settings),
+                    tf.name
+                )
+            } else {
+                format!(
+                    "{method} ambient factor, {} rays x {} samples, TF {}",
+                    settings.rays.name(),
+                    settings.samples,
+                    tf.name
+                )
+            },
         )],
     }
 }

@@ -22,6 +22,8 @@ pub struct CpuVolume {
     pub light: Option<super::shadow::LightVolume>,
     /// Geometry drawn inside the volume, with what `nearest_hit` needs besides the ray.
     pub surfaces: Option<CpuSurfaces>,
+    /// Opacity factor per voxel in [0, 1] (variance modulation); `None` means 1.
+    pub modulation: Option<Vec<f32>>,
 }
 
 /// Surfaces for the CPU twin: the meshes, and the frame and texels that place the camera.
@@ -45,6 +47,7 @@ impl CpuVolume {
             live_vao: None,
             light: None,
             surfaces: None,
+            modulation: None,
         }
     }
 }
@@ -206,6 +209,9 @@ pub fn pixel(
             let norm = trilinear(&vol.norm, vol.dims, uvw);
             let mut rgba = classify(p, lut, norm);
             if rgba.w > 0.0 {
+                if let Some(m) = &vol.modulation {
+                    rgba.w *= trilinear(m, vol.dims, uvw);
+                }
                 let len = dt.min(t_exit - t);
                 let rgb = shade(p, vol, rgba.truncate(), uvw, -dir);
                 if pending && t_surf < t + len {

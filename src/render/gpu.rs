@@ -39,6 +39,7 @@ pub struct GpuVolume {
     ranges: BlockRanges,
     volume_view: wgpu::TextureView,
     ao_view: wgpu::TextureView,
+    modulation_view: wgpu::TextureView,
     occupancy: wgpu::Texture,
     occupancy_view: wgpu::TextureView,
     lut_buffer: wgpu::Buffer,
@@ -170,6 +171,14 @@ impl GpuVolume {
                 wgpu::TextureFormat::R32Float,
             );
             write_3d(queue, &ao, [1, 1, 1], 4, bytemuck::bytes_of(&1.0f32));
+            // No opacity modulation: a single texel of 1.
+            let modulation = texture_3d(
+                device,
+                "GpuVolume::opacity_modulation",
+                [1, 1, 1],
+                wgpu::TextureFormat::R8Unorm,
+            );
+            write_3d(queue, &modulation, [1, 1, 1], 1, &[255]);
             let occupancy = texture_3d(
                 device,
                 "GpuVolume::occupancy",
@@ -187,6 +196,7 @@ impl GpuVolume {
             GpuVolume {
                 volume_view: volume.create_view(&Default::default()),
                 ao_view: ao.create_view(&Default::default()),
+                modulation_view: modulation.create_view(&Default::default()),
                 occupancy_view: occupancy.create_view(&Default::default()),
                 occupancy,
                 lut_buffer,
@@ -250,6 +260,32 @@ impl GpuVolume {
         self.ao_view = view.clone();
     }
 
+    /// Uses `values` (one per voxel, x fastest, in [0, 1]) as the opacity factor of
+    /// variance modulation. Stored as R16Unorm like the AO volume; returns the values as
+    /// the GPU will sample them (for the CPU twin).
+    pub fn set_opacity_modulation(&mut self, gpu: &Gpu, values: &[f32]) -> Vec<f32> {
+        let dims = self.texels.dims.map(|d| d as u32);
+        let quantised: Vec<u16> = values
+            .iter()
+            .map(|&a| (a.clamp(0.0, 1.0) * 65535.0).round() as u16)
+            .collect();
+        let texture = texture_3d(
+            &gpu.device,
+            "GpuVolume::opacity_modulation",
+            dims,
+            wgpu::TextureFormat::R16Unorm,
+        );
+        write_3d(
+            &gpu.queue,
+            &texture,
+            dims,
+            2,
+            bytemuck::cast_slice(&quantised),
+        );
+        self.modulation_view = texture.create_view(&Default::default());
+        quantised.iter().map(|&q| q as f32 / 65535.0).collect()
+    }
+
     /// The occupancy grid for the current LUT (for the CPU twin).
     pub fn occupancy(&self) -> Vec<u8> {
         self.ranges.occupancy(&self.texels, &self.lut)
@@ -306,6 +342,7 @@ impl RayCaster {
                             view_dimension: wgpu::TextureViewDimension::D2,
                         },
                     ),
+                    entry(7, tex(wgpu::TextureSampleType::Float { filterable: true })),
                 ],
             });
             let clip_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -480,6 +517,7 @@ impl RayCaster {
                     wgpu::BindingResource::TextureView(&vol.ao_view),
                     wgpu::BindingResource::TextureView(&vol.occupancy_view),
                     wgpu::BindingResource::TextureView(&target_view),
+                    wgpu::BindingResource::TextureView(&vol.modulation_view),
                 ],
             );
             let group_2 = super::shadow::bind_group_2(

@@ -60,6 +60,10 @@ pub struct RenderSettings {
     /// here: scene files keep it in their `light`.
     #[serde(skip)]
     pub light_direction: [f32; 3],
+    /// Multiply each sample's opacity by `min(σ²/σ²_max, 1)` (Ruiz et al. §4.2); off
+    /// when absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub opacity_modulation: Option<crate::ao::filter::OpacityModulation>,
 }
 
 impl Default for RenderSettings {
@@ -75,6 +79,7 @@ impl Default for RenderSettings {
             background: [0.0, 0.0, 0.0, 1.0],
             shadows: false,
             light_direction: shadow::DEFAULT_LIGHT,
+            opacity_modulation: None,
         }
     }
 }

@@ -157,7 +157,15 @@ pub fn render_with(
                         vol.set_ambient_occlusion(&g, &a);
                     }
                     AoMethod::VaoLive => vol.set_live_vao(&g, tf, Some(&ao.vao))?,
-                    AoMethod::None => {}
+                    _ => {
+                        if let Some(a) = crate::ao::fast::compute_gpu(&g, &vol, tf, ao)? {
+                            vol.set_ambient_occlusion(&g, &a);
+                        }
+                    }
+                }
+                if let Some(m) = &frame.settings.opacity_modulation {
+                    let f = crate::ao::fast::modulation_gpu(&g, &vol, tf, m)?;
+                    vol.set_opacity_modulation(&g, &f);
                 }
                 if cao_state.is_none() && !clip.is_empty() {
                     let mut m = ClipMaps::new(&g)?;
@@ -228,6 +236,12 @@ pub fn render_with(
     if ao.method == AoMethod::VaoLive {
         cv.live_vao = Some(vao::PositionalAo::new(&texels, tf, &ao.vao));
     }
+    if let Some(a) = crate::ao::fast::compute_cpu(&texels, tf, ao) {
+        cv.ao = Some(a);
+    }
+    if let Some(m) = &frame.settings.opacity_modulation {
+        cv.modulation = Some(quantise16(&crate::ao::fast::modulation_cpu(&texels, tf, m)));
+    }
     if frame.settings.shadows {
         let dir = light_dir(frame)?;
         let t = light_cpu(&texels, &light_lut(tf, &texels), dir, progress);
@@ -255,4 +269,12 @@ fn light_dir(frame: &Frame) -> Result<glam::Vec3, GpuError> {
         stage: "shadows".into(),
         message,
     })
+}
+
+/// As the GPU path stores modulation volumes (R16Unorm).
+fn quantise16(values: &[f32]) -> Vec<f32> {
+    values
+        .iter()
+        .map(|&x| (x.clamp(0.0, 1.0) * 65535.0).round() / 65535.0)
+        .collect()
 }
