@@ -24,6 +24,8 @@ pub struct CpuVolume {
     pub surfaces: Option<CpuSurfaces>,
     /// Opacity factor per voxel in [0, 1] (variance modulation); `None` means 1.
     pub modulation: Option<Vec<f32>>,
+    /// Clip shapes' maps (read back from the GPU): shadow-test clipping of every sample.
+    pub clip: Option<crate::clip::cpu::ClipMapsCpu>,
 }
 
 /// Surfaces for the CPU twin: the meshes, and the frame and texels that place the camera.
@@ -48,6 +50,7 @@ impl CpuVolume {
             light: None,
             surfaces: None,
             modulation: None,
+            clip: None,
         }
     }
 }
@@ -205,6 +208,14 @@ pub fn pixel(
                     k = (k + 1).max(next);
                     continue;
                 }
+            }
+            // Shadow-test clipping (CAO step VI): clipped samples are empty.
+            if let Some(c) = &vol.clip
+                && c.uniforms.counts[0] > 0
+                && !c.classify(pos).0
+            {
+                k += 1;
+                continue;
             }
             let norm = trilinear(&vol.norm, vol.dims, uvw);
             let mut rgba = classify(p, lut, norm);
