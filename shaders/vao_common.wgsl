@@ -12,6 +12,7 @@
 // A ray stops at an accepted sample with V ≥ V_thres, or once γ_k is within 1/256 of 1.
 // Samples outside the volume box are empty. Isosurface mode (§5.2.1): γ_k = 1 if a
 // sample beyond the guard distance lies within d_tol of d_iso (data values), else 0.
+//!include clip_common.wgsl
 
 struct VaoParams {
     mm_to_uvw: vec4<f32>,  // 1 / extent (mm) per axis; w = stratum length Δ (mm)
@@ -36,6 +37,15 @@ fn vao_value(uvw: vec3<f32>) -> f32 {
     return textureSampleLevel(vao_volume, vao_sampler, uvw, f32(vao.counts.z)).r;
 }
 
+// True where a clip shape removes the volume (clip_common.wgsl): clipped space is
+// empty for positional AO too, so it follows the clip shapes in live mode.
+fn vao_clipped(uvw: vec3<f32>) -> bool {
+    if clip.counts.x == 0u {
+        return false;
+    }
+    return !clip_visible((uvw - vec3<f32>(0.5)) / vao.mm_to_uvw.xyz);
+}
+
 // Opacity per voxel length v_s (Eq. 6's V), from the transfer function.
 fn vao_opacity(norm: f32) -> f32 {
     let t = clamp(norm * vao.lut_map.x + vao.lut_map.y, 0.0, vao.lut_map.z);
@@ -56,6 +66,9 @@ fn vao_obscurance(x: vec3<f32>, ray: vec4<f32>) -> f32 {
             if !vao_inside(uvw) {
                 break;
             }
+            if vao_clipped(uvw) {
+                continue;
+            }
             if s * stratum >= vao.guard.x && abs(vao_value(uvw) - vao.limits.z) < vao.limits.w {
                 return 1.0;
             }
@@ -63,7 +76,7 @@ fn vao_obscurance(x: vec3<f32>, ray: vec4<f32>) -> f32 {
         return 0.0;
     }
     var prev = 0.0;
-    if vao_inside(x) {
+    if vao_inside(x) && !vao_clipped(x) {
         prev = vao_opacity(vao_value(x));
     }
     var product = 1.0;
@@ -73,7 +86,10 @@ fn vao_obscurance(x: vec3<f32>, ray: vec4<f32>) -> f32 {
         if !vao_inside(uvw) {
             break;
         }
-        let v = vao_opacity(vao_value(uvw));
+        var v = 0.0;
+        if !vao_clipped(uvw) {
+            v = vao_opacity(vao_value(uvw));
+        }
         let accepted = v >= prev;
         prev = v;
         if accepted {

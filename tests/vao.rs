@@ -767,3 +767,69 @@ fn v_thres_and_near_full_obscurance_stop_a_ray() {
     let five = 1.0 - 0.4f32.powf(5.0 * stratum);
     assert!((a - five).abs() < 1e-5, "A_P = {a}, five samples {five}");
 }
+
+#[test]
+fn live_mode_treats_clipped_space_as_empty_and_matches_its_twin() {
+    use volao::clip::ClipShape;
+    use volao::clip::gpu::ClipMaps;
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let (_, v, tf) = real_crops().remove(0);
+    let t = texels(&v);
+    let s = VaoSettings {
+        r_max_mm: 8.0,
+        ..Default::default()
+    };
+    let f = Frame {
+        camera: Camera {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            ..Default::default()
+        },
+        settings: RenderSettings {
+            ambient: 1.0,
+            shading: volao::render::Shading::None,
+            ..Default::default()
+        },
+        width: 64,
+        height: 64,
+    };
+    let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+        .unwrap_or_else(|e| panic!("{e}"));
+    vol.set_live_vao(&gpu, &tf, Some(&s))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let extent = Vec3::from(t.extent());
+    // A slab carving the front half: the cut face loses the occluders in front of it.
+    let shape = ClipShape::parse(&format!("plane:0,{},0,0,1,0", -extent.y * 0.1))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut maps = ClipMaps::new(&gpu).unwrap_or_else(|e| panic!("{e}"));
+    maps.update(
+        &gpu,
+        std::slice::from_ref(&shape),
+        extent.length() * 0.5,
+        1.0,
+        256,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let g = rc
+        .render_clipped(&gpu, &vol, &f, Some(&maps))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let cpu_maps = maps.read_back(&gpu).unwrap_or_else(|e| panic!("{e}"));
+    let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
+    let mut pao = PositionalAo::new(&t, &tf, &s);
+    pao.clip = Some(cpu_maps.clone());
+    cv.live_vao = Some(pao);
+    cv.clip = Some(cpu_maps);
+    let c = cpu::render(&t, &cv, &vol.lut, &occ, &f);
+    check("live_clipped_twin", &g, &c, TWIN, &out_dir()).unwrap_or_else(|e| panic!("{e}"));
+    // Clip-blind positional AO (clipped occluders still counted) is darker on the cut.
+    cv.live_vao = Some(PositionalAo::new(&t, &tf, &s));
+    let blind = cpu::render(&t, &cv, &vol.lut, &occ, &f);
+    let lum = |img: &Image| img.pixels.iter().map(|p| p[0] as u64).sum::<u64>();
+    assert!(
+        lum(&c) > lum(&blind),
+        "clipped space must not occlude: {} vs {}",
+        lum(&c),
+        lum(&blind)
+    );
+}

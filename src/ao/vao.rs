@@ -352,6 +352,8 @@ pub struct PositionalAo {
     /// The level the function samples (texel values as f16, x fastest) and its dims.
     level: Vec<f32>,
     level_dims: [usize; 3],
+    /// Clip shapes' maps: clipped space is empty (twin of `vao_clipped`).
+    pub clip: Option<crate::clip::cpu::ClipMapsCpu>,
 }
 
 impl PositionalAo {
@@ -371,7 +373,21 @@ impl PositionalAo {
             rays: rays(s.directions),
             level,
             level_dims,
+            clip: None,
         }
+    }
+
+    /// `vao_clipped` of `vao_common.wgsl`.
+    fn clipped(&self, uvw: Vec3) -> bool {
+        let Some(c) = &self.clip else {
+            return false;
+        };
+        if c.uniforms.counts[0] == 0 {
+            return false;
+        }
+        let m = &self.params.mm_to_uvw;
+        !c.classify((uvw - Vec3::splat(0.5)) / Vec3::new(m[0], m[1], m[2]))
+            .0
     }
 
     fn value(&self, uvw: Vec3) -> f32 {
@@ -404,6 +420,9 @@ impl PositionalAo {
                 if !inside(uvw) {
                     break;
                 }
+                if self.clipped(uvw) {
+                    continue;
+                }
                 if s * stratum >= p.guard[0] && (self.value(uvw) - p.limits[2]).abs() < p.limits[3]
                 {
                     return 1.0;
@@ -411,7 +430,7 @@ impl PositionalAo {
             }
             return 0.0;
         }
-        let mut prev = if inside(x) {
+        let mut prev = if inside(x) && !self.clipped(x) {
             self.opacity(self.value(x))
         } else {
             0.0
@@ -422,7 +441,11 @@ impl PositionalAo {
             if !inside(uvw) {
                 break;
             }
-            let v = self.opacity(self.value(uvw));
+            let v = if self.clipped(uvw) {
+                0.0
+            } else {
+                self.opacity(self.value(uvw))
+            };
             let accepted = v >= prev;
             prev = v;
             if accepted {
@@ -629,6 +652,7 @@ pub struct VaoGpu {
     pipeline: wgpu::ComputePipeline,
     slab_layout: wgpu::BindGroupLayout,
     vao_layout: wgpu::BindGroupLayout,
+    no_clip: wgpu::BindGroup,
 }
 
 /// Uniforms of `vao.wgsl`. Mirrors `struct Slab` there.
@@ -674,10 +698,11 @@ impl VaoGpu {
                 label: Some("Vao::inputs_layout"),
                 entries: &layout_entries(),
             });
+            let clip_layout = crate::clip::gpu::bind_group_layout(device);
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("Vao::pipeline_layout"),
-                // Group 1 is the ray caster's clip group, unused here; the inputs are group 2.
-                bind_group_layouts: &[Some(&slab_layout), None, Some(&vao_layout)],
+                // Group 1: clip shapes (none here: the precomputed volume is unclipped).
+                bind_group_layouts: &[Some(&slab_layout), Some(&clip_layout), Some(&vao_layout)],
                 immediate_size: 0,
             });
             VaoGpu {
@@ -689,6 +714,7 @@ impl VaoGpu {
                     compilation_options: Default::default(),
                     cache: None,
                 }),
+                no_clip: crate::clip::gpu::empty_bind_group(device, &clip_layout),
                 slab_layout,
                 vao_layout,
             }
@@ -754,6 +780,7 @@ impl VaoGpu {
                     });
                     pass.set_pipeline(&self.pipeline);
                     pass.set_bind_group(0, &group0, &[]);
+                    pass.set_bind_group(1, &self.no_clip, &[]);
                     pass.set_bind_group(2, &group1, &[]);
                     pass.dispatch_workgroups(gx, gy, 1);
                 }

@@ -176,6 +176,35 @@ pub fn layout_entries(visibility: wgpu::ShaderStages) -> [wgpu::BindGroupLayoutE
     ]
 }
 
+/// The layout of `@group(1)` in `clip_common.wgsl` (compute stage).
+pub fn bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("clip::layout"),
+        entries: &layout_entries(wgpu::ShaderStages::COMPUTE),
+    })
+}
+
+/// A `@group(1)` with no clip shapes: wgpu zero-initialises the uniforms (0 shapes) and
+/// the one-texel map array.
+pub fn empty_bind_group(device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
+    let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("clip::no_shapes"),
+        size: std::mem::size_of::<ClipUniforms>() as u64,
+        usage: wgpu::BufferUsages::UNIFORM,
+        mapped_at_creation: false,
+    });
+    let maps = maps_texture(device, 1, LAYERS_PER_SHAPE);
+    bind_group(
+        device,
+        "clip::no_shapes",
+        layout,
+        &[
+            uniforms.as_entire_binding(),
+            wgpu::BindingResource::TextureView(&array_view(&maps)),
+        ],
+    )
+}
+
 /// The clip uniforms for the current poses: volume mm → each shape's map coordinates.
 fn shape_uniform(shape: &ClipShape, camera: &ClipCamera, slot: usize) -> ShapeUniform {
     let to_map: Mat4 = camera.to_map * shape.shape_to_volume().inverse();

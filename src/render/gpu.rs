@@ -345,10 +345,7 @@ impl RayCaster {
                     entry(7, tex(wgpu::TextureSampleType::Float { filterable: true })),
                 ],
             });
-            let clip_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("RayCaster::clip_layout"),
-                entries: &crate::clip::gpu::layout_entries(wgpu::ShaderStages::COMPUTE),
-            });
+            let clip_layout = crate::clip::gpu::bind_group_layout(device);
             let layout_2 = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("RayCaster::layout_2"),
                 entries: &super::shadow::layout_entries(),
@@ -372,41 +369,7 @@ impl RayCaster {
                 min_filter: wgpu::FilterMode::Linear,
                 ..Default::default()
             });
-            // wgpu zero-initialises buffers and textures: zero shapes, blank maps.
-            let no_clip_uniforms = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("RayCaster::no_clip"),
-                size: std::mem::size_of::<crate::clip::gpu::ClipUniforms>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM,
-                mapped_at_creation: false,
-            });
-            let no_clip_maps = device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("RayCaster::no_clip_maps"),
-                size: wgpu::Extent3d {
-                    width: 1,
-                    height: 1,
-                    depth_or_array_layers: crate::clip::gpu::LAYERS_PER_SHAPE,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::R32Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            });
-            let no_clip = bind_group(
-                device,
-                "RayCaster::no_clip",
-                &clip_layout,
-                &[
-                    no_clip_uniforms.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&no_clip_maps.create_view(
-                        &wgpu::TextureViewDescriptor {
-                            dimension: Some(wgpu::TextureViewDimension::D2Array),
-                            ..Default::default()
-                        },
-                    )),
-                ],
-            );
+            let no_clip = crate::clip::gpu::empty_bind_group(device, &clip_layout);
             RayCaster {
                 pipeline,
                 layout,
