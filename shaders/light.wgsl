@@ -6,13 +6,16 @@
 // voxel (a hash of the voxel): jittered sampling turns the banding of a fixed step into
 // fine noise, which the ray caster's ¼, ½, ¼ filter along the view ray (Imagire et al.
 // Eq. 3–4) then smooths. α is the transfer function's opacity corrected for the step h.
-// A ray stops once T < 1e-4 (nothing further can be seen).
+// A ray stops once T < 1e-4 (nothing further can be seen). Clipped space (clip shapes,
+// clip_common.wgsl) is empty: light passes through what the user carved away.
+//!include clip_common.wgsl
 
 struct Params {
     dims: vec4<u32>,      // x, y, z, first z of this slab
     work: vec4<u32>,      // voxels in this slab, invocations per row, max steps
     step_uvw: vec4<f32>,  // direction to the light × h, in texture coordinates
     lut_map: vec4<f32>,   // a, b, entries - 1
+    half: vec4<f32>,      // half the volume's extent (mm)
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
@@ -57,7 +60,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) || t < T_STOP {
             break;
         }
-        t = t * (1.0 - alpha_at(uvw));
+        if clip.counts.x == 0u || clip_visible((uvw - vec3<f32>(0.5)) * 2.0 * p.half.xyz) {
+            t = t * (1.0 - alpha_at(uvw));
+        }
     }
     transmittance[index] = t;
 }

@@ -301,3 +301,43 @@ fn imagire_filter_keeps_linear_light_and_softens_a_hard_edge() {
         "filtered jump {filtered} vs unfiltered {plain}"
     );
 }
+
+#[test]
+fn light_passes_through_clipped_space_on_gpu_and_cpu_alike() {
+    use volao::clip::ClipShape;
+    use volao::clip::gpu::ClipMaps;
+    use volao::render::shadow::light_cpu_clipped;
+    // A uniform medium with the upper half carved away, light from above: voxels just
+    // below the cut see the light through empty space.
+    let n = [20, 18, 24];
+    let v = filled(n, |_, _, _| 90);
+    let tf = flat_tf(0.08);
+    let dir = light_direction([0.1, 0.2, 1.0]).expect("valid");
+    let t = texels(&v);
+    let gpu = device();
+    let plane = ClipShape::parse("plane:0,0,0,0,0,1").expect("plane");
+    let mut maps = ClipMaps::new(&gpu).unwrap_or_else(|e| panic!("{e}"));
+    let radius = Vec3::from(t.extent()).length() * 0.5;
+    maps.update(&gpu, std::slice::from_ref(&plane), radius, 1.0, 128)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let g = LightGpu::new(&gpu.device)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .compute_clipped(&gpu, &t, &light_lut(&tf, &t), dir, Some(&maps), &|_, _| {})
+        .unwrap_or_else(|e| panic!("{e}"));
+    let cpu_maps = maps.read_back(&gpu).unwrap_or_else(|e| panic!("{e}"));
+    let c = light_cpu_clipped(&t, &light_lut(&tf, &t), dir, Some(&cpu_maps), &|_, _| {});
+    let worst = g
+        .iter()
+        .zip(&c)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f32::max);
+    assert!(worst < 1e-4, "GPU vs CPU: {worst}");
+    let unclipped = light_cpu(&t, &light_lut(&tf, &t), dir, &|_, _| {});
+    // Just below the cut (z = 11, the plane is at z = 12 mm): brighter when clipped.
+    let at = |values: &[f32], x: usize, y: usize, z: usize| values[x + n[0] * (y + n[1] * z)];
+    let (lit, shaded) = (at(&c, 10, 9, 11), at(&unclipped, 10, 9, 11));
+    assert!(
+        lit > 0.8 && shaded < 0.5,
+        "clipped {lit} vs unclipped {shaded}"
+    );
+}

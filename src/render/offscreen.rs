@@ -175,19 +175,20 @@ pub fn render_with(
                     clip_errors = update.errors.iter().map(|e| e.to_string()).collect();
                     maps = Some(m);
                 }
+                let clip_maps = cao_state.as_ref().map(|c| &c.clip).or(maps.as_ref());
                 if frame.settings.shadows {
                     let dir = light_dir(frame)?;
-                    let t = LightGpu::new(&g.device)?.compute(
+                    let t = LightGpu::new(&g.device)?.compute_clipped(
                         &g,
                         &vol.texels,
                         &light_lut(tf, &vol.texels),
                         dir,
+                        clip_maps,
                         progress,
                     )?;
                     vol.set_light_volume(&g, Some((&t, dir)))?;
                 }
                 let ao_seconds = start.elapsed().as_secs_f64();
-                let clip_maps = cao_state.as_ref().map(|c| &c.clip).or(maps.as_ref());
                 let image = rc.render_clipped(&g, &vol, frame, clip_maps)?;
                 return Ok(Rendered {
                     image,

@@ -8,8 +8,7 @@
 //! jittered offset, so no stair-steps appear at shadow boundaries.
 
 use crate::gpu::{
-    Gpu, GpuError, bind_group, read_buffer, readback_buffer, shaders, submit_compute,
-    uniform_buffer, validated,
+    Gpu, GpuError, bind_group, read_buffer, readback_buffer, shaders, uniform_buffer, validated,
 };
 use crate::render::cpu::trilinear;
 use crate::render::gpu::bake_lut;
@@ -53,9 +52,11 @@ pub struct LightParams {
     pub work: [u32; 4],
     pub step_uvw: [f32; 4],
     pub lut_map: [f32; 4],
+    /// Half the volume's extent (mm), for the clip test.
+    pub half: [f32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<LightParams>() == 64);
+const _: () = assert!(std::mem::size_of::<LightParams>() == 80);
 
 fn params(texels: &VolumeTexels, lut: &Lut, direction: Vec3) -> LightParams {
     let extent = texels.extent();
@@ -73,6 +74,7 @@ fn params(texels: &VolumeTexels, lut: &Lut, direction: Vec3) -> LightParams {
         work: [0, 0, (diag / h).ceil() as u32 + 2, 0],
         step_uvw: [step.x, step.y, step.z, h],
         lut_map: [a, b, (lut.rgba.len().max(2) - 1) as f32, 0.0],
+        half: [extent[0] * 0.5, extent[1] * 0.5, extent[2] * 0.5, 0.0],
     }
 }
 
@@ -83,6 +85,7 @@ fn light_voxel(
     norm: &[f32],
     dims: [usize; 3],
     voxel: [usize; 3],
+    clip: Option<&crate::clip::cpu::ClipMapsCpu>,
 ) -> f32 {
     let centre = (Vec3::new(voxel[0] as f32, voxel[1] as f32, voxel[2] as f32) + 0.5)
         / Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32);
@@ -93,6 +96,16 @@ fn light_voxel(
         let uvw = centre + step * (i as f32 + j);
         if uvw.cmplt(Vec3::ZERO).any() || uvw.cmpgt(Vec3::ONE).any() || t < T_STOP {
             break;
+        }
+        if let Some(c) = clip
+            && c.uniforms.counts[0] > 0
+            && !c
+                .classify(
+                    (uvw - Vec3::splat(0.5)) * 2.0 * Vec3::new(p.half[0], p.half[1], p.half[2]),
+                )
+                .0
+        {
+            continue;
         }
         let n = trilinear(norm, dims, uvw);
         let x = (n * p.lut_map[0] + p.lut_map[1]).clamp(0.0, p.lut_map[2]);
@@ -124,6 +137,17 @@ pub fn light_cpu(
     direction: Vec3,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Vec<f32> {
+    light_cpu_clipped(texels, lut, direction, None, progress)
+}
+
+/// [`light_cpu`] with clip shapes (maps read back from the GPU): clipped space is empty.
+pub fn light_cpu_clipped(
+    texels: &VolumeTexels,
+    lut: &Lut,
+    direction: Vec3,
+    clip: Option<&crate::clip::cpu::ClipMapsCpu>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Vec<f32> {
     let p = params(texels, lut, direction);
     let alpha: Vec<f32> = lut.rgba.iter().map(|e| e[3]).collect();
     let norm = f16_texels(texels);
@@ -133,7 +157,7 @@ pub fn light_cpu(
         .into_par_iter()
         .flat_map_iter(|z| {
             let slice: Vec<f32> = (0..nx * ny)
-                .map(|i| light_voxel(&p, &alpha, &norm, texels.dims, [i % nx, i / nx, z]))
+                .map(|i| light_voxel(&p, &alpha, &norm, texels.dims, [i % nx, i / nx, z], clip))
                 .collect();
             progress(
                 done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
@@ -185,7 +209,25 @@ impl LightGpu {
         direction: Vec3,
         progress: &dyn Fn(usize, usize),
     ) -> Result<Vec<f32>, GpuError> {
+        self.compute_clipped(gpu, texels, lut, direction, None, progress)
+    }
+
+    /// [`Self::compute`] through the clipped volume: clipped space lets light through.
+    pub fn compute_clipped(
+        &self,
+        gpu: &Gpu,
+        texels: &VolumeTexels,
+        lut: &Lut,
+        direction: Vec3,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        progress: &dyn Fn(usize, usize),
+    ) -> Result<Vec<f32>, GpuError> {
         let device = &gpu.device;
+        let clip_layout = self.pipeline.get_bind_group_layout(1);
+        let clip_group = match clip {
+            Some(c) => c.bind_group(device, &clip_layout),
+            None => crate::clip::gpu::empty_bind_group(device, &clip_layout),
+        };
         let [nx, ny, nz] = texels.dims;
         let slice = nx * ny;
         let base = params(texels, lut, direction);
@@ -243,12 +285,12 @@ impl LightGpu {
                         out.as_entire_binding(),
                     ],
                 );
-                submit_compute(
+                crate::gpu::submit_compute_with(
                     device,
                     &gpu.queue,
                     "Light::slab",
                     &self.pipeline,
-                    &group,
+                    &[&group, &clip_group],
                     [gx, gy, 1],
                     |encoder| {
                         encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, count as u64 * 4);
