@@ -12,6 +12,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("lao.wgsl", include_str!("../../shaders/lao.wgsl")),
     ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
     ("smoke.wgsl", include_str!("../../shaders/smoke.wgsl")),
+    ("viewport.wgsl", include_str!("../../shaders/viewport.wgsl")),
 ];
 
 const DIRECTIVE: &str = "//!include ";

@@ -243,6 +243,19 @@ impl GpuVolume {
         quantised.iter().map(|&q| q as f32 / 65535.0).collect()
     }
 
+    /// Back to no ambient occlusion (A = 1 everywhere), as right after upload. The viewer
+    /// shows this while a new AO volume is computed for a changed transfer function.
+    pub fn clear_ambient_occlusion(&mut self, gpu: &Gpu) {
+        let ao = texture_3d(
+            &gpu.device,
+            "GpuVolume::ambient_occlusion",
+            [1, 1, 1],
+            wgpu::TextureFormat::R8Unorm,
+        );
+        write_3d(&gpu.queue, &ao, [1, 1, 1], 1, &[255]);
+        self.ao_view = ao.create_view(&Default::default());
+    }
+
     /// The occupancy grid for the current LUT (for the CPU twin).
     pub fn occupancy(&self) -> Vec<u8> {
         self.ranges.occupancy(&self.texels, &self.lut)
@@ -324,6 +337,55 @@ impl RayCaster {
                 layout,
                 sampler,
             }
+        })
+    }
+
+    /// Encodes the ray casting of the tile of `frame` at `origin` into `encoder`, writing
+    /// the caller's `target` (Rgba8Unorm with `STORAGE_BINDING`; its size is the tile's),
+    /// with no readback. The viewer draws `target` through a paint callback and copies
+    /// screenshot tiles out of it asynchronously; the pixels are those [`Self::render`]
+    /// reads back for the same frame.
+    pub fn encode_tile(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        vol: &GpuVolume,
+        frame: &Frame,
+        origin: (u32, u32),
+        target: &wgpu::Texture,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<(), GpuError> {
+        let params = frame.params(&vol.texels, &vol.lut, origin.0, origin.1);
+        let (tw, th) = (target.width(), target.height());
+        validated(device, "RayCaster::encode_tile", || {
+            let uniforms = uniform_buffer(
+                device,
+                queue,
+                "RayCaster::params",
+                bytemuck::bytes_of(&params),
+            );
+            let target_view = target.create_view(&Default::default());
+            let group = bind_group(
+                device,
+                "RayCaster::bind_group",
+                &self.layout,
+                &[
+                    uniforms.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&vol.volume_view),
+                    wgpu::BindingResource::Sampler(&self.sampler),
+                    vol.lut_buffer.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&vol.ao_view),
+                    wgpu::BindingResource::TextureView(&vol.occupancy_view),
+                    wgpu::BindingResource::TextureView(&target_view),
+                ],
+            );
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("RayCaster::encode_tile"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(tw.div_ceil(8), th.div_ceil(8), 1);
         })
     }
 
