@@ -102,7 +102,9 @@ pub fn show(
                     }
                 });
             if let RaySet::Fibonacci(n) = &mut settings.rays {
-                ui.add(egui::DragValue::new(n).range(1..=65536).prefix("N "));
+                ui.label("N");
+                ui.add(egui::DragValue::new(n).range(1..=65536))
+                    .accessible_name("N");
             }
         });
         ui.add(egui::Slider::new(&mut settings.samples, 1..=64).text("Samples M"));

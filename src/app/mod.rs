@@ -1108,7 +1108,9 @@ impl Viewer {
             .resizable(true)
             .default_size(330.0)
             .show(ui, |ui| {
-                egui::ScrollArea::vertical().show(ui, |ui| self.side_panel(ui));
+                egui::ScrollArea::vertical()
+                    .auto_shrink([false, false])
+                    .show(ui, |ui| self.side_panel(ui));
             });
         egui::CentralPanel::no_frame().show(ui, |ui| self.viewport(ui));
         self.show_prompt(ui.ctx());
@@ -1368,9 +1370,12 @@ impl Viewer {
                     });
                 if let ShotSize::Fixed(w, h) = &mut self.shot_size {
                     ui.horizontal(|ui| {
-                        ui.add(egui::DragValue::new(w).range(1..=screenshot::MAX_SIDE));
-                        ui.label("×");
-                        ui.add(egui::DragValue::new(h).range(1..=screenshot::MAX_SIDE));
+                        ui.label("Width");
+                        ui.add(egui::DragValue::new(w).range(1..=screenshot::MAX_SIDE))
+                            .accessible_name("Width");
+                        ui.label("Height");
+                        ui.add(egui::DragValue::new(h).range(1..=screenshot::MAX_SIDE))
+                            .accessible_name("Height");
                     });
                 }
                 ui.checkbox(&mut self.shot_transparent, "Transparent background");
@@ -1605,7 +1610,7 @@ impl Viewer {
                             } else {
                                 ui.label(&t.text);
                             }
-                            if ui.small_button("✕").clicked() {
+                            if ui.small_button("×").clicked() {
                                 dismiss = Some(i);
                             }
                         });

@@ -233,9 +233,11 @@ impl TfEditor {
                 egui::DragValue::new(&mut w)
                     .speed(speed)
                     .range(0.0..=f64::MAX),
-            );
+            )
+            .accessible_name("Window");
             ui.label("Level");
-            ui.add(egui::DragValue::new(&mut l).speed(speed));
+            ui.add(egui::DragValue::new(&mut l).speed(speed))
+                .accessible_name("Level");
         });
         if (w, l) != (window, level) {
             *tf = tf.with_window_level(w, l);
