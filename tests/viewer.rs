@@ -182,7 +182,7 @@ fn open_switch_preset_and_the_viewport_matches_volao_render() {
     let doc = h.state().document().expect("Bucky.pvm loaded");
     assert_eq!(doc.title, "Bucky.pvm");
     assert_eq!(doc.volume.dims, [32, 32, 32]);
-    let stats = doc.stats.clone();
+    let stats = doc.stats;
 
     // Switch the preset through the combo box, as a user does.
     choose(&mut h, "Preset", "cao-single-color");

@@ -972,9 +972,11 @@ impl Viewer {
         if self.pending_shot.is_none()
             && self.load_job.is_none()
             && self.ao_ready()
+            && self.doc.is_some()
             && let Some((path, size)) = self.shot_request.take()
+            && let Some(doc) = &self.doc
         {
-            if let Some(doc) = &self.doc {
+            {
                 let (w, h) = match size {
                     ShotSize::Window => (self.viewport_px.0.max(1), self.viewport_px.1.max(1)),
                     ShotSize::Fixed(w, h) => (w, h),
@@ -1565,18 +1567,17 @@ impl Viewer {
             });
         });
         match choice {
-            Some(0) => {
-                if self.save_dialog(false) {
-                    self.prompt = None;
-                    self.proceed(pending);
-                }
+            Some(0) if self.save_dialog(false) => {
+                self.prompt = None;
+                self.proceed(pending);
             }
+            // Saving was cancelled or failed: keep asking.
+            Some(0) | None => {}
             Some(1) => {
                 self.prompt = None;
                 self.proceed(pending);
             }
             Some(_) => self.prompt = None,
-            None => {}
         }
     }
 

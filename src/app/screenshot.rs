@@ -167,8 +167,7 @@ impl PendingShot {
         });
         ray_caster
             .encode_tile(
-                device,
-                &gpu.queue,
+                (device, &gpu.queue),
                 volume,
                 &self.frame,
                 (x0, y0),

@@ -171,8 +171,7 @@ impl ViewportGpu {
             return;
         };
         match self.ray_caster.encode_tile(
-            device,
-            queue,
+            (device, queue),
             volume,
             frame,
             (0, 0),

@@ -347,8 +347,7 @@ impl RayCaster {
     /// reads back for the same frame.
     pub fn encode_tile(
         &self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
+        (device, queue): (&wgpu::Device, &wgpu::Queue),
         vol: &GpuVolume,
         frame: &Frame,
         origin: (u32, u32),
