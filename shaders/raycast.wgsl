@@ -1,6 +1,7 @@
 // Direct volume ray caster: one invocation per pixel of a tile.
 // CPU twin: src/render/cpu.rs (same steps, same order; keep them in sync).
 //!include common.wgsl
+//!include clip_common.wgsl
 
 struct Params {
     inv_view_proj: mat4x4<f32>,
@@ -134,6 +135,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     k = max(k + 1u, next);
                     continue;
                 }
+            }
+            // Shadow-test clipping (CAO step VI): clipped samples are empty.
+            if clip.counts.x > 0u && !clip_visible(pos) {
+                k = k + 1u;
+                continue;
             }
             let norm = sample_norm(uvw);
             var rgba = classify(norm);

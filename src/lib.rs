@@ -17,6 +17,7 @@
 pub mod ao;
 pub mod app;
 pub mod bench;
+pub mod clip;
 pub mod gpu;
 pub mod render;
 pub mod scene;

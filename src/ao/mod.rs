@@ -3,6 +3,7 @@
 //! The renderer's ambient term is `k · A(x) · C_TF(x)`; a method here produces `A(x)`
 //! per voxel in [0, 1] (1 = unoccluded).
 
+pub mod cao;
 pub mod lao;
 pub mod rays;
 

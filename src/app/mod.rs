@@ -1006,13 +1006,13 @@ impl Viewer {
         }
         if let Some(shot) = &mut self.pending_shot {
             let gpu = Arc::clone(&self.gpu);
-            let mut renderer = self.render_state.renderer.write();
-            let result = match renderer.callback_resources.get_mut::<ViewportGpu>() {
-                Some(ViewportGpu {
-                    volume: Some(vol),
-                    ray_caster,
-                    ..
-                }) => shot.pump(&gpu, ray_caster, vol),
+            let renderer = self.render_state.renderer.read();
+            let result = match renderer.callback_resources.get::<ViewportGpu>() {
+                Some(
+                    v @ ViewportGpu {
+                        volume: Some(vol), ..
+                    },
+                ) => shot.pump(&gpu, &v.ray_caster, vol, v.clip_maps()),
                 _ => Err("no volume to render".into()),
             };
             drop(renderer);

@@ -6,6 +6,7 @@
 //! mapped-on-completion buffer and checks each UI frame whether the map finished; the
 //! finished image is written by a worker thread ([`super::jobs::Job`]).
 
+use crate::clip::gpu::ClipMaps;
 use crate::gpu::{Gpu, padded_row_bytes, readback_buffer};
 use crate::render::gpu::{GpuVolume, RayCaster, TILE};
 use crate::render::{Frame, Image};
@@ -106,6 +107,7 @@ impl PendingShot {
         gpu: &Gpu,
         ray_caster: &RayCaster,
         volume: &GpuVolume,
+        clip: Option<&ClipMaps>,
     ) -> Result<Option<Shot>, String> {
         let _ = gpu.device.poll(wgpu::PollType::Poll);
         if let Some(t) = &self.in_flight {
@@ -130,7 +132,7 @@ impl PendingShot {
                 path: self.path.clone(),
             }));
         }
-        self.submit(gpu, ray_caster, volume)?;
+        self.submit(gpu, ray_caster, volume, clip)?;
         Ok(None)
     }
 
@@ -139,6 +141,7 @@ impl PendingShot {
         gpu: &Gpu,
         ray_caster: &RayCaster,
         volume: &GpuVolume,
+        clip: Option<&ClipMaps>,
     ) -> Result<(), String> {
         let (x0, y0) = self.tiles[self.next];
         let size = (
@@ -170,8 +173,8 @@ impl PendingShot {
                 (device, &gpu.queue),
                 volume,
                 &self.frame,
-                (x0, y0),
-                &texture,
+                clip,
+                (&texture, (x0, y0)),
                 &mut encoder,
             )
             .map_err(|e| e.to_string())?;

@@ -6,6 +6,8 @@
 //! [`ViewportGpu`] is the long-lived part and lives in egui_wgpu's callback resources;
 //! a [`ViewportCallback`] carries only what changes per frame (the [`Frame`]).
 
+use crate::ao::cao::CaoGpu;
+use crate::clip::gpu::ClipMaps;
 use crate::gpu::{GpuError, shaders, validated};
 use crate::render::Frame;
 use crate::render::gpu::{GpuVolume, RayCaster};
@@ -22,6 +24,10 @@ pub struct ViewportGpu {
     target: Option<Target>,
     /// The volume shown; `None` until the first one is uploaded.
     pub volume: Option<GpuVolume>,
+    /// Clip shapes' maps when clipping without CAO.
+    pub clip: Option<ClipMaps>,
+    /// Contextual AO (LAO with clip shapes): its clip maps clip the picture too.
+    pub cao: Option<CaoGpu>,
     /// Bumped by every change to the volume, its transfer function or its AO, so an
     /// unchanged frame is not ray-cast again (egui repaints on every mouse move).
     pub revision: u64,
@@ -101,6 +107,8 @@ impl ViewportGpu {
                 layout,
                 target: None,
                 volume: None,
+                clip: None,
+                cao: None,
                 revision: 0,
                 drawn: None,
                 last_error: None,
@@ -113,6 +121,11 @@ impl ViewportGpu {
     pub fn set_volume(&mut self, volume: GpuVolume) {
         self.volume = Some(volume);
         self.revision += 1;
+    }
+
+    /// The clip maps the picture is clipped with: CAO's when it runs, else the plain ones.
+    pub fn clip_maps(&self) -> Option<&ClipMaps> {
+        self.cao.as_ref().map(|c| &c.clip).or(self.clip.as_ref())
     }
 
     /// Marks the volume's transfer function or AO as changed.
@@ -170,12 +183,13 @@ impl ViewportGpu {
         let Some(target) = &self.target else {
             return;
         };
+        let clip = self.clip_maps();
         match self.ray_caster.encode_tile(
             (device, queue),
             volume,
             frame,
-            (0, 0),
-            &target.texture,
+            clip,
+            (&target.texture, (0, 0)),
             encoder,
         ) {
             Ok(()) => {

@@ -283,3 +283,73 @@ pub fn submit_compute(
     after(&mut encoder);
     queue.submit([encoder.finish()]);
 }
+
+/// Like [`submit_compute`], with bind groups 0, 1, … set from `groups_bound`.
+pub fn submit_compute_with(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    groups_bound: &[&wgpu::BindGroup],
+    groups: [u32; 3],
+    after: impl FnOnce(&mut wgpu::CommandEncoder),
+) {
+    let mut encoder =
+        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(pipeline);
+        for (i, g) in groups_bound.iter().enumerate() {
+            pass.set_bind_group(i as u32, *g, &[]);
+        }
+        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+    }
+    after(&mut encoder);
+    queue.submit([encoder.finish()]);
+}
+
+/// Reads an `R32Float` texture (2-D array or 3-D; `size` = width, height, layers/depth)
+/// back as f32 values, x fastest, then y, then layer.
+pub fn read_texture_f32(
+    gpu: &Gpu,
+    texture: &wgpu::Texture,
+    size: [u32; 3],
+    stage: &str,
+) -> Result<Vec<f32>, GpuError> {
+    let device = &gpu.device;
+    let row = padded_row_bytes(size[0] * 4);
+    let readback = validated(device, stage, || {
+        let readback = readback_buffer(device, stage, row as u64 * size[1] as u64 * size[2] as u64);
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(stage) });
+        encoder.copy_texture_to_buffer(
+            texture.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &readback,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(size[1]),
+                },
+            },
+            wgpu::Extent3d {
+                width: size[0],
+                height: size[1],
+                depth_or_array_layers: size[2],
+            },
+        );
+        gpu.queue.submit([encoder.finish()]);
+        readback
+    })?;
+    let bytes = read_buffer(device, &readback, stage)?;
+    let mut out = Vec::with_capacity((size[0] * size[1] * size[2]) as usize);
+    for r in bytes.chunks_exact(row as usize) {
+        out.extend(bytemuck::pod_collect_to_vec::<u8, f32>(
+            &r[..(size[0] * 4) as usize],
+        ));
+    }
+    Ok(out)
+}

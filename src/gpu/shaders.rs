@@ -8,6 +8,20 @@ use super::GpuError;
 /// Every shader in `shaders/`, embedded at build time. A test checks this list against
 /// the directory so a new file cannot be forgotten.
 pub const SOURCES: &[(&str, &str)] = &[
+    ("cao_clip.wgsl", include_str!("../../shaders/cao_clip.wgsl")),
+    ("cao_lao.wgsl", include_str!("../../shaders/cao_lao.wgsl")),
+    (
+        "clip_common.wgsl",
+        include_str!("../../shaders/clip_common.wgsl"),
+    ),
+    (
+        "clip_depth.wgsl",
+        include_str!("../../shaders/clip_depth.wgsl"),
+    ),
+    (
+        "clip_maps.wgsl",
+        include_str!("../../shaders/clip_maps.wgsl"),
+    ),
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
     ("lao.wgsl", include_str!("../../shaders/lao.wgsl")),
     ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),

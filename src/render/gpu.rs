@@ -6,7 +6,7 @@ use super::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use super::{Frame, Image};
 use crate::gpu::{
     Gpu, GpuError, bind_group, padded_row_bytes, read_buffer, readback_buffer, shaders,
-    submit_compute, uniform_buffer, validated,
+    uniform_buffer, validated,
 };
 use crate::tf::{Lut, TransferFunction, correct_opacity};
 
@@ -22,6 +22,9 @@ pub const MAX_VOLUME_BYTES: u64 = 2 << 30;
 pub struct RayCaster {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
+    clip_layout: wgpu::BindGroupLayout,
+    /// `@group(1)` with no clip shapes (zeroed uniforms, a blank map).
+    no_clip: wgpu::BindGroup,
     sampler: wgpu::Sampler,
 }
 
@@ -158,9 +161,9 @@ impl GpuVolume {
                 device,
                 "GpuVolume::ambient_occlusion",
                 [1, 1, 1],
-                wgpu::TextureFormat::R8Unorm,
+                wgpu::TextureFormat::R32Float,
             );
-            write_3d(queue, &ao, [1, 1, 1], 1, &[255]);
+            write_3d(queue, &ao, [1, 1, 1], 4, bytemuck::bytes_of(&1.0f32));
             let occupancy = texture_3d(
                 device,
                 "GpuVolume::occupancy",
@@ -217,30 +220,24 @@ impl GpuVolume {
 
     /// Uses `values` (one per voxel, x fastest, in [0, 1]) as the ambient factor A(x).
     ///
-    /// Stored as R16Unorm: 8 bits would quantise A by 1/255, the size of the whole error
-    /// of a 54-ray pattern (CAO paper Table 5), while 16 bits keep it far below.
-    /// Returns the values as the GPU will sample them (for the CPU twin).
-    pub fn set_ambient_occlusion(&mut self, gpu: &Gpu, values: &[f32]) -> Vec<f32> {
+    /// Stored as R32Float (filtered with `FLOAT32_FILTERABLE`), the format CAO's compute
+    /// passes write, so a precomputed and a per-frame AO volume shade alike.
+    pub fn set_ambient_occlusion(&mut self, gpu: &Gpu, values: &[f32]) {
         let dims = self.texels.dims.map(|d| d as u32);
-        let quantised: Vec<u16> = values
-            .iter()
-            .map(|&a| (a.clamp(0.0, 1.0) * 65535.0).round() as u16)
-            .collect();
         let texture = texture_3d(
             &gpu.device,
             "GpuVolume::ambient_occlusion",
             dims,
-            wgpu::TextureFormat::R16Unorm,
+            wgpu::TextureFormat::R32Float,
         );
-        write_3d(
-            &gpu.queue,
-            &texture,
-            dims,
-            2,
-            bytemuck::cast_slice(&quantised),
-        );
+        write_3d(&gpu.queue, &texture, dims, 4, bytemuck::cast_slice(values));
         self.ao_view = texture.create_view(&Default::default());
-        quantised.iter().map(|&q| q as f32 / 65535.0).collect()
+    }
+
+    /// Uses an AO volume already on the GPU (R32Float, the volume's dims), such as
+    /// CAO's `V_AO`.
+    pub fn set_ambient_occlusion_view(&mut self, view: &wgpu::TextureView) {
+        self.ao_view = view.clone();
     }
 
     /// Back to no ambient occlusion (A = 1 everywhere), as right after upload. The viewer
@@ -250,9 +247,9 @@ impl GpuVolume {
             &gpu.device,
             "GpuVolume::ambient_occlusion",
             [1, 1, 1],
-            wgpu::TextureFormat::R8Unorm,
+            wgpu::TextureFormat::R32Float,
         );
-        write_3d(&gpu.queue, &ao, [1, 1, 1], 1, &[255]);
+        write_3d(&gpu.queue, &ao, [1, 1, 1], 4, bytemuck::bytes_of(&1.0f32));
         self.ao_view = ao.create_view(&Default::default());
     }
 
@@ -313,9 +310,13 @@ impl RayCaster {
                     ),
                 ],
             });
+            let clip_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("RayCaster::clip_layout"),
+                entries: &crate::clip::gpu::layout_entries(wgpu::ShaderStages::COMPUTE),
+            });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("RayCaster::pipeline_layout"),
-                bind_group_layouts: &[Some(&layout)],
+                bind_group_layouts: &[Some(&layout), Some(&clip_layout)],
                 immediate_size: 0,
             });
             let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -332,29 +333,69 @@ impl RayCaster {
                 min_filter: wgpu::FilterMode::Linear,
                 ..Default::default()
             });
+            // wgpu zero-initialises buffers and textures: zero shapes, blank maps.
+            let no_clip_uniforms = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("RayCaster::no_clip"),
+                size: std::mem::size_of::<crate::clip::gpu::ClipUniforms>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM,
+                mapped_at_creation: false,
+            });
+            let no_clip_maps = device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("RayCaster::no_clip_maps"),
+                size: wgpu::Extent3d {
+                    width: 1,
+                    height: 1,
+                    depth_or_array_layers: crate::clip::gpu::LAYERS_PER_SHAPE,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::R32Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            });
+            let no_clip = bind_group(
+                device,
+                "RayCaster::no_clip",
+                &clip_layout,
+                &[
+                    no_clip_uniforms.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&no_clip_maps.create_view(
+                        &wgpu::TextureViewDescriptor {
+                            dimension: Some(wgpu::TextureViewDimension::D2Array),
+                            ..Default::default()
+                        },
+                    )),
+                ],
+            );
             RayCaster {
                 pipeline,
                 layout,
+                clip_layout,
+                no_clip,
                 sampler,
             }
         })
     }
 
-    /// Encodes the ray casting of the tile of `frame` at `origin` into `encoder`, writing
-    /// the caller's `target` (Rgba8Unorm with `STORAGE_BINDING`; its size is the tile's),
-    /// with no readback. The viewer draws `target` through a paint callback and copies
-    /// screenshot tiles out of it asynchronously; the pixels are those [`Self::render`]
-    /// reads back for the same frame.
+    /// Encodes the ray casting of one tile of `frame` into `encoder`, writing the caller's
+    /// `target` (Rgba8Unorm with `STORAGE_BINDING`; its size is the tile's, `origin` where
+    /// it sits in the frame), with no readback, clipped by `clip` as
+    /// [`Self::render_clipped`] is. The viewer draws `target` through a paint callback and
+    /// copies screenshot tiles out of it asynchronously; the pixels are those
+    /// [`Self::render_clipped`] reads back for the same frame.
     pub fn encode_tile(
         &self,
         (device, queue): (&wgpu::Device, &wgpu::Queue),
         vol: &GpuVolume,
         frame: &Frame,
-        origin: (u32, u32),
-        target: &wgpu::Texture,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        (target, origin): (&wgpu::Texture, (u32, u32)),
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
         let params = frame.params(&vol.texels, &vol.lut, origin.0, origin.1);
+        let clip_group = clip.map(|c| c.bind_group(device, &self.clip_layout));
+        let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
         let (tw, th) = (target.width(), target.height());
         validated(device, "RayCaster::encode_tile", || {
             let uniforms = uniform_buffer(
@@ -384,12 +425,26 @@ impl RayCaster {
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &group, &[]);
+            pass.set_bind_group(1, clip_group, &[]);
             pass.dispatch_workgroups(tw.div_ceil(8), th.div_ceil(8), 1);
         })
     }
 
     /// Renders a frame in tiles of at most [`TILE`]² and reads it back.
     pub fn render(&self, gpu: &Gpu, vol: &GpuVolume, frame: &Frame) -> Result<Image, GpuError> {
+        self.render_clipped(gpu, vol, frame, None)
+    }
+
+    /// [`Self::render`] with shadow-test clipping against `clip`'s shapes.
+    pub fn render_clipped(
+        &self,
+        gpu: &Gpu,
+        vol: &GpuVolume,
+        frame: &Frame,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+    ) -> Result<Image, GpuError> {
+        let clip_group = clip.map(|c| c.bind_group(&gpu.device, &self.clip_layout));
+        let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
         let (w, h) = (frame.width.max(1), frame.height.max(1));
         let mut image = Image {
             width: w,
@@ -401,7 +456,7 @@ impl RayCaster {
             let mut x0 = 0;
             while x0 < w {
                 let size = ((w - x0).min(TILE), (h - y0).min(TILE));
-                let tile = self.render_tile(gpu, vol, frame, (x0, y0), size)?;
+                let tile = self.render_tile(gpu, vol, frame, clip_group, (x0, y0), size)?;
                 image.blit(&tile, x0, y0);
                 x0 += TILE;
             }
@@ -415,6 +470,7 @@ impl RayCaster {
         gpu: &Gpu,
         vol: &GpuVolume,
         frame: &Frame,
+        clip_group: &wgpu::BindGroup,
         (x0, y0): (u32, u32),
         (tw, th): (u32, u32),
     ) -> Result<Image, GpuError> {
@@ -458,12 +514,12 @@ impl RayCaster {
                     wgpu::BindingResource::TextureView(&target_view),
                 ],
             );
-            submit_compute(
+            crate::gpu::submit_compute_with(
                 device,
                 &gpu.queue,
                 "RayCaster::tile",
                 &self.pipeline,
-                &group,
+                &[&group, clip_group],
                 [tw.div_ceil(8), th.div_ceil(8), 1],
                 |encoder| {
                     encoder.copy_texture_to_buffer(

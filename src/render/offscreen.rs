@@ -70,12 +70,7 @@ pub fn render(
     let start = std::time::Instant::now();
     if ao.method == AoMethod::Lao {
         let a = lao_cpu(&texels, &lao_lut(tf, &texels), &rays, ao.samples, progress);
-        // As the GPU path stores it (R16Unorm), so both paths shade alike.
-        cv.ao = Some(
-            a.iter()
-                .map(|&x| (x.clamp(0.0, 1.0) * 65535.0).round() / 65535.0)
-                .collect(),
-        );
+        cv.ao = Some(a);
     }
     let ao_seconds = start.elapsed().as_secs_f64();
     let threads = rayon::current_num_threads();

@@ -1,0 +1,78 @@
+// Shadow-test clipping (CAO paper §3.2, §3.6) against up to 8 clip meshes, each seen by
+// its own orthographic clipping camera. CPU twin: src/clip/cpu.rs (`ClipMapsCpu`).
+//
+// Per shape, 8 layers of `clip_maps` (from clip_maps.wgsl):
+//   base + 0..3: Z_front1, Z_back1, Z_front2, Z_back2   (two depth-peeling layers)
+//   base + 4..7: the same dilated (carve) or contracted (probe) by Algorithm 1.
+// Empty pixels hold +3 (front) / −3 (back) so they are never inside.
+
+struct ClipShape {
+    volume_to_map: mat4x4<f32>, // volume-centred mm → (pixel x, pixel y, depth)
+    info: vec4<u32>,            // mode (0 carve, 1 probe), first layer, resolution, unused
+}
+
+struct Clip {
+    counts: vec4<u32>,          // shapes, probing shapes, unused, unused
+    shapes: array<ClipShape, 8>,
+}
+
+@group(1) @binding(0) var<uniform> clip: Clip;
+@group(1) @binding(1) var clip_maps: texture_2d_array<f32>;
+
+struct ClipTest {
+    inside: bool,   // inside the mesh
+    near: bool,     // carve: inside the dilation; probe: inside the contraction
+}
+
+fn clip_in_interval(xy: vec2<i32>, layer: u32, z: f32, strict: bool) -> bool {
+    let f1 = textureLoad(clip_maps, xy, layer, 0).r;
+    let b1 = textureLoad(clip_maps, xy, layer + 1u, 0).r;
+    let f2 = textureLoad(clip_maps, xy, layer + 2u, 0).r;
+    let b2 = textureLoad(clip_maps, xy, layer + 3u, 0).r;
+    if strict {
+        return (f1 < z && z < b1) || (f2 < z && z < b2);
+    }
+    return (f1 <= z && z <= b1) || (f2 <= z && z <= b2);
+}
+
+fn clip_test(s: u32, pos: vec3<f32>) -> ClipTest {
+    let shape = clip.shapes[s];
+    let c = shape.volume_to_map * vec4<f32>(pos, 1.0);
+    let res = f32(shape.info.z);
+    var t = ClipTest(false, false);
+    if !(c.x >= 0.0 && c.y >= 0.0 && c.x < res && c.y < res) {
+        return t;
+    }
+    let xy = vec2<i32>(floor(c.xy));
+    t.inside = clip_in_interval(xy, shape.info.y, c.z, false);
+    t.near = clip_in_interval(xy, shape.info.y + 4u, c.z, true);
+    return t;
+}
+
+// (visible, affected): visible = outside every carving mesh and, if any mesh probes,
+// inside one of them; affected = inside a carving mesh's dilation, or (with probes)
+// inside no probing mesh's contraction — the voxel's LAO neighbourhood may be clipped.
+fn clip_classify(pos: vec3<f32>) -> vec2<bool> {
+    var carved = false;
+    var probed = false;
+    var near_carve = false;
+    var deep_probe = false;
+    for (var s = 0u; s < clip.counts.x; s = s + 1u) {
+        let t = clip_test(s, pos);
+        if clip.shapes[s].info.x == 0u {
+            carved = carved || t.inside;
+            near_carve = near_carve || t.near;
+        } else {
+            probed = probed || t.inside;
+            deep_probe = deep_probe || t.near;
+        }
+    }
+    let probes = clip.counts.y > 0u;
+    let visible = !carved && (!probes || probed);
+    let affected = near_carve || (probes && !deep_probe);
+    return vec2<bool>(visible, affected);
+}
+
+fn clip_visible(pos: vec3<f32>) -> bool {
+    return clip_classify(pos).x;
+}

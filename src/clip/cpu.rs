@@ -1,0 +1,136 @@
+//! CPU twin of the clip tests (`shaders/clip_common.wgsl`) and of the map building
+//! (`shaders/clip_maps.wgsl`, Algorithm 1), working on maps read back from the GPU.
+
+use super::camera::EMPTY;
+use super::gpu::{ClipUniforms, LAYERS_PER_SHAPE};
+use glam::{Mat4, Vec3, Vec4};
+
+/// The clip maps and uniforms as the shaders see them.
+#[derive(Debug, Clone)]
+pub struct ClipMapsCpu {
+    pub resolution: u32,
+    /// `layers × resolution²` values, x fastest.
+    pub layers: Vec<f32>,
+    pub uniforms: ClipUniforms,
+}
+
+/// Result of testing a point against one shape.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClipTest {
+    pub inside: bool,
+    /// Carve: inside the dilation; probe: inside the contraction.
+    pub near: bool,
+}
+
+impl ClipMapsCpu {
+    fn at(&self, layer: u32, x: u32, y: u32) -> f32 {
+        let r = self.resolution as usize;
+        self.layers[layer as usize * r * r + y as usize * r + x as usize]
+    }
+
+    fn in_interval(&self, x: u32, y: u32, layer: u32, z: f32, strict: bool) -> bool {
+        let f1 = self.at(layer, x, y);
+        let b1 = self.at(layer + 1, x, y);
+        let f2 = self.at(layer + 2, x, y);
+        let b2 = self.at(layer + 3, x, y);
+        if strict {
+            (f1 < z && z < b1) || (f2 < z && z < b2)
+        } else {
+            (f1 <= z && z <= b1) || (f2 <= z && z <= b2)
+        }
+    }
+
+    /// `clip_test` of `clip_common.wgsl`.
+    pub fn test(&self, s: usize, pos: Vec3) -> ClipTest {
+        let shape = &self.uniforms.shapes[s];
+        let c = Mat4::from_cols_array_2d(&shape.volume_to_map) * Vec4::from((pos, 1.0));
+        let res = shape.info[2] as f32;
+        let mut t = ClipTest {
+            inside: false,
+            near: false,
+        };
+        if !(c.x >= 0.0 && c.y >= 0.0 && c.x < res && c.y < res) {
+            return t;
+        }
+        let (x, y) = (c.x.floor() as u32, c.y.floor() as u32);
+        t.inside = self.in_interval(x, y, shape.info[1], c.z, false);
+        t.near = self.in_interval(x, y, shape.info[1] + 4, c.z, true);
+        t
+    }
+
+    /// `clip_classify` of `clip_common.wgsl`: (visible, affected).
+    pub fn classify(&self, pos: Vec3) -> (bool, bool) {
+        let (mut carved, mut probed, mut near_carve, mut deep_probe) = (false, false, false, false);
+        for s in 0..self.uniforms.counts[0] as usize {
+            let t = self.test(s, pos);
+            if self.uniforms.shapes[s].info[0] == 0 {
+                carved |= t.inside;
+                near_carve |= t.near;
+            } else {
+                probed |= t.inside;
+                deep_probe |= t.near;
+            }
+        }
+        let probes = self.uniforms.counts[1] > 0;
+        let visible = !carved && (!probes || probed);
+        let affected = near_carve || (probes && !deep_probe);
+        (visible, affected)
+    }
+
+    /// One map layer of shape `slot` (0..8: Z_front1 … D_back2).
+    pub fn layer(&self, slot: usize, layer: u32) -> &[f32] {
+        let r = self.resolution as usize;
+        let l = slot * LAYERS_PER_SHAPE as usize + layer as usize;
+        &self.layers[l * r * r..(l + 1) * r * r]
+    }
+}
+
+/// Algorithm 1 on the CPU: the dilation (carve) or contraction (probe) layers of one
+/// shape from its four resolved Z layers (`z[k]`, `resolution²` each).
+pub fn dilate(z: [&[f32]; 4], resolution: u32, r_xy: f32, r_z: f32, probe: bool) -> [Vec<f32>; 4] {
+    let res = resolution as i32;
+    let reach = r_xy.floor() as i32;
+    let mut out: [Vec<f32>; 4] = std::array::from_fn(|_| vec![0.0; (res * res) as usize]);
+    for y in 0..res {
+        for x in 0..res {
+            let mut d = if probe {
+                [-EMPTY, EMPTY, -EMPTY, EMPTY]
+            } else {
+                [EMPTY, -EMPTY, EMPTY, -EMPTY]
+            };
+            for j in -reach..=reach {
+                for i in -reach..=reach {
+                    let (qx, qy) = (x + i, y + j);
+                    if qx < 0 || qy < 0 || qx >= res || qy >= res {
+                        continue;
+                    }
+                    let dist = glam::Vec2::new(i as f32, j as f32).length();
+                    if dist > r_xy {
+                        continue;
+                    }
+                    let ratio = dist / r_xy;
+                    let h = r_z * (1.0 - ratio * ratio).max(0.0).sqrt();
+                    let q = (qy * res + qx) as usize;
+                    for (k, dk) in d.iter_mut().enumerate() {
+                        let zq = z[k][q];
+                        let front = k % 2 == 0;
+                        *dk = match (probe, front) {
+                            (false, true) => dk.min(zq - h),
+                            (false, false) => dk.max(zq + h),
+                            (true, true) => dk.max(zq + h),
+                            (true, false) => dk.min(zq - h),
+                        };
+                    }
+                }
+            }
+            if probe && (x < reach || y < reach || x >= res - reach || y >= res - reach) {
+                d = [EMPTY, -EMPTY, EMPTY, -EMPTY];
+            }
+            let p = (y * res + x) as usize;
+            for k in 0..4 {
+                out[k][p] = d[k];
+            }
+        }
+    }
+    out
+}

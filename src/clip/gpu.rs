@@ -1,0 +1,523 @@
+//! Depth and dilation maps of the clip shapes on the GPU (CAO paper §3.4 steps II–III).
+//!
+//! For each shape, depth-only render passes peel two layers of front and back faces
+//! (`shaders/clip_depth.wgsl`), then a compute pass (`shaders/clip_maps.wgsl`) resolves
+//! empty pixels and builds the dilation (carve) or contraction (probe) maps by
+//! Algorithm 1. All maps live in one `R32Float` 2-D array texture, 8 layers per shape.
+//! Maps are re-rendered only when a shape's geometry (shape, scale, mode, margin,
+//! resolution) changes; moving a shape only rewrites its matrix in the uniforms.
+
+use super::camera::ClipCamera;
+use super::mesh::TriMesh;
+use super::{ClipError, ClipMode, ClipShape, MAX_SHAPES, Shape};
+use crate::gpu::{Gpu, GpuError, bind_group, shaders, uniform_buffer, validated};
+use glam::Mat4;
+
+/// Layers per shape in the map array (see `shaders/clip_common.wgsl`).
+pub const LAYERS_PER_SHAPE: u32 = 8;
+
+/// Default depth-map size (pixels, square).
+pub const DEFAULT_RESOLUTION: u32 = 1024;
+
+/// One shape as the shaders see it. Mirrors `struct ClipShape` in `clip_common.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ShapeUniform {
+    pub volume_to_map: [[f32; 4]; 4],
+    /// mode (0 carve, 1 probe), first layer, resolution, unused.
+    pub info: [u32; 4],
+}
+
+/// Mirrors `struct Clip` in `clip_common.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ClipUniforms {
+    /// shapes, probing shapes, unused, unused.
+    pub counts: [u32; 4],
+    pub shapes: [ShapeUniform; MAX_SHAPES],
+}
+
+const _: () = assert!(std::mem::size_of::<ClipUniforms>() == 16 + MAX_SHAPES * 80);
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct PeelUniform {
+    projection: [[f32; 4]; 4],
+    flags: [u32; 4],
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct MapsParams {
+    radii: [f32; 4],
+    info: [u32; 4],
+}
+
+/// What makes a shape's maps: if it is unchanged, the maps are reused.
+#[derive(Debug, Clone, PartialEq)]
+struct GeometryKey {
+    shape: Shape,
+    scale: [f32; 3],
+    /// The plane's slab depends on where it is (it must cover the volume).
+    plane_reach: f32,
+    mode: ClipMode,
+    reach_mm: f32,
+    resolution: u32,
+}
+
+#[derive(Debug, Clone)]
+struct Slot {
+    key: GeometryKey,
+    camera: ClipCamera,
+}
+
+/// What [`ClipMaps::update`] did.
+#[derive(Debug, Default)]
+pub struct ClipUpdate {
+    /// Shapes left out, with why (the others still clip).
+    pub errors: Vec<ClipError>,
+    /// Shapes whose depth and dilation maps were (re)built.
+    pub rebuilt: usize,
+}
+
+/// The clip shapes' maps and uniforms on the GPU.
+#[derive(Debug)]
+pub struct ClipMaps {
+    peel_front: wgpu::RenderPipeline,
+    peel_back: wgpu::RenderPipeline,
+    resolve: wgpu::ComputePipeline,
+    maps: wgpu::Texture,
+    maps_view: wgpu::TextureView,
+    dummy_depth: wgpu::TextureView,
+    resolution: u32,
+    slots: Vec<Slot>,
+    pub uniforms: ClipUniforms,
+    uniform_buffer: wgpu::Buffer,
+}
+
+fn depth_texture(device: &wgpu::Device, label: &str, size: u32) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: size,
+            height: size,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Depth32Float,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        view_formats: &[],
+    })
+}
+
+fn maps_texture(device: &wgpu::Device, resolution: u32, layers: u32) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("ClipMaps::maps"),
+        size: wgpu::Extent3d {
+            width: resolution,
+            height: resolution,
+            depth_or_array_layers: layers,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::R32Float,
+        usage: wgpu::TextureUsages::STORAGE_BINDING
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    })
+}
+
+fn array_view(texture: &wgpu::Texture) -> wgpu::TextureView {
+    texture.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    })
+}
+
+/// The bind group layout entries of `@group(1)` in `clip_common.wgsl`, for pipelines
+/// with explicit layouts.
+pub fn layout_entries(visibility: wgpu::ShaderStages) -> [wgpu::BindGroupLayoutEntry; 2] {
+    [
+        wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        },
+        wgpu::BindGroupLayoutEntry {
+            binding: 1,
+            visibility,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2Array,
+                multisampled: false,
+            },
+            count: None,
+        },
+    ]
+}
+
+/// The clip uniforms for the current poses: volume mm → each shape's map coordinates.
+fn shape_uniform(shape: &ClipShape, camera: &ClipCamera, slot: usize) -> ShapeUniform {
+    let to_map: Mat4 = camera.to_map * shape.shape_to_volume().inverse();
+    ShapeUniform {
+        volume_to_map: to_map.to_cols_array_2d(),
+        info: [
+            u32::from(shape.mode == ClipMode::Probe),
+            slot as u32 * LAYERS_PER_SHAPE,
+            camera.resolution,
+            0,
+        ],
+    }
+}
+
+impl ClipMaps {
+    pub fn new(gpu: &Gpu) -> Result<Self, GpuError> {
+        let device = &gpu.device;
+        let depth_module = shaders::module(device, "clip_depth.wgsl")?;
+        let maps_module = shaders::module(device, "clip_maps.wgsl")?;
+        validated(device, "ClipMaps::new", || {
+            let peel = |label, cull| {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some(label),
+                    layout: None,
+                    vertex: wgpu::VertexState {
+                        module: &depth_module,
+                        entry_point: Some("vs"),
+                        compilation_options: Default::default(),
+                        buffers: &[Some(wgpu::VertexBufferLayout {
+                            array_stride: 12,
+                            step_mode: wgpu::VertexStepMode::Vertex,
+                            attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                        })],
+                    },
+                    primitive: wgpu::PrimitiveState {
+                        topology: wgpu::PrimitiveTopology::TriangleList,
+                        front_face: wgpu::FrontFace::Ccw,
+                        cull_mode: Some(cull),
+                        ..Default::default()
+                    },
+                    depth_stencil: Some(wgpu::DepthStencilState {
+                        format: wgpu::TextureFormat::Depth32Float,
+                        depth_write_enabled: Some(true),
+                        depth_compare: Some(wgpu::CompareFunction::Less),
+                        stencil: Default::default(),
+                        bias: Default::default(),
+                    }),
+                    multisample: Default::default(),
+                    fragment: Some(wgpu::FragmentState {
+                        module: &depth_module,
+                        entry_point: Some("fs"),
+                        compilation_options: Default::default(),
+                        targets: &[],
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            };
+            let resolve = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("ClipMaps::resolve"),
+                layout: None,
+                module: &maps_module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+            let maps = maps_texture(device, 1, LAYERS_PER_SHAPE);
+            let dummy = depth_texture(device, "ClipMaps::no_previous_layer", 1);
+            let uniforms: ClipUniforms = bytemuck::Zeroable::zeroed();
+            ClipMaps {
+                // Front faces: cull the back ones, and vice versa.
+                peel_front: peel("ClipMaps::peel_front", wgpu::Face::Back),
+                peel_back: peel("ClipMaps::peel_back", wgpu::Face::Front),
+                resolve,
+                maps_view: array_view(&maps),
+                maps,
+                dummy_depth: dummy.create_view(&Default::default()),
+                resolution: 1,
+                slots: Vec::new(),
+                uniform_buffer: uniform_buffer(
+                    device,
+                    &gpu.queue,
+                    "ClipMaps::uniforms",
+                    bytemuck::bytes_of(&uniforms),
+                ),
+                uniforms,
+            }
+        })
+    }
+
+    /// Brings the maps and uniforms up to date with `shapes`.
+    ///
+    /// `reach_mm` is how far a clipped point can influence the ambient factor (the LAO
+    /// ray length plus the interpolation footprint); `volume_radius` (mm) sizes planes.
+    /// Shapes that cannot be used (bad pose, broken mesh, beyond [`MAX_SHAPES`]) are left
+    /// out and reported; the others clip.
+    pub fn update(
+        &mut self,
+        gpu: &Gpu,
+        shapes: &[ClipShape],
+        volume_radius: f32,
+        reach_mm: f32,
+        resolution: u32,
+    ) -> Result<ClipUpdate, GpuError> {
+        let device = &gpu.device;
+        let resolution = resolution.clamp(16, device.limits().max_texture_dimension_2d);
+        let mut report = ClipUpdate::default();
+        if shapes.len() > MAX_SHAPES {
+            report.errors.push(ClipError::TooMany {
+                count: shapes.len(),
+            });
+        }
+        // Shapes that can clip, with their geometry keys.
+        let mut usable: Vec<(&ClipShape, GeometryKey)> = Vec::new();
+        for (i, s) in shapes.iter().take(MAX_SHAPES).enumerate() {
+            if let Err(e) = s.check(i) {
+                report.errors.push(e);
+                continue;
+            }
+            let key = GeometryKey {
+                shape: s.shape.clone(),
+                scale: s.scale,
+                plane_reach: if s.shape == Shape::Plane {
+                    4.0 * volume_radius.max(1.0) + glam::Vec3::from(s.translation).length()
+                } else {
+                    0.0
+                },
+                mode: s.mode,
+                reach_mm,
+                resolution,
+            };
+            usable.push((s, key));
+        }
+        let layers = (usable.len().max(1) as u32) * LAYERS_PER_SHAPE;
+        if resolution != self.resolution || layers > self.maps.depth_or_array_layers() {
+            self.maps = validated(device, "ClipMaps::allocate", || {
+                maps_texture(device, resolution, layers)
+            })?;
+            self.maps_view = array_view(&self.maps);
+            self.resolution = resolution;
+            self.slots.clear();
+        }
+        let mut slots = Vec::with_capacity(usable.len());
+        let mut kept = Vec::with_capacity(usable.len());
+        for (shape, key) in usable {
+            let idx = slots.len();
+            let reuse = self.slots.get(idx).filter(|s| s.key == key).cloned();
+            let built = match reuse {
+                Some(s) => s,
+                None => {
+                    let mesh = match shape.geometry(volume_radius) {
+                        Ok(m) => m,
+                        Err(e) => {
+                            report.errors.push(e);
+                            continue;
+                        }
+                    };
+                    let camera = ClipCamera::frame(&mesh, reach_mm, resolution);
+                    self.render_shape(gpu, &mesh, &camera, shape.mode, idx)?;
+                    report.rebuilt += 1;
+                    Slot { key, camera }
+                }
+            };
+            kept.push(shape.clone());
+            slots.push(built);
+        }
+        self.slots = slots;
+        let mut uniforms: ClipUniforms = bytemuck::Zeroable::zeroed();
+        uniforms.counts[0] = kept.len() as u32;
+        uniforms.counts[1] = kept.iter().filter(|s| s.mode == ClipMode::Probe).count() as u32;
+        for (i, (shape, slot)) in kept.iter().zip(&self.slots).enumerate() {
+            uniforms.shapes[i] = shape_uniform(shape, &slot.camera, i);
+        }
+        self.uniforms = uniforms;
+        gpu.queue
+            .write_buffer(&self.uniform_buffer, 0, bytemuck::bytes_of(&uniforms));
+        Ok(report)
+    }
+
+    /// The clipping cameras of the shapes now in use, in order.
+    pub fn cameras(&self) -> Vec<ClipCamera> {
+        self.slots.iter().map(|s| s.camera).collect()
+    }
+
+    /// Bind group for `@group(1)` of a pipeline that includes `clip_common.wgsl`.
+    pub fn bind_group(
+        &self,
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+    ) -> wgpu::BindGroup {
+        bind_group(
+            device,
+            "ClipMaps::bind_group",
+            layout,
+            &[
+                self.uniform_buffer.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&self.maps_view),
+            ],
+        )
+    }
+
+    /// Peels the mesh's depth layers and builds its maps into `slot`'s layers.
+    fn render_shape(
+        &self,
+        gpu: &Gpu,
+        mesh: &TriMesh,
+        camera: &ClipCamera,
+        mode: ClipMode,
+        slot: usize,
+    ) -> Result<(), GpuError> {
+        let device = &gpu.device;
+        let res = camera.resolution;
+        validated(device, "ClipMaps::render_shape", || {
+            let vertices: Vec<[f32; 3]> = mesh.vertices.iter().map(|v| v.to_array()).collect();
+            let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
+            let buffer = |label, usage, bytes: &[u8]| {
+                let b = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: bytes.len() as u64,
+                    usage: usage | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                gpu.queue.write_buffer(&b, 0, bytes);
+                b
+            };
+            let vbuf = buffer(
+                "ClipMaps::vertices",
+                wgpu::BufferUsages::VERTEX,
+                bytemuck::cast_slice(&vertices),
+            );
+            let ibuf = buffer(
+                "ClipMaps::indices",
+                wgpu::BufferUsages::INDEX,
+                bytemuck::cast_slice(&indices),
+            );
+            let depths: Vec<wgpu::Texture> = (0..4)
+                .map(|_| depth_texture(device, "ClipMaps::peeled_depth", res))
+                .collect();
+            let views: Vec<wgpu::TextureView> = depths
+                .iter()
+                .map(|t| t.create_view(&Default::default()))
+                .collect();
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("ClipMaps::render_shape"),
+            });
+            for layer in 0..4 {
+                let pipeline = if layer % 2 == 0 {
+                    &self.peel_front
+                } else {
+                    &self.peel_back
+                };
+                let peel = PeelUniform {
+                    projection: camera.projection.to_cols_array_2d(),
+                    flags: [u32::from(layer > 0), 0, 0, 0],
+                };
+                let uniforms = uniform_buffer(
+                    device,
+                    &gpu.queue,
+                    "ClipMaps::peel",
+                    bytemuck::bytes_of(&peel),
+                );
+                let previous = if layer == 0 {
+                    &self.dummy_depth
+                } else {
+                    &views[layer - 1]
+                };
+                let group = bind_group(
+                    device,
+                    "ClipMaps::peel",
+                    &pipeline.get_bind_group_layout(0),
+                    &[
+                        uniforms.as_entire_binding(),
+                        wgpu::BindingResource::TextureView(previous),
+                    ],
+                );
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("ClipMaps::peel"),
+                    color_attachments: &[],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &views[layer],
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Store,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    ..Default::default()
+                });
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, &group, &[]);
+                pass.set_vertex_buffer(0, vbuf.slice(..));
+                pass.set_index_buffer(ibuf.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..indices.len() as u32, 0, 0..1);
+            }
+            let (r_xy, r_z) = camera.dilation_radii();
+            let params = MapsParams {
+                radii: [r_xy, r_z, 0.0, 0.0],
+                info: [
+                    res,
+                    slot as u32 * LAYERS_PER_SHAPE,
+                    u32::from(mode == ClipMode::Probe),
+                    0,
+                ],
+            };
+            let uniforms = uniform_buffer(
+                device,
+                &gpu.queue,
+                "ClipMaps::maps_params",
+                bytemuck::bytes_of(&params),
+            );
+            let storage = self.maps.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            });
+            let group = bind_group(
+                device,
+                "ClipMaps::resolve",
+                &self.resolve.get_bind_group_layout(0),
+                &[
+                    uniforms.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&views[0]),
+                    wgpu::BindingResource::TextureView(&views[1]),
+                    wgpu::BindingResource::TextureView(&views[2]),
+                    wgpu::BindingResource::TextureView(&views[3]),
+                    wgpu::BindingResource::TextureView(&storage),
+                ],
+            );
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("ClipMaps::resolve"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.resolve);
+                pass.set_bind_group(0, &group, &[]);
+                pass.dispatch_workgroups(res.div_ceil(8), res.div_ceil(8), 1);
+            }
+            gpu.queue.submit([encoder.finish()]);
+        })
+    }
+
+    /// Reads every map layer in use back (for the CPU twin and tests).
+    pub fn read_back(&self, gpu: &Gpu) -> Result<super::cpu::ClipMapsCpu, GpuError> {
+        let layers = (self.slots.len().max(1) as u32) * LAYERS_PER_SHAPE;
+        let values = crate::gpu::read_texture_f32(
+            gpu,
+            &self.maps,
+            [self.resolution, self.resolution, layers],
+            "ClipMaps::read_back",
+        )?;
+        Ok(super::cpu::ClipMapsCpu {
+            resolution: self.resolution,
+            layers: values,
+            uniforms: self.uniforms,
+        })
+    }
+}

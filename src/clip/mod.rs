@@ -1,0 +1,307 @@
+//! Clip shapes for Contextual Ambient Occlusion (Titov et al. §3.2–3.6).
+//!
+//! A [`ClipShape`] is a closed triangle mesh with a pose in the volume's physical space
+//! (millimetres, origin at the volume's centre, axes along the voxel axes — the space the
+//! ray caster works in) and a mode: **carve** removes the inside, **probe** keeps only the
+//! inside. Each shape gets its own orthographic clipping camera ([`camera::ClipCamera`])
+//! attached to the mesh: its depth maps depend only on the mesh's geometry (shape and
+//! scale), so translating or rotating a shape only changes a matrix.
+
+pub mod camera;
+pub mod cpu;
+pub mod gpu;
+pub mod mesh;
+
+use glam::{EulerRot, Mat4, Quat, Vec3};
+use mesh::{MeshError, TriMesh};
+use std::path::PathBuf;
+
+/// Shapes clipping at once (CAO paper §3.6: each has its own clipping camera and maps).
+pub const MAX_SHAPES: usize = 8;
+
+/// The geometry of a clip shape before its pose.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Shape {
+    /// A half-space: everything on the side of local +z from the plane through the
+    /// origin (built as a slab larger than any volume). Scale is ignored.
+    Plane,
+    /// Unit sphere; scale gives the radii.
+    Sphere,
+    /// Box `[-1, 1]³`; scale gives the half sizes.
+    Box,
+    /// Cylinder of radius 1 around local z, z in [-1, 1]; scale gives radii and half height.
+    Cylinder,
+    /// Torus around local y (ring in the xz plane), major radius 1, tube radius `tube`
+    /// (relative to the major radius).
+    Torus { tube: f32 },
+    /// A closed OBJ or STL mesh (coordinates in mm), scaled by `scale`.
+    Mesh { path: PathBuf },
+}
+
+/// Carve (subtract the inside, the paper's default) or probe (keep only the inside).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ClipMode {
+    #[default]
+    Carve,
+    Probe,
+}
+
+impl ClipMode {
+    pub fn parse(s: &str) -> Result<ClipMode, String> {
+        match s {
+            "carve" => Ok(ClipMode::Carve),
+            "probe" => Ok(ClipMode::Probe),
+            other => Err(format!(
+                "unknown clip mode {other:?} (available: carve, probe)"
+            )),
+        }
+    }
+}
+
+/// A clip shape with its pose, as saved in scene files.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClipShape {
+    pub shape: Shape,
+    /// Centre in mm from the volume's centre.
+    pub translation: [f32; 3],
+    /// Rotation in degrees about x, then y, then z.
+    pub rotation_deg: [f32; 3],
+    /// Size in mm per local axis (see [`Shape`]).
+    pub scale: [f32; 3],
+    #[serde(default)]
+    pub mode: ClipMode,
+}
+
+/// Why a clip shape cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ClipError {
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    #[error("clip shape {index}: {message}")]
+    Invalid { index: usize, message: String },
+    #[error("{count} clip shapes given; at most {MAX_SHAPES} can clip at once")]
+    TooMany { count: usize },
+}
+
+impl ClipShape {
+    /// A shape of `shape` at `translation` with uniform size `size` mm.
+    pub fn new(shape: Shape, translation: Vec3, size: f32) -> Self {
+        ClipShape {
+            shape,
+            translation: translation.to_array(),
+            rotation_deg: [0.0; 3],
+            scale: [size; 3],
+            mode: ClipMode::Carve,
+        }
+    }
+
+    pub fn rotation(&self) -> Quat {
+        let [x, y, z] = self.rotation_deg.map(f32::to_radians);
+        Quat::from_euler(EulerRot::XYZ, x, y, z)
+    }
+
+    /// Shape space (the scaled mesh, centred) → volume physical space: rotation, then
+    /// translation. Moving a shape changes only this matrix.
+    pub fn shape_to_volume(&self) -> Mat4 {
+        Mat4::from_rotation_translation(self.rotation(), Vec3::from(self.translation))
+    }
+
+    /// Checks the pose; `index` names the shape in errors.
+    pub fn check(&self, index: usize) -> Result<(), ClipError> {
+        let invalid = |message: String| ClipError::Invalid { index, message };
+        let numbers = self
+            .translation
+            .iter()
+            .chain(&self.rotation_deg)
+            .chain(&self.scale);
+        if numbers.clone().any(|v| !v.is_finite()) {
+            return Err(invalid(format!(
+                "the pose has a non-finite number (translation {:?}, rotation {:?}, scale {:?})",
+                self.translation, self.rotation_deg, self.scale
+            )));
+        }
+        if self.shape != Shape::Plane && self.scale.iter().any(|&s| s <= 0.0) {
+            return Err(invalid(format!(
+                "the scale must be positive on every axis, got {:?}",
+                self.scale
+            )));
+        }
+        if let Shape::Torus { tube } = self.shape
+            && !(tube > 0.0 && tube < 1.0)
+        {
+            return Err(invalid(format!(
+                "a torus's tube radius must be between 0 and 1 (relative to the major radius), got {tube}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// The mesh in shape space (scaled, not posed). `volume_radius` (mm) sizes the plane's
+    /// slab so it covers the volume from any pose inside it.
+    pub fn geometry(&self, volume_radius: f32) -> Result<TriMesh, ClipError> {
+        let scale = Vec3::from(self.scale);
+        let mesh = match &self.shape {
+            Shape::Plane => {
+                let l = 4.0 * volume_radius.max(1.0) + Vec3::from(self.translation).length();
+                mesh::cuboid(Vec3::new(-l, -l, 0.0), Vec3::new(l, l, l))
+            }
+            Shape::Sphere => mesh::sphere(48, 96).scaled(scale),
+            Shape::Box => mesh::cuboid(Vec3::NEG_ONE, Vec3::ONE).scaled(scale),
+            Shape::Cylinder => mesh::cylinder(96).scaled(scale),
+            Shape::Torus { tube } => mesh::torus(*tube, 96, 48).scaled(scale),
+            Shape::Mesh { path } => {
+                let m = mesh::load(path)?;
+                // Centre the file's mesh so the pose rotates it about its middle.
+                let (lo, hi) = m.bounds();
+                let c = (lo + hi) * 0.5;
+                TriMesh {
+                    vertices: m.vertices.iter().map(|v| (*v - c) * scale).collect(),
+                    triangles: m.triangles,
+                }
+            }
+        };
+        Ok(mesh.validate(&self.describe())?)
+    }
+
+    /// e.g. "sphere at (10, 0, -5) mm".
+    pub fn describe(&self) -> String {
+        let name = match &self.shape {
+            Shape::Plane => "plane".to_owned(),
+            Shape::Sphere => "sphere".to_owned(),
+            Shape::Box => "box".to_owned(),
+            Shape::Cylinder => "cylinder".to_owned(),
+            Shape::Torus { .. } => "torus".to_owned(),
+            Shape::Mesh { path } => format!("mesh {}", path.display()),
+        };
+        let [x, y, z] = self.translation;
+        format!("{name} at ({x}, {y}, {z}) mm")
+    }
+
+    /// Parses the CLI form (all lengths in mm, centres from the volume's centre):
+    ///
+    /// - `plane:PX,PY,PZ,NX,NY,NZ` — removes the side the normal points to
+    /// - `sphere:CX,CY,CZ,R`
+    /// - `box:CX,CY,CZ,SX,SY,SZ[,RX,RY,RZ]` — side lengths, rotation in degrees
+    /// - `cylinder:CX,CY,CZ,R,H[,RX,RY,RZ]` — radius, height along local z
+    /// - `torus:CX,CY,CZ,R,r[,RX,RY,RZ]` — major and tube radius
+    /// - `mesh:PATH[,CX,CY,CZ[,S]]` — OBJ or STL, uniform scale S
+    pub fn parse(spec: &str) -> Result<ClipShape, String> {
+        let (kind, rest) = spec.split_once(':').ok_or_else(|| {
+            format!("clip shape {spec:?}: expected KIND:NUMBERS, e.g. sphere:0,0,0,20")
+        })?;
+        if kind == "mesh" {
+            let mut parts = rest.split(',');
+            let path = PathBuf::from(parts.next().unwrap_or_default());
+            let nums = numbers(spec, parts)?;
+            let centre = match nums.len() {
+                0 => Vec3::ZERO,
+                3 | 4 => Vec3::new(nums[0], nums[1], nums[2]),
+                n => {
+                    return Err(format!(
+                        "clip shape {spec:?}: expected 0, 3 or 4 numbers after the path, got {n}"
+                    ));
+                }
+            };
+            let s = nums.get(3).copied().unwrap_or(1.0);
+            return Ok(ClipShape::new(Shape::Mesh { path }, centre, s));
+        }
+        let n = numbers(spec, rest.split(','))?;
+        let count = |allowed: &[usize]| -> Result<(), String> {
+            if allowed.contains(&n.len()) {
+                Ok(())
+            } else {
+                Err(format!(
+                    "clip shape {spec:?}: {kind} takes {allowed:?} numbers, got {}",
+                    n.len()
+                ))
+            }
+        };
+        let centre = || Vec3::new(n[0], n[1], n[2]);
+        let rotation = |at: usize| -> [f32; 3] {
+            if n.len() >= at + 3 {
+                [n[at], n[at + 1], n[at + 2]]
+            } else {
+                [0.0; 3]
+            }
+        };
+        let mut shape = match kind {
+            "plane" => {
+                count(&[6])?;
+                let normal = Vec3::new(n[3], n[4], n[5]);
+                if normal.length_squared() == 0.0 || !normal.is_finite() {
+                    return Err(format!("clip shape {spec:?}: the plane's normal is zero"));
+                }
+                let q = Quat::from_rotation_arc(Vec3::Z, normal.normalize());
+                let (x, y, z) = q.to_euler(EulerRot::XYZ);
+                let mut s = ClipShape::new(Shape::Plane, centre(), 1.0);
+                s.rotation_deg = [x, y, z].map(f32::to_degrees);
+                s
+            }
+            "sphere" => {
+                count(&[4])?;
+                ClipShape::new(Shape::Sphere, centre(), n[3])
+            }
+            "box" => {
+                count(&[6, 9])?;
+                let mut s = ClipShape::new(Shape::Box, centre(), 1.0);
+                s.scale = [n[3] * 0.5, n[4] * 0.5, n[5] * 0.5];
+                s.rotation_deg = rotation(6);
+                s
+            }
+            "cylinder" => {
+                count(&[5, 8])?;
+                let mut s = ClipShape::new(Shape::Cylinder, centre(), n[3]);
+                s.scale[2] = n[4] * 0.5;
+                s.rotation_deg = rotation(5);
+                s
+            }
+            "torus" => {
+                count(&[5, 8])?;
+                if n[3] <= 0.0 {
+                    return Err(format!(
+                        "clip shape {spec:?}: the major radius must be positive"
+                    ));
+                }
+                let mut s = ClipShape::new(Shape::Torus { tube: n[4] / n[3] }, centre(), n[3]);
+                s.rotation_deg = rotation(5);
+                s
+            }
+            other => {
+                return Err(format!(
+                    "unknown clip shape {other:?} (available: plane, sphere, box, cylinder, torus, mesh)"
+                ));
+            }
+        };
+        shape.mode = ClipMode::Carve;
+        shape
+            .check(0)
+            .map_err(|e| format!("clip shape {spec:?}: {e}"))?;
+        Ok(shape)
+    }
+}
+
+fn numbers<'a>(spec: &str, parts: impl Iterator<Item = &'a str>) -> Result<Vec<f32>, String> {
+    parts
+        .filter(|p| !p.trim().is_empty())
+        .map(|p| {
+            p.trim()
+                .parse::<f32>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("clip shape {spec:?}: {p:?} is not a number"))
+        })
+        .collect()
+}
+
+/// Checks a list of shapes: count and every pose.
+pub fn check_all(shapes: &[ClipShape]) -> Result<(), ClipError> {
+    if shapes.len() > MAX_SHAPES {
+        return Err(ClipError::TooMany {
+            count: shapes.len(),
+        });
+    }
+    shapes.iter().enumerate().try_for_each(|(i, s)| s.check(i))
+}

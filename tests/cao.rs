@@ -1,0 +1,562 @@
+//! Contextual Ambient Occlusion: CAO equals "LAO every frame" bit for bit, for random
+//! poses of every shape, both modes and overlapping shapes; the CPU twins of the clip
+//! maps, the mask and the ray cast; and the dilation margin is what exactness rests on.
+//! GPU tests run on lavapipe in CI; never skipped.
+
+mod common;
+
+use common::{Rng, data};
+use glam::Vec3;
+use volao::ao::cao::{CaoGpu, CaoMode, clip_volume_cpu, lao_on_opacity_cpu, reach_mm};
+use volao::ao::lao::{Rays, lao_lut};
+use volao::ao::rays::RaySet;
+use volao::clip::camera::EMPTY;
+use volao::clip::{ClipMode, ClipShape, Shape};
+use volao::gpu::{self, Gpu};
+use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::texels::{UploadLimits, VolumeTexels};
+use volao::render::{Camera, Frame, RenderSettings};
+use volao::tf::{Preset, TransferFunction};
+use volao::volume::{self, LoadOptions, Volume, VoxelData};
+
+/// Depth-map size in these tests (the default is 1024; small keeps lavapipe quick).
+const MAP: u32 = 128;
+/// Samples per LAO ray here (the default is 20).
+const SAMPLES: u32 = 8;
+
+fn device() -> Gpu {
+    gpu::request_device().unwrap_or_else(|e| {
+        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
+    })
+}
+
+fn crop(v: &Volume, origin: [usize; 3], size: [usize; 3]) -> Volume {
+    let [nx, ny, _] = v.dims;
+    let idx = |i: usize| {
+        let (x, y, z) = (
+            i % size[0],
+            (i / size[0]) % size[1],
+            i / (size[0] * size[1]),
+        );
+        origin[0] + x + nx * (origin[1] + y + ny * (origin[2] + z))
+    };
+    let n = size.iter().product::<usize>();
+    let data = match &v.data {
+        VoxelData::U8(d) => VoxelData::U8((0..n).map(|i| d[idx(i)]).collect()),
+        VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
+        other => panic!("crop: {:?} not needed here", other.voxel_type()),
+    };
+    let mut out = Volume::new(size, v.spacing, data).expect("valid crop");
+    out.scaling = v.scaling;
+    out
+}
+
+fn load(rel: &str, opts: LoadOptions) -> Volume {
+    volume::format::load(&data(rel), &opts)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .volume
+        .to_ras()
+}
+
+fn engine() -> Volume {
+    crop(
+        &load("raw/engine.raw", LoadOptions::default()),
+        [96, 80, 40],
+        [40, 40, 36],
+    )
+}
+
+fn cranium() -> Volume {
+    let opts = LoadOptions {
+        raw: common::shared_files()
+            .into_iter()
+            .find(|(f, _)| *f == "raw/cranium-ct.raw")
+            .map(|(_, o)| o)
+            .unwrap_or_default(),
+        ..Default::default()
+    };
+    crop(
+        &load("raw/cranium-ct.raw", opts),
+        [90, 60, 40],
+        [40, 40, 28],
+    )
+}
+
+fn texels(v: &Volume) -> VolumeTexels {
+    VolumeTexels::new(
+        v,
+        UploadLimits {
+            max_dim: 4096,
+            max_bytes: 1 << 30,
+        },
+    )
+}
+
+struct Scene {
+    gpu: Gpu,
+    vol: GpuVolume,
+    rc: RayCaster,
+    cao: CaoGpu,
+    tf: TransferFunction,
+    rays: Rays,
+    frame: Frame,
+}
+
+fn scene(v: &Volume, preset: Preset, set: RaySet) -> Scene {
+    let gpu = device();
+    let tf = TransferFunction::preset(preset, &v.stats());
+    let settings = RenderSettings {
+        ambient: 0.8,
+        ..Default::default()
+    };
+    let vol = GpuVolume::from_texels(&gpu, texels(v), &tf, settings.step_voxels)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let rays = Rays::uniform(set.directions());
+    let cao = CaoGpu::new(&gpu, &vol, &tf, &rays, SAMPLES, 32, &|_, _| {})
+        .unwrap_or_else(|e| panic!("{e}"));
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let frame = Frame {
+        camera: Camera {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            ..Camera::default()
+        },
+        settings,
+        width: 48,
+        height: 48,
+    };
+    Scene {
+        gpu,
+        vol,
+        rc,
+        cao,
+        tf,
+        rays,
+        frame,
+    }
+}
+
+impl Scene {
+    fn reach(&self) -> f32 {
+        reach_mm(SAMPLES, self.vol.texels.spacing)
+    }
+
+    /// V_AO and the rendered image after one frame in `mode`.
+    fn frame(
+        &mut self,
+        shapes: &[ClipShape],
+        mode: CaoMode,
+        reach: f32,
+    ) -> (Vec<f32>, Vec<[u8; 4]>, f64) {
+        let stats = self
+            .cao
+            .update(&self.gpu, &self.vol.texels, shapes, MAP, reach, mode)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(stats.clip_errors.is_empty(), "{:?}", stats.clip_errors);
+        let ao = self
+            .cao
+            .read(&self.gpu, 3)
+            .unwrap_or_else(|e| panic!("{e}"));
+        self.vol.set_ambient_occlusion_view(self.cao.ao_view());
+        let image = self
+            .rc
+            .render_clipped(&self.gpu, &self.vol, &self.frame, Some(&self.cao.clip))
+            .unwrap_or_else(|e| panic!("{e}"));
+        (ao, image.pixels, stats.percent_recomputed())
+    }
+}
+
+/// A random pose for `shape`, sized for a volume of half-extent `half` (mm).
+fn random_shape(rng: &mut Rng, shape: &Shape, half: Vec3, mode: ClipMode) -> ClipShape {
+    let mut u = || (rng.next() >> 11) as f32 / (1u64 << 53) as f32;
+    let r = half.min_element();
+    let translation = Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5) * half * 1.2;
+    let rotation_deg = [u() * 360.0, u() * 360.0, u() * 360.0];
+    let scale = match shape {
+        Shape::Plane => [1.0; 3],
+        Shape::Sphere => [r * (0.35 + 0.3 * u()); 3],
+        Shape::Box => [
+            r * (0.25 + 0.3 * u()),
+            r * (0.25 + 0.3 * u()),
+            r * (0.25 + 0.3 * u()),
+        ],
+        Shape::Cylinder => [
+            r * (0.25 + 0.2 * u()),
+            r * (0.25 + 0.2 * u()),
+            r * (0.4 + 0.4 * u()),
+        ],
+        Shape::Torus { .. } | Shape::Mesh { .. } => [r * (0.45 + 0.2 * u()); 3],
+    };
+    ClipShape {
+        shape: shape.clone(),
+        translation: translation.to_array(),
+        rotation_deg,
+        scale,
+        mode,
+    }
+}
+
+fn differing<T: PartialEq>(a: &[T], b: &[T]) -> usize {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).filter(|(x, y)| x != y).count()
+}
+
+/// CAO vs the baseline for `poses` random poses of every shape, in `mode`.
+fn exactness(v: &Volume, preset: Preset, set: RaySet, mode: ClipMode, seed: u64, poses: usize) {
+    let mut s = scene(v, preset, set);
+    let half = Vec3::from(s.vol.texels.extent()) * 0.5;
+    let reach = s.reach();
+    let shapes = [
+        Shape::Plane,
+        Shape::Sphere,
+        Shape::Box,
+        Shape::Cylinder,
+        Shape::Torus { tube: 0.35 },
+    ];
+    let mut rng = Rng(seed);
+    let mut recomputed = Vec::new();
+    for shape in &shapes {
+        // One geometry per shape: poses change only matrices (scale fixed per shape).
+        let base = random_shape(&mut rng, shape, half, mode);
+        for pose in 0..poses {
+            let mut c = random_shape(&mut rng, shape, half, mode);
+            c.scale = base.scale;
+            let (cao, cao_img, pct) = s.frame(std::slice::from_ref(&c), CaoMode::Selective, reach);
+            let (full, full_img, _) = s.frame(std::slice::from_ref(&c), CaoMode::Full, reach);
+            let bits = |a: &[f32]| a.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                differing(&bits(&cao), &bits(&full)),
+                0,
+                "{set:?} {mode:?} pose {pose}: {c:?}: V_AO differs from LAO every frame"
+            );
+            assert_eq!(
+                differing(&cao_img, &full_img),
+                0,
+                "{set:?} {mode:?} pose {pose}: {c:?}: image differs"
+            );
+            recomputed.push(pct);
+        }
+    }
+    // The test means something only if voxels were both copied and recomputed.
+    let busy = recomputed.iter().filter(|&&p| p > 0.0 && p < 100.0).count();
+    assert!(
+        busy * 2 >= recomputed.len(),
+        "most poses should recompute some but not all voxels: {recomputed:?}"
+    );
+}
+
+#[test]
+fn cao_equals_lao_every_frame_carving_engine() {
+    for set in [RaySet::Six, RaySet::TwentySix] {
+        exactness(
+            &engine(),
+            Preset::CaoSingleColor,
+            set,
+            ClipMode::Carve,
+            11,
+            20,
+        );
+    }
+}
+
+#[test]
+fn cao_equals_lao_every_frame_probing_cranium() {
+    for set in [RaySet::Six, RaySet::TwentySix] {
+        exactness(&cranium(), Preset::CtBone, set, ClipMode::Probe, 23, 20);
+    }
+}
+
+#[test]
+fn cao_equals_lao_every_frame_carving_cranium_and_probing_engine() {
+    exactness(
+        &cranium(),
+        Preset::CtBone,
+        RaySet::Six,
+        ClipMode::Carve,
+        5,
+        20,
+    );
+    exactness(
+        &engine(),
+        Preset::CaoSingleColor,
+        RaySet::TwentySix,
+        ClipMode::Probe,
+        7,
+        20,
+    );
+}
+
+#[test]
+fn overlapping_shapes_stay_exact() {
+    let v = engine();
+    let mut s = scene(&v, Preset::CaoSingleColor, RaySet::TwentySix);
+    let half = Vec3::from(s.vol.texels.extent()) * 0.5;
+    let reach = s.reach();
+    let mut rng = Rng(99);
+    let combos = [
+        (Shape::Sphere, ClipMode::Carve, Shape::Box, ClipMode::Carve),
+        (
+            Shape::Torus { tube: 0.35 },
+            ClipMode::Carve,
+            Shape::Cylinder,
+            ClipMode::Carve,
+        ),
+        (
+            Shape::Sphere,
+            ClipMode::Probe,
+            Shape::Plane,
+            ClipMode::Carve,
+        ),
+        (Shape::Box, ClipMode::Probe, Shape::Sphere, ClipMode::Probe),
+    ];
+    for (a, ma, b, mb) in &combos {
+        for pose in 0..5 {
+            let mut first = random_shape(&mut rng, a, half, *ma);
+            let mut second = random_shape(&mut rng, b, half, *mb);
+            // Overlap: the second sits next to the first.
+            second.translation =
+                (Vec3::from(first.translation) + Vec3::splat(half.min_element() * 0.3)).to_array();
+            first.translation = (Vec3::from(first.translation) * 0.5).to_array();
+            let shapes = [first, second];
+            let (cao, cao_img, pct) = s.frame(&shapes, CaoMode::Selective, reach);
+            let (full, full_img, _) = s.frame(&shapes, CaoMode::Full, reach);
+            let bits = |a: &[f32]| a.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                differing(&bits(&cao), &bits(&full)),
+                0,
+                "pose {pose}: {shapes:?}"
+            );
+            assert_eq!(differing(&cao_img, &full_img), 0, "pose {pose}: {shapes:?}");
+            assert!(pct < 100.0, "{shapes:?}");
+        }
+    }
+}
+
+#[test]
+fn a_margin_shorter_than_the_rays_breaks_exactness() {
+    let v = engine();
+    let mut s = scene(&v, Preset::CaoSingleColor, RaySet::TwentySix);
+    let shape = ClipShape::new(Shape::Sphere, Vec3::new(2.0, -3.0, 1.0), 9.0);
+    let reach = s.reach();
+    let (full, _, _) = s.frame(std::slice::from_ref(&shape), CaoMode::Full, reach);
+    let (exact, _, _) = s.frame(std::slice::from_ref(&shape), CaoMode::Selective, reach);
+    assert_eq!(differing(&exact, &full), 0);
+    let (short, _, _) = s.frame(
+        std::slice::from_ref(&shape),
+        CaoMode::Selective,
+        reach * 0.4,
+    );
+    let wrong = differing(&short, &full);
+    assert!(
+        wrong > 100,
+        "a 40 % margin must miss affected voxels, {wrong} differ"
+    );
+}
+
+#[test]
+fn gpu_mask_and_opacity_match_the_cpu_twin() {
+    for (v, preset) in [
+        (engine(), Preset::CaoSingleColor),
+        (cranium(), Preset::CtBone),
+    ] {
+        let mut s = scene(&v, preset, RaySet::TwentySix);
+        let half = Vec3::from(s.vol.texels.extent()) * 0.5;
+        let reach = s.reach();
+        let mut rng = Rng(3);
+        let mut classes = [false; 3];
+        for shapes in [
+            vec![random_shape(
+                &mut rng,
+                &Shape::Torus { tube: 0.35 },
+                half,
+                ClipMode::Carve,
+            )],
+            vec![
+                random_shape(&mut rng, &Shape::Sphere, half, ClipMode::Carve),
+                // Large enough that its contraction (reach ≈ 10 mm) is not empty.
+                ClipShape {
+                    scale: [16.0, 15.0, 14.0],
+                    ..random_shape(&mut rng, &Shape::Box, half * 0.3, ClipMode::Probe)
+                },
+            ],
+        ] {
+            s.frame(&shapes, CaoMode::Selective, reach);
+            let maps = s
+                .cao
+                .clip
+                .read_back(&s.gpu)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let lut = lao_lut(&s.tf, &s.vol.texels);
+            let (v_o, v_m) = clip_volume_cpu(&s.vol.texels, &lut, &maps, 32);
+            let g_o = s.cao.read(&s.gpu, 0).unwrap_or_else(|e| panic!("{e}"));
+            let g_m = s.cao.read(&s.gpu, 1).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(differing(&v_m, &g_m), 0, "mask, {shapes:?}");
+            // V_o: the CPU's f32 arithmetic may round a sample lying on a map boundary the
+            // other way than the GPU's (fused multiply-adds); such a voxel differs by one
+            // MSAA sample (TF_o / 41). Allow that for 0.1 % of voxels, nothing else.
+            let flips = v_o
+                .iter()
+                .zip(&g_o)
+                .filter(|(a, b)| (*a - *b).abs() > 1e-6)
+                .inspect(|(a, b)| {
+                    // TF_o ≤ 1, so one sample is at most 1/41.
+                    let samples = (*a - *b).abs() * 41.0;
+                    assert!(
+                        samples <= 1.0 + 1e-4,
+                        "V_o differs by more than a sample: {a} vs {b}"
+                    );
+                })
+                .count();
+            assert!(
+                flips * 1000 <= v_o.len(),
+                "{flips} voxels of V_o differ: {shapes:?}"
+            );
+            for (seen, class) in classes.iter_mut().zip([0.0, 0.5, 1.0]) {
+                *seen |= g_m.contains(&class);
+            }
+            // Step V: the twin ray casts from the GPU's V_o, V_m, V_PAO.
+            let pao = s.cao.read(&s.gpu, 2).unwrap_or_else(|e| panic!("{e}"));
+            let ao = s.cao.read(&s.gpu, 3).unwrap_or_else(|e| panic!("{e}"));
+            let twin = lao_on_opacity_cpu(
+                &s.vol.texels,
+                &g_o,
+                &g_m,
+                &pao,
+                &s.rays,
+                SAMPLES,
+                CaoMode::Selective,
+            );
+            let worst = twin
+                .iter()
+                .zip(&ao)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f32::max);
+            assert!(worst <= 1e-4, "V_AO differs from the CPU twin by {worst}");
+        }
+        assert_eq!(classes, [true; 3], "every mask class occurs");
+    }
+}
+
+#[test]
+fn dilation_maps_match_the_cpu_twin() {
+    let v = engine();
+    let mut s = scene(&v, Preset::CaoSingleColor, RaySet::Six);
+    let reach = s.reach();
+    for (shape, mode) in [
+        (Shape::Sphere, ClipMode::Carve),
+        (Shape::Torus { tube: 0.35 }, ClipMode::Probe),
+    ] {
+        let c = ClipShape {
+            mode,
+            ..ClipShape::new(shape, Vec3::ZERO, 10.0)
+        };
+        s.frame(std::slice::from_ref(&c), CaoMode::Selective, reach);
+        let maps = s
+            .cao
+            .clip
+            .read_back(&s.gpu)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let camera = s.cao.clip.cameras()[0];
+        let (r_xy, r_z) = camera.dilation_radii();
+        let z = [0, 1, 2, 3].map(|l| maps.layer(0, l));
+        let d = volao::clip::cpu::dilate(z, maps.resolution, r_xy, r_z, mode == ClipMode::Probe);
+        for (k, dk) in d.iter().enumerate() {
+            let g = maps.layer(0, 4 + k as u32);
+            let worst = dk
+                .iter()
+                .zip(g)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f32::max);
+            assert!(worst < 1e-5, "{mode:?} layer {k}: {worst}");
+        }
+    }
+}
+
+#[test]
+fn depth_maps_of_a_sphere_and_a_torus() {
+    let v = engine();
+    let mut s = scene(&v, Preset::CaoSingleColor, RaySet::Six);
+    let reach = s.reach();
+    let sphere = ClipShape::new(Shape::Sphere, Vec3::ZERO, 10.0);
+    let torus = ClipShape::new(Shape::Torus { tube: 0.3 }, Vec3::ZERO, 10.0);
+    s.frame(&[sphere, torus], CaoMode::Selective, reach);
+    let maps = s
+        .cao
+        .clip
+        .read_back(&s.gpu)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let cams = s.cao.clip.cameras();
+    let res = maps.resolution as usize;
+    let at = |slot: usize, layer: u32, p: Vec3| {
+        let c = cams[slot].project(p);
+        maps.layer(slot, layer)[c.y as usize * res + c.x as usize]
+    };
+    // Sphere: front and back at the poles (shape space z = ±10), one layer only.
+    let front = cams[0].project(Vec3::new(0.0, 0.0, 10.0)).z;
+    let back = cams[0].project(Vec3::new(0.0, 0.0, -10.0)).z;
+    let probe = Vec3::new(0.01, 0.01, 0.0);
+    assert!(
+        (at(0, 0, probe) - front).abs() < 2e-3,
+        "{} vs {front}",
+        at(0, 0, probe)
+    );
+    assert!((at(0, 1, probe) - back).abs() < 2e-3);
+    assert_eq!(at(0, 2, probe), EMPTY, "a sphere has no second layer");
+    // Torus edge-on: through its middle a view ray crosses the tube twice, with the
+    // hole between: two layers, and the hole stays visible.
+    let middle = Vec3::ZERO;
+    for layer in 0..4 {
+        assert!(
+            at(1, layer, middle).abs() < 1.0,
+            "layer {layer} must be present"
+        );
+    }
+    assert!(at(1, 1, middle) < at(1, 2, middle), "back1 before front2");
+    assert!(
+        !maps.test(1, Vec3::ZERO).inside,
+        "the torus's hole is not clipped (convex-hull clipping would clip it)"
+    );
+    assert!(
+        maps.test(1, Vec3::new(0.0, 0.0, 10.0)).inside,
+        "inside the tube is clipped"
+    );
+    assert!(
+        maps.test(1, Vec3::new(10.0, 0.0, 0.0)).inside,
+        "inside the tube is clipped"
+    );
+    assert!(
+        !maps.test(1, Vec3::new(0.0, 5.0, 10.0)).inside,
+        "beside the tube is not"
+    );
+}
+
+#[test]
+fn bad_shapes_are_reported_and_the_rest_still_clip() {
+    let v = engine();
+    let mut s = scene(&v, Preset::CaoSingleColor, RaySet::Six);
+    let reach = s.reach();
+    let good = ClipShape::new(Shape::Sphere, Vec3::ZERO, 8.0);
+    let mut nan = good.clone();
+    nan.translation[1] = f32::NAN;
+    let mut flat = good.clone();
+    flat.scale[2] = 0.0;
+    let missing = ClipShape::new(
+        Shape::Mesh {
+            path: "/nonexistent/shape.stl".into(),
+        },
+        Vec3::ZERO,
+        1.0,
+    );
+    let mut many = vec![nan, flat, missing, good.clone()];
+    many.extend(std::iter::repeat_n(good.clone(), 8));
+    let stats = s
+        .cao
+        .update(&s.gpu, &s.vol.texels, &many, MAP, reach, CaoMode::Selective)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let errors = stats.clip_errors.join("\n");
+    assert!(errors.contains("non-finite"), "{errors}");
+    assert!(errors.contains("scale must be positive"), "{errors}");
+    assert!(errors.contains("/nonexistent/shape.stl"), "{errors}");
+    assert!(errors.contains("at most 8"), "{errors}");
+    assert!(stats.clipped > 0, "the good shapes still clip");
+}
