@@ -17,6 +17,9 @@ use volao::render::image::{Tolerance, check};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::LoadOptions;
 
+/// Depth-map edge for clip shapes (the default 1024 is slow on lavapipe, as in tests/cao.rs).
+const CLIP_MAPS: u32 = 128;
+
 /// The window the tests drive (points = pixels: pixels_per_point 1).
 const WINDOW: (f32, f32) = (760.0, 520.0);
 
@@ -30,9 +33,20 @@ fn golden_dir() -> PathBuf {
 
 /// A harness whose egui renderer and viewer share one device from `request_device`.
 fn harness(open: OpenRequest, screenshot_dir: &Path) -> Harness<'static, Viewer> {
-    let gpu = volao::gpu::request_device().unwrap_or_else(|e| {
+    harness_on(device(), open, screenshot_dir)
+}
+
+fn device() -> volao::gpu::Gpu {
+    volao::gpu::request_device().unwrap_or_else(|e| {
         panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
-    });
+    })
+}
+
+fn harness_on(
+    gpu: volao::gpu::Gpu,
+    open: OpenRequest,
+    screenshot_dir: &Path,
+) -> Harness<'static, Viewer> {
     let setup = egui_wgpu::WgpuSetup::Existing(egui_wgpu::WgpuSetupExisting {
         instance: gpu.instance.clone(),
         adapter: gpu.adapter.clone(),
@@ -47,6 +61,7 @@ fn harness(open: OpenRequest, screenshot_dir: &Path) -> Harness<'static, Viewer>
         open,
         recent_file: Some(screenshot_dir.join("recent.json")),
         screenshot_dir: screenshot_dir.to_owned(),
+        clip_resolution: CLIP_MAPS,
         ..Default::default()
     };
     let viewer = Viewer::new(&ctx, render_state, options).unwrap_or_else(|e| panic!("{e}"));
@@ -443,4 +458,116 @@ fn scenes_reopen_as_saved() {
         data("pvm/Bucky.pvm").canonicalize().ok()
     );
     assert!(!h2.state().has_unsaved_changes());
+}
+
+#[test]
+fn add_a_clip_shape_drag_it_and_cao_follows() {
+    use volao::clip::gpu::ClipMaps;
+    use volao::render::gpu::{GpuVolume, RayCaster};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let gpu = device();
+    let twin = volao::gpu::Gpu {
+        instance: gpu.instance.clone(),
+        adapter: gpu.adapter.clone(),
+        device: gpu.device.clone(),
+        queue: gpu.queue.clone(),
+        info: gpu.info.clone(),
+    };
+    let mut h = harness_on(gpu, bucky(), dir.path());
+    settle(&mut h);
+    h.get_by_label("Sphere").scroll_to_me();
+    h.run_steps(8);
+    h.get_by_label("Sphere").click();
+    settle(&mut h);
+    let doc = h.state().document().expect("doc").clone();
+    assert_eq!(doc.clip_shapes.len(), 1);
+    let sphere = doc.clip_shapes[0].clone();
+
+    // Drag the sphere by its outline, 40 points to the right: it follows the mouse.
+    let rect = h.state().viewport_rect();
+    let project = |p: glam::Vec3, cam: &volao::render::Camera| {
+        let s = cam
+            .view_proj(doc.radius, rect.width() / rect.height())
+            .project_point3(p);
+        egui::pos2(
+            rect.left() + (s.x + 1.0) * 0.5 * rect.width(),
+            rect.top() + (1.0 - s.y) * 0.5 * rect.height(),
+        )
+    };
+    // The silhouette circle facing the anterior view lies in the xz plane.
+    let grab = project(
+        glam::Vec3::from(sphere.translation) + glam::Vec3::X * sphere.scale[0],
+        &doc.camera,
+    );
+    let centre_before = project(glam::Vec3::from(sphere.translation), &doc.camera);
+    h.drag_at(grab);
+    h.step();
+    for i in 1..=8 {
+        h.hover_at(grab + egui::vec2(5.0 * i as f32, 0.0));
+        h.step();
+    }
+    h.drop_at(grab + egui::vec2(40.0, 0.0));
+    settle(&mut h);
+    let doc = h.state().document().expect("doc").clone();
+    assert_eq!(
+        doc.camera,
+        volao::render::Camera::default(),
+        "the camera stayed"
+    );
+    let moved = project(
+        glam::Vec3::from(doc.clip_shapes[0].translation),
+        &doc.camera,
+    ) - centre_before;
+    // egui starts a drag after a few points of movement; those are not applied.
+    assert!(
+        moved.x > 25.0 && moved.x <= 40.5 && moved.y.abs() < 0.5,
+        "the sphere moved {moved:?} for a 40-point drag"
+    );
+
+    // The viewport clips exactly as an independent clipped render of the same scene.
+    h.state_mut().show_outlines = false;
+    h.run_steps(2);
+    let viewport = viewport_pixels(&mut h);
+    let frame = h.state().view_frame().expect("frame");
+    let vol = GpuVolume::new(
+        &twin,
+        &doc.volume,
+        &doc.view_tf(),
+        frame.settings.step_voxels,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let mut clip = ClipMaps::new(&twin).unwrap_or_else(|e| panic!("{e}"));
+    let reach = volao::ao::cao::reach_mm(doc.ao.samples, vol.texels.spacing);
+    clip.update(&twin, &doc.clip_shapes, doc.radius, reach, CLIP_MAPS)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let expected = RayCaster::new(&twin.device)
+        .and_then(|rc| rc.render_clipped(&twin, &vol, &frame, Some(&clip)))
+        .unwrap_or_else(|e| panic!("{e}"));
+    check(
+        "clipped_viewport",
+        &viewport,
+        &expected,
+        SAME_RENDERER,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let unclipped = RayCaster::new(&twin.device)
+        .and_then(|rc| rc.render(&twin, &vol, &frame))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_ne!(
+        viewport.pixels, unclipped.pixels,
+        "the sphere carved something"
+    );
+
+    // LAO with a clip shape runs as CAO: exact AO every frame, recomputing a share.
+    choose(&mut h, "Method", "lao");
+    settle(&mut h);
+    assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
+    let with_ao = viewport_pixels(&mut h);
+    assert_ne!(with_ao.pixels, viewport.pixels, "CAO shades the picture");
+    h.state_mut().document_mut().expect("doc").clip_shapes[0].translation[2] += 3.0;
+    settle(&mut h);
+    assert!(h.state().ao_ready());
+    let percent = h.state().cao_percent_recomputed().expect("CAO statistics");
+    assert!(percent > 0.0 && percent < 100.0, "{percent} % recomputed");
 }

@@ -54,6 +54,8 @@ pub struct AoStats {
     pub ao_device: Option<String>,
     /// Voxels whose AO the last frame recomputed, in percent (precomputed methods: 0).
     pub recomputed_percent: Option<f64>,
+    /// CAO's per-frame stage times.
+    pub stages: Option<String>,
     /// "computing…", "ready", an error.
     pub status: String,
 }
@@ -140,6 +142,9 @@ fn statistics(ui: &mut egui::Ui, stats: &AoStats) {
             (Some(s), None) => format!("{:.0} ms", s * 1e3),
             _ => "—".into(),
         });
+        ui.end_row();
+        ui.label("CAO stages");
+        ui.label(stats.stages.clone().unwrap_or_else(|| "—".into()));
         ui.end_row();
         ui.label("Voxels recomputed per frame");
         ui.label(

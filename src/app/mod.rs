@@ -12,6 +12,7 @@
 
 pub mod ao_panel;
 pub mod camera_input;
+pub mod clip_panel;
 pub mod jobs;
 pub mod screenshot;
 pub mod tf_editor;
@@ -114,6 +115,9 @@ pub struct ViewerOptions {
     pub screenshot_dir: PathBuf,
     /// Window size in points.
     pub window_size: [f32; 2],
+    /// Edge of the clip shapes' depth maps (rebuilt only when a shape's geometry
+    /// changes; moving a shape changes a matrix).
+    pub clip_resolution: u32,
 }
 
 impl Default for ViewerOptions {
@@ -125,6 +129,7 @@ impl Default for ViewerOptions {
             recent_file: default_recent_file(),
             screenshot_dir: std::env::current_dir().unwrap_or_else(|_| PathBuf::from(".")),
             window_size: [1280.0, 800.0],
+            clip_resolution: crate::clip::gpu::DEFAULT_RESOLUTION,
         }
     }
 }
@@ -164,8 +169,8 @@ pub struct Document {
     pub ao: AoSettings,
     /// Show the ambient term alone (white transfer-function colours, k = 1, no Phong).
     pub ao_only: bool,
-    /// Kept as the scene file had them (clipping lands with its own issue).
-    pub clip_shapes: Vec<serde_json::Value>,
+    /// Clip shapes with their poses and modes.
+    pub clip_shapes: Vec<crate::clip::ClipShape>,
     /// Bounding-sphere radius of the volume in mm (camera pan speed).
     pub radius: f32,
     /// How many times the volume was halved to fit the GPU.
@@ -213,7 +218,11 @@ impl Document {
             width: width.max(1),
             height: height.max(1),
             ambient_occlusion: self.ao,
-            clip_shapes: self.clip_shapes.clone(),
+            clip_shapes: self
+                .clip_shapes
+                .iter()
+                .filter_map(|c| serde_json::to_value(c).ok())
+                .collect(),
         }
     }
 }
@@ -287,6 +296,20 @@ pub fn load_document(
         None => TransferFunction::preset(Preset::default_for(&stats), &stats),
     };
     let render = scene.as_ref().map(|s| s.render).unwrap_or_default();
+    let clip_shapes = scene
+        .as_ref()
+        .map(|s| {
+            s.clip_shapes
+                .iter()
+                .enumerate()
+                .map(|(i, v)| {
+                    serde_json::from_value::<crate::clip::ClipShape>(v.clone())
+                        .map_err(|e| format!("clip shape {}: {e}", i + 1))
+                })
+                .collect::<Result<Vec<_>, _>>()
+        })
+        .transpose()?
+        .unwrap_or_default();
     let info = format!(
         "{info}, {} {}, {} × {} × {} mm",
         volume::fmt_dims(volume.dims),
@@ -341,7 +364,7 @@ pub fn load_document(
             .map(|s| s.ambient_occlusion)
             .unwrap_or_default(),
         ao_only: false,
-        clip_shapes: scene.map(|s| s.clip_shapes).unwrap_or_default(),
+        clip_shapes,
         radius,
         downsampled,
     };
@@ -356,6 +379,8 @@ pub fn load_document(
 #[derive(Debug, Clone, PartialEq)]
 struct AoKey {
     settings: AoSettings,
+    /// With clip shapes LAO runs as CAO (exact under clipping every frame).
+    clipping: bool,
     /// LAO depends on the transfer function's opacity only.
     opacity: Vec<crate::tf::OpacityPoint>,
     doc_generation: u64,
@@ -364,9 +389,16 @@ struct AoKey {
 /// A finished AO computation.
 #[derive(Debug)]
 struct AoResult {
-    values: Vec<f32>,
+    kind: AoData,
     device: String,
     seconds: f64,
+}
+
+/// A precomputed AO volume, or CAO with its `V_PAO` ready for per-frame updates.
+#[derive(Debug)]
+enum AoData {
+    Volume(Vec<f32>),
+    Cao(Box<crate::ao::cao::CaoGpu>),
 }
 
 #[derive(Debug)]
@@ -427,8 +459,15 @@ pub struct Viewer {
     uploaded_tf: Option<(TransferFunction, f32)>,
     ao_seconds: Option<(f64, String)>,
     tf_editor: tf_editor::TfEditor,
+    clip_editor: clip_panel::ClipEditor,
+    /// The shapes the GPU clips with (and CAO's V_AO was made for); `None`: out of date.
+    synced_clip: Option<Vec<crate::clip::ClipShape>>,
+    /// The last CAO frame's figures.
+    cao_stats: Option<crate::ao::cao::CaoStats>,
     shot_size: ShotSize,
     shot_transparent: bool,
+    /// Draw the clip shapes' outlines over the viewport.
+    pub show_outlines: bool,
     shot_request: Option<(PathBuf, ShotSize)>,
     pending_shot: Option<PendingShot>,
     write_job: Option<Job<(PathBuf, PathBuf)>>,
@@ -570,8 +609,12 @@ impl Viewer {
             uploaded_tf: None,
             ao_seconds: None,
             tf_editor: Default::default(),
+            clip_editor: Default::default(),
+            synced_clip: None,
+            cao_stats: None,
             shot_size: ShotSize::Window,
             shot_transparent: false,
+            show_outlines: true,
             shot_request: None,
             pending_shot: None,
             write_job: None,
@@ -643,6 +686,11 @@ impl Viewer {
             AoState::Failed { message, .. } => Some(message),
             _ => None,
         }
+    }
+
+    /// Voxels CAO recomputed in its last frame, in percent (`None` without CAO).
+    pub fn cao_percent_recomputed(&self) -> Option<f64> {
+        self.cao_stats.as_ref().map(|c| c.percent_recomputed())
     }
 
     pub fn toasts(&self) -> &[Toast] {
@@ -783,6 +831,7 @@ impl Viewer {
         let doc = self.doc.as_ref()?;
         (doc.ao.method != AoMethod::None).then(|| AoKey {
             settings: doc.ao,
+            clipping: !doc.clip_shapes.is_empty() && doc.ao.method == AoMethod::Lao,
             opacity: doc.tf.opacity.clone(),
             doc_generation: self.doc_generation,
         })
@@ -817,29 +866,36 @@ impl Viewer {
             let key = key.clone();
             self.ao_state = match result {
                 Ok(r) => {
-                    let expected = self
-                        .with_viewport(|v| {
-                            v.volume.as_ref().map(|g| g.texels.dims.iter().product())
-                        })
-                        .flatten()
-                        .unwrap_or(0usize);
-                    if r.values.len() != expected {
-                        AoState::Failed {
-                            key,
-                            message: "the AO volume does not match the uploaded volume (it was \
-                                      halved to fit the GPU); AO needs the full resolution"
-                                .into(),
-                        }
-                    } else {
-                        let gpu = Arc::clone(&self.gpu);
-                        self.with_viewport(|v| {
-                            if let Some(g) = &mut v.volume {
-                                g.set_ambient_occlusion(&gpu, &r.values);
+                    let gpu = Arc::clone(&self.gpu);
+                    let applied = self
+                        .with_viewport(|v| match (r.kind, &mut v.volume) {
+                            (AoData::Volume(values), Some(g)) => {
+                                if values.len() != g.texels.dims.iter().product::<usize>() {
+                                    return Err("the AO volume does not match the uploaded \
+                                                volume (it was halved to fit the GPU); AO \
+                                                needs the full resolution"
+                                        .to_owned());
+                                }
+                                g.set_ambient_occlusion(&gpu, &values);
+                                v.cao = None;
                                 v.touch();
+                                Ok(())
                             }
-                        });
-                        self.ao_seconds = Some((r.seconds, r.device));
-                        AoState::Ready { key }
+                            (AoData::Cao(cao), Some(_)) => {
+                                v.cao = Some(*cao);
+                                Ok(())
+                            }
+                            (_, None) => Err("no volume".to_owned()),
+                        })
+                        .unwrap_or_else(|| Err("no viewport".into()));
+                    match applied {
+                        Ok(()) => {
+                            // CAO's V_AO is made for the current shapes on the next sync.
+                            self.synced_clip = None;
+                            self.ao_seconds = Some((r.seconds, r.device));
+                            AoState::Ready { key }
+                        }
+                        Err(message) => AoState::Failed { key, message },
                     }
                 }
                 Err(JobError::Cancelled) => AoState::Off,
@@ -864,11 +920,13 @@ impl Viewer {
         if had_ao {
             let gpu = Arc::clone(&self.gpu);
             self.with_viewport(|v| {
+                v.cao = None;
                 if let Some(g) = &mut v.volume {
                     g.clear_ambient_occlusion(&gpu);
                     v.touch();
                 }
             });
+            self.synced_clip = None;
         }
         let Some(key) = want else {
             return;
@@ -884,25 +942,58 @@ impl Viewer {
         let volume = Arc::clone(&doc.volume);
         let tf = doc.tf.clone();
         let settings = doc.ao;
+        let step = doc.render.step_voxels;
         let label = format!(
-            "Ambient occlusion ({})",
-            ao_panel::method_name(settings.method)
+            "Ambient occlusion ({}{})",
+            ao_panel::method_name(settings.method),
+            if key.clipping { ", CAO" } else { "" }
         );
-        let job = Job::spawn(label, self.repaint_fn(), move |p| {
-            let start = Instant::now();
-            let (ao, device) = crate::ao::compute_volume(&volume, &tf, &settings, true, &|d, t| {
-                p.set(d as u64, t as u64)
+        let job = if key.clipping {
+            // CAO precomputes V_PAO on its own copy of the uploaded texels.
+            let texels = self
+                .with_viewport(|v| v.volume.as_ref().map(|g| g.texels.clone()))
+                .flatten();
+            let gpu = Arc::clone(&self.gpu);
+            Job::spawn(label, self.repaint_fn(), move |p| {
+                let start = Instant::now();
+                let texels = texels.ok_or("no volume uploaded")?;
+                let vol =
+                    GpuVolume::from_texels(&gpu, texels, &tf, step).map_err(|e| e.to_string())?;
+                let rays = crate::ao::lao::Rays::uniform(settings.rays.directions());
+                let cao = crate::ao::cao::CaoGpu::new(
+                    &gpu,
+                    &vol,
+                    &tf,
+                    &rays,
+                    settings.samples,
+                    crate::ao::cao::DEFAULT_MSAA,
+                    &|d, t| p.set(d as u64, t as u64),
+                )
+                .map_err(|e| e.to_string())?;
+                Ok(AoResult {
+                    kind: AoData::Cao(Box::new(cao)),
+                    device: gpu.describe(),
+                    seconds: start.elapsed().as_secs_f64(),
+                })
             })
-            .map_err(|e| e.to_string())?;
-            let volume::VoxelData::F32(values) = ao.data else {
-                return Err("the AO volume came back in an unexpected voxel type".into());
-            };
-            Ok(AoResult {
-                values,
-                device,
-                seconds: start.elapsed().as_secs_f64(),
+        } else {
+            Job::spawn(label, self.repaint_fn(), move |p| {
+                let start = Instant::now();
+                let (ao, device) =
+                    crate::ao::compute_volume(&volume, &tf, &settings, true, &|d, t| {
+                        p.set(d as u64, t as u64)
+                    })
+                    .map_err(|e| e.to_string())?;
+                let volume::VoxelData::F32(values) = ao.data else {
+                    return Err("the AO volume came back in an unexpected voxel type".into());
+                };
+                Ok(AoResult {
+                    kind: AoData::Volume(values),
+                    device,
+                    seconds: start.elapsed().as_secs_f64(),
+                })
             })
-        });
+        };
         self.ao_state = AoState::Computing { key, job };
     }
 
@@ -927,6 +1018,73 @@ impl Viewer {
             }
         });
         self.uploaded_tf = Some(want);
+    }
+
+    /// Brings the GPU's clipping up to date with the shapes: CAO's per-frame update (the
+    /// AO stays exact while a shape moves) or, without CAO, the clip maps alone.
+    fn sync_clip(&mut self) {
+        let Some(doc) = &self.doc else {
+            return;
+        };
+        if self.synced_clip.as_ref() == Some(&doc.clip_shapes) {
+            return;
+        }
+        let shapes = doc.clip_shapes.clone();
+        let (radius, samples) = (doc.radius, doc.ao.samples);
+        let gpu = Arc::clone(&self.gpu);
+        let resolution = self.options.clip_resolution;
+        let result = self
+            .with_viewport(|v| -> Result<Option<crate::ao::cao::CaoStats>, String> {
+                let Some(vol) = &mut v.volume else {
+                    return Ok(None);
+                };
+                let out = if let Some(cao) = &mut v.cao {
+                    let reach = cao.reach_mm(&vol.texels);
+                    let stats = cao
+                        .update(
+                            &gpu,
+                            &vol.texels,
+                            &shapes,
+                            resolution,
+                            reach,
+                            crate::ao::cao::CaoMode::Selective,
+                        )
+                        .map_err(|e| e.to_string())?;
+                    vol.set_ambient_occlusion_view(cao.ao_view());
+                    Some(stats)
+                } else if shapes.is_empty() {
+                    v.clip = None;
+                    None
+                } else {
+                    if v.clip.is_none() {
+                        v.clip =
+                            Some(crate::clip::gpu::ClipMaps::new(&gpu).map_err(|e| e.to_string())?);
+                    }
+                    let reach = crate::ao::cao::reach_mm(samples, vol.texels.spacing);
+                    if let Some(clip) = &mut v.clip {
+                        let report = clip
+                            .update(&gpu, &shapes, radius, reach, resolution)
+                            .map_err(|e| e.to_string())?;
+                        if let Some(e) = report.errors.first() {
+                            return Err(e.to_string());
+                        }
+                    }
+                    None
+                };
+                v.touch();
+                Ok(out)
+            })
+            .unwrap_or(Ok(None));
+        self.synced_clip = Some(shapes);
+        match result {
+            Ok(stats) => {
+                if let Some(e) = stats.as_ref().and_then(|s| s.clip_errors.first()) {
+                    self.toast(format!("Clip shape left out: {e}"), true);
+                }
+                self.cao_stats = stats;
+            }
+            Err(e) => self.toast(format!("Clipping failed: {e}"), true),
+        }
     }
 
     fn with_viewport<R>(&self, f: impl FnOnce(&mut ViewportGpu) -> R) -> Option<R> {
@@ -1094,6 +1252,7 @@ impl Viewer {
         self.handle_input(ui);
         self.update_ao();
         self.sync_transfer_function();
+        self.sync_clip();
         self.update_screenshots();
         let errors: Vec<String> = self
             .gpu_errors
@@ -1342,14 +1501,12 @@ impl Viewer {
                 }
             });
         });
-        if !doc.clip_shapes.is_empty() {
-            egui::CollapsingHeader::new("Clipping").show(ui, |ui| {
-                ui.weak(format!(
-                    "{} clip shape(s) from the scene, kept as written (clipping is not in this build yet)",
-                    doc.clip_shapes.len()
-                ));
+        let radius = doc.radius;
+        egui::CollapsingHeader::new("Clipping")
+            .default_open(true)
+            .show(ui, |ui| {
+                self.clip_editor.panel(ui, &mut doc.clip_shapes, radius);
             });
-        }
         egui::CollapsingHeader::new("Screenshot")
             .default_open(true)
             .show(ui, |ui| {
@@ -1433,8 +1590,24 @@ impl Viewer {
             frames,
             ao_seconds: self.ao_seconds.as_ref().map(|(s, _)| *s),
             ao_device: self.ao_seconds.as_ref().map(|(_, d)| d.clone()),
-            // Precomputed AO: a frame recomputes no voxel (CAO reports its own share).
-            recomputed_percent: matches!(self.ao_state, AoState::Ready { .. }).then_some(0.0),
+            // Precomputed AO: a frame recomputes no voxel; CAO reports its own share.
+            recomputed_percent: match (&self.ao_state, &self.cao_stats) {
+                (AoState::Ready { key }, Some(c)) if key.clipping => Some(c.percent_recomputed()),
+                (AoState::Ready { .. }, _) => Some(0.0),
+                _ => None,
+            },
+            stages: self
+                .cao_stats
+                .as_ref()
+                .filter(|_| self.ao_key().is_some_and(|k| k.clipping))
+                .map(|c| {
+                    format!(
+                        "maps {:.0} ms, clip {:.0} ms, LAO {:.0} ms",
+                        c.maps_seconds * 1e3,
+                        c.clip_seconds * 1e3,
+                        c.lao_seconds * 1e3
+                    )
+                }),
             status,
         }
     }
@@ -1502,7 +1675,12 @@ impl Viewer {
             ui.put(rect, egui::Spinner::new().size(32.0));
             return;
         };
-        camera_input::handle(ui, &response, &mut doc.camera, doc.radius);
+        let used =
+            self.clip_editor
+                .handle(ui, &response, &doc.camera, doc.radius, &mut doc.clip_shapes);
+        if !used {
+            camera_input::handle(ui, &response, &mut doc.camera, doc.radius);
+        }
         let frame = Frame {
             camera: doc.camera,
             settings: doc.view_settings(),
@@ -1513,6 +1691,15 @@ impl Viewer {
             rect,
             ViewportCallback { frame, rect },
         ));
+        if self.show_outlines {
+            self.clip_editor.paint(
+                &ui.painter().with_clip_rect(rect),
+                rect,
+                &doc.camera,
+                doc.radius,
+                &doc.clip_shapes,
+            );
+        }
         if hovering_files {
             ui.painter()
                 .rect_filled(rect, 0.0, egui::Color32::from_black_alpha(160));
