@@ -23,8 +23,11 @@ pub struct ClipEditor {
     drag: Option<usize>,
 }
 
+/// Makes a fresh shape of one kind.
+pub type MakeShape = fn() -> Shape;
+
 /// The shapes a user can add, with the button label.
-pub const KINDS: [(&str, fn() -> Shape); 5] = [
+pub const KINDS: [(&str, MakeShape); 5] = [
     ("Plane", || Shape::Plane),
     ("Sphere", || Shape::Sphere),
     ("Box", || Shape::Box),
