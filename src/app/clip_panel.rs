@@ -444,7 +444,8 @@ mod tests {
         // The sphere's silhouette circle (xz plane, facing the anterior view) at +x.
         let edge = project(&camera, 100.0, rect, Vec3::X * 20.0).expect("front");
         assert!(distance_to_outline(&s, &camera, 100.0, rect, edge) < 0.5);
-        let centre = project(&camera, 100.0, rect, Vec3::ZERO).expect("front");
-        assert!(distance_to_outline(&s, &camera, 100.0, rect, centre) > PICK);
+        // Beyond the silhouette, diagonally, nothing is hit.
+        let outside = project(&camera, 100.0, rect, Vec3::new(30.0, 0.0, 30.0)).expect("front");
+        assert!(distance_to_outline(&s, &camera, 100.0, rect, outside) > PICK);
     }
 }

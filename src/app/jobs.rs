@@ -195,6 +195,7 @@ mod tests {
             "endless",
             || {},
             move |p| {
+                p.set(1, 10);
                 let _ = started_tx.send(());
                 loop {
                     p.set(1, 10);
