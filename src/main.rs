@@ -65,6 +65,10 @@ struct ViewArgs {
     /// Close after this many frames showing the volume (with its ambient occlusion).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     exit_after_frames: Option<u64>,
+    /// (benchmark) Show only the viewport; once AO is ready move the scene's first clip
+    /// shape 1 mm per frame for N frames and print the frame times.
+    #[arg(long, hide = true, value_name = "N")]
+    bench_clip_drag: Option<u64>,
     /// Window size in points, e.g. 1280x800.
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     size: Option<[f32; 2]>,
@@ -401,13 +405,14 @@ fn view(args: &ViewArgs) -> Result<()> {
         open,
         screenshot: args.screenshot.clone(),
         exit_after_frames: args.exit_after_frames,
+        bench_clip_drag: args.bench_clip_drag,
         ..Default::default()
     };
     if let Some(size) = args.size {
         options.window_size = size;
     }
     // A scripted run must not touch the user's recent-files list.
-    if args.exit_after_frames.is_some() {
+    if args.exit_after_frames.is_some() || args.bench_clip_drag.is_some() {
         options.recent_file = None;
     }
     volao::app::run(options)?;

@@ -118,6 +118,10 @@ pub struct ViewerOptions {
     /// Edge of the clip shapes' depth maps (rebuilt only when a shape's geometry
     /// changes; moving a shape changes a matrix).
     pub clip_resolution: u32,
+    /// Benchmark (`volao view --bench-clip-drag N`): the viewport alone fills the window;
+    /// once AO is ready, the first clip shape moves 1 mm every frame for N frames, then the
+    /// frame times are printed and the viewer closes.
+    pub bench_clip_drag: Option<u64>,
 }
 
 impl Default for ViewerOptions {
@@ -130,6 +134,7 @@ impl Default for ViewerOptions {
             screenshot_dir: std::env::current_dir().unwrap_or_else(|_| PathBuf::from(".")),
             window_size: [1280.0, 800.0],
             clip_resolution: crate::clip::gpu::DEFAULT_RESOLUTION,
+            bench_clip_drag: None,
         }
     }
 }
@@ -491,6 +496,9 @@ pub struct Viewer {
     /// Set when a `--screenshot` could not be written (the process exits non-zero).
     pub exit_error: Arc<Mutex<Option<String>>>,
     last_title: String,
+    /// Frame times (s) and CAO shares (%) of `--bench-clip-drag`.
+    bench: Vec<(f64, f64)>,
+    bench_last: Option<Instant>,
 }
 
 impl std::fmt::Debug for Viewer {
@@ -632,6 +640,8 @@ impl Viewer {
             exit_requested: false,
             exit_error: Arc::default(),
             last_title: String::new(),
+            bench: Vec::new(),
+            bench_last: None,
             options: options.clone(),
         };
         viewer.start_load(options.open);
@@ -820,7 +830,10 @@ impl Viewer {
                     ""
                 };
                 self.toast(format!("Could not open: {e}{what}"), true);
-                if self.doc.is_none() && self.options.exit_after_frames.is_some() {
+                if self.doc.is_none()
+                    && (self.options.exit_after_frames.is_some()
+                        || self.options.bench_clip_drag.is_some())
+                {
                     self.fail_exit(format!("could not open: {e}"));
                 }
             }
@@ -1263,6 +1276,11 @@ impl Viewer {
             self.toast(format!("GPU error: {e}"), true);
         }
 
+        if self.options.bench_clip_drag.is_some() {
+            egui::CentralPanel::no_frame().show(ui, |ui| self.viewport(ui));
+            self.bench_step(ui.ctx());
+            return;
+        }
         egui::Panel::top("menu").show(ui, |ui| self.menu_bar(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status_bar(ui));
         egui::Panel::left("controls")
@@ -1724,6 +1742,61 @@ impl Viewer {
                 });
             }
             self.frames_seen = frames;
+        }
+    }
+
+    /// One frame of `--bench-clip-drag`: time since the last frame, then move the shape.
+    fn bench_step(&mut self, ctx: &egui::Context) {
+        let Some(n) = self.options.bench_clip_drag else {
+            return;
+        };
+        ctx.request_repaint();
+        if let Some(e) = self.ao_error() {
+            let message = format!("ambient occlusion failed: {e}");
+            self.fail_exit(message);
+        }
+        if self.exit_requested {
+            self.quit_confirmed = true;
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            return;
+        }
+        if self.load_job.is_some() || !self.ao_ready() {
+            return;
+        }
+        let now = Instant::now();
+        if let Some(last) = self.bench_last {
+            let share = self.cao_percent_recomputed().unwrap_or(0.0);
+            self.bench.push(((now - last).as_secs_f64(), share));
+        }
+        self.bench_last = Some(now);
+        if self.bench.len() as u64 >= n {
+            let mut t: Vec<f64> = self.bench.iter().map(|b| b.0).collect();
+            t.sort_by(f64::total_cmp);
+            let mean = t.iter().sum::<f64>() / t.len() as f64;
+            let share = self.bench.iter().map(|b| b.1).sum::<f64>() / t.len() as f64;
+            println!(
+                "viewport {}×{}: {} frames dragging a clip shape, mean {:.0} ms, median {:.0} ms, \
+                 min {:.0} ms; CAO recomputed {:.2} % of voxels per frame; {}",
+                self.viewport_px.0,
+                self.viewport_px.1,
+                t.len(),
+                mean * 1e3,
+                t[t.len() / 2] * 1e3,
+                t[0] * 1e3,
+                share,
+                self.gpu.describe()
+            );
+            self.exit_requested = true;
+            return;
+        }
+        if let Some(doc) = &mut self.doc
+            && let Some(s) = doc.clip_shapes.first_mut()
+        {
+            // Back and forth by 1 mm, as a slow drag.
+            let dir = if (self.bench.len() / 8) % 2 == 0 { 1.0 } else { -1.0 };
+            s.translation[0] += dir;
+        } else {
+            self.fail_exit("--bench-clip-drag needs a scene with a clip shape".into());
         }
     }
 
