@@ -69,6 +69,10 @@ struct ViewArgs {
     /// shape 1 mm per frame for N frames and print the frame times.
     #[arg(long, hide = true, value_name = "N")]
     bench_clip_drag: Option<u64>,
+    /// Edge of the clip shapes' depth maps (default 1024; smaller builds faster on a CPU
+    /// driver).
+    #[arg(long, value_name = "PIXELS", value_parser = clap::value_parser!(u32).range(16..=8192))]
+    clip_maps: Option<u32>,
     /// Window size in points, e.g. 1280x800.
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     size: Option<[f32; 2]>,
@@ -410,6 +414,9 @@ fn view(args: &ViewArgs) -> Result<()> {
     };
     if let Some(size) = args.size {
         options.window_size = size;
+    }
+    if let Some(n) = args.clip_maps {
+        options.clip_resolution = n;
     }
     // A scripted run must not touch the user's recent-files list.
     if args.exit_after_frames.is_some() || args.bench_clip_drag.is_some() {
