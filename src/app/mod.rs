@@ -1797,7 +1797,7 @@ impl Viewer {
             && let Some(s) = doc.clip_shapes.first_mut()
         {
             // Back and forth by 1 mm, as a slow drag.
-            let dir = if (self.bench.len() / 8) % 2 == 0 {
+            let dir = if (self.bench.len() / 8).is_multiple_of(2) {
                 1.0
             } else {
                 -1.0
