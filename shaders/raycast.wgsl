@@ -2,6 +2,7 @@
 // CPU twin: src/render/cpu.rs (same steps, same order; keep them in sync).
 //!include common.wgsl
 //!include clip_common.wgsl
+//!include vao_common.wgsl
 
 struct Params {
     inv_view_proj: mat4x4<f32>,
@@ -22,8 +23,36 @@ struct Params {
 @group(0) @binding(4) var ambient_occlusion: texture_3d<f32>;
 @group(0) @binding(5) var occupancy: texture_3d<u32>;
 @group(0) @binding(6) var out_image: texture_storage_2d<rgba8unorm, write>;
+// min(σ²/σ²_max, 1) per voxel (Ruiz et al. §4.2); a single texel of 1 when off.
+@group(0) @binding(7) var opacity_modulation: texture_3d<f32>;
+
+// Group 2 (src/render/shadow.rs): live positional AO (vao_common.wgsl, bindings 0–4)
+// and the light volume for shadows.
+struct Extras {
+    flags: vec4<u32>,  // live positional AO on, shadows on
+    light: vec4<f32>,  // unit direction towards the light (volume space)
+}
+
+@group(2) @binding(5) var<uniform> extras: Extras;
+@group(2) @binding(6) var light_volume: texture_3d<f32>;
+@group(2) @binding(7) var surface_position: texture_2d<f32>;  // nearest surface, w = covered
+@group(2) @binding(8) var surface_color: texture_2d<f32>;     // its shaded straight RGBA
+
+// Front-to-back "over" of straight colour `c` with opacity `a` behind `acc`.
+fn over(acc: vec4<f32>, rgb: vec3<f32>, a: f32) -> vec4<f32> {
+    return vec4<f32>(acc.rgb + (1.0 - acc.a) * a * rgb, acc.a + (1.0 - acc.a) * a);
+}
 
 const OPAQUE: f32 = 0.99;
+
+// Shadow factor at a view-ray sample, anti-aliased as Imagire et al. (Eq. 3–4): the light
+// volume at the sample and at the half-step positions on either side, weighted ¼, ½, ¼.
+fn shadow(uvw: vec3<f32>, view: vec3<f32>) -> f32 {
+    let half_step = -view * (0.5 * p.step.x) / (2.0 * p.box_half.xyz);
+    return 0.25 * textureSampleLevel(light_volume, linear_clamp, uvw - half_step, 0.0).r
+        + 0.5 * textureSampleLevel(light_volume, linear_clamp, uvw, 0.0).r
+        + 0.25 * textureSampleLevel(light_volume, linear_clamp, uvw + half_step, 0.0).r;
+}
 
 // PCG hash of the pixel → [0, 1); identical to render::jitter.
 fn jitter(x: u32, y: u32) -> f32 {
@@ -59,9 +88,17 @@ fn sample_norm(uvw: vec3<f32>) -> f32 {
 // Blinn–Phong headlight with the ambient term k · A(x) · C_TF(x).
 fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
     let k = p.shading.x;
-    let ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
+    var ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
+    if extras.flags.x != 0u {
+        ao = 1.0 - positional_ao(uvw);  // live mode: Eq. 8 at this very sample
+    }
+    let shadows = extras.flags.y != 0u;
+    var lit = 1.0;
+    if shadows {
+        lit = shadow(uvw, view);
+    }
     if p.shading.w == 0.0 {
-        return rgb * (k * ao + (1.0 - k));
+        return rgb * (k * ao + (1.0 - k) * lit);
     }
     let d = p.voxel_uvw.xyz;
     // Central differences in texel units per mm.
@@ -75,13 +112,21 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
     let edge = clamp(strength, 0.0, 1.0);
     var diffuse = 1.0;
     var specular = 0.0;
-    if strength > 0.0 {
+    if strength > 0.0 && shadows {
+        // Directional light: two-sided Blinn–Phong with the half vector of light and eye.
+        let n = normalize(g);
+        diffuse = mix(1.0, abs(dot(n, extras.light.xyz)), edge);
+        let h = extras.light.xyz + view;
+        if dot(h, h) > 1e-12 {
+            specular = p.shading.y * pow(abs(dot(n, normalize(h))), p.shading.z) * edge;
+        }
+    } else if strength > 0.0 {
         // Headlight: the light comes from the eye, so the half vector is the view vector.
         let n_dot_v = abs(dot(normalize(g), view));
         diffuse = mix(1.0, n_dot_v, edge);
         specular = p.shading.y * pow(n_dot_v, p.shading.z) * edge;
     }
-    return rgb * (k * ao + (1.0 - k) * diffuse) + vec3<f32>(specular);
+    return rgb * (k * ao + (1.0 - k) * diffuse * lit) + vec3<f32>(specular * lit);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -106,6 +151,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t_exit = hit.y;
     let dt = p.step.x;
     var acc = vec4<f32>(0.0);
+    // A surface inside the view (render::surface): the valid sampling path ends there.
+    var pending = false;
+    var t_surf = 0.0;
+    var surf = vec4<f32>(0.0);
+    if extras.flags.z != 0u {
+        let sp = textureLoad(surface_position, vec2<u32>(px, py), 0);
+        if sp.w > 0.0 {
+            pending = true;
+            t_surf = dot(sp.xyz - origin, dir);
+            surf = textureLoad(surface_color, vec2<u32>(px, py), 0);
+        }
+    }
     if t_exit > t_enter {
         var offset = 0.0;
         if p.step.y != 0.0 {
@@ -119,6 +176,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 break;
             }
             let t = t_enter + (f32(k) + offset) * dt;
+            if pending && t_surf <= t {
+                // The surface lies before this sample in transparent space (or before the
+                // first one): composite it here.
+                acc = over(acc, surf.rgb, surf.a);
+                pending = false;
+                if surf.a >= 1.0 {
+                    break;
+                }
+            }
             if t >= t_exit {
                 break;
             }
@@ -144,19 +210,37 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let norm = sample_norm(uvw);
             var rgba = classify(norm);
             if rgba.a > 0.0 {
+                rgba.a = rgba.a * textureSampleLevel(opacity_modulation, linear_clamp, uvw, 0.0).r;
                 // The last step ends at the box exit: correct its opacity for its length.
                 let len = min(dt, t_exit - t);
-                if len < dt {
-                    rgba.a = 1.0 - pow(1.0 - rgba.a, len / dt);
-                }
                 let rgb = shade(rgba.rgb, uvw, -dir);
-                acc = vec4<f32>(acc.rgb + (1.0 - acc.a) * rgba.a * rgb, acc.a + (1.0 - acc.a) * rgba.a);
+                if pending && t_surf < t + len {
+                    // The surface cuts this step: the part before it, the surface, then
+                    // (if it is translucent) the part behind it, each for its true length.
+                    let before = max(t_surf - t, 0.0);
+                    acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, before / dt));
+                    acc = over(acc, surf.rgb, surf.a);
+                    pending = false;
+                    if surf.a >= 1.0 {
+                        break;
+                    }
+                    acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, (len - before) / dt));
+                } else {
+                    if len < dt {
+                        rgba.a = 1.0 - pow(1.0 - rgba.a, len / dt);
+                    }
+                    acc = vec4<f32>(acc.rgb + (1.0 - acc.a) * rgba.a * rgb, acc.a + (1.0 - acc.a) * rgba.a);
+                }
                 if acc.a > OPAQUE {
                     break;
                 }
             }
             k = k + 1u;
         }
+    }
+    if pending {
+        // Behind the volume (or the ray missed the box).
+        acc = over(acc, surf.rgb, surf.a);
     }
     let bg = p.background;
     let alpha = acc.a + (1.0 - acc.a) * bg.a;

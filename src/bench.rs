@@ -1,5 +1,7 @@
 //! `volao bench …`: measurements recorded in `docs/benchmarks.md`, never asserted in tests.
 
+pub mod raymarch;
+
 use crate::volume::{self, LoadOptions, fmt_bytes};
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};

@@ -140,7 +140,9 @@ struct RenderArgs {
     /// Ambient coefficient k of k·A(x)·C_TF(x), 0 to 1 (1: ambient occlusion only).
     #[arg(long)]
     ambient: Option<f32>,
-    /// Ambient occlusion: none or lao.
+    /// Ambient occlusion: none, lao, cao (exact under clipping), lao-full (LAO of every
+    /// voxel each frame, CAO's baseline), vao / vao-live (positional AO, precomputed or
+    /// at every sample), cdf, gauss, penner (filter maps) or cone (cone-traced).
     #[arg(long, value_parser = volao::ao::AoMethod::parse)]
     ao: Option<volao::ao::AoMethod>,
     /// AO ray pattern: 6, 14, 26, 54 (the CAO paper's) or fib:N (Fibonacci lattice).
@@ -149,6 +151,30 @@ struct RenderArgs {
     /// AO samples per ray (1 mm apart).
     #[arg(long)]
     samples: Option<u32>,
+    #[command(flatten)]
+    clip: ClipArgs,
+    #[command(flatten)]
+    vao: VaoArgs,
+    /// Volumetric shadows from a directional light (see --light).
+    #[arg(long)]
+    shadows: bool,
+    /// Directional light: the direction towards the light in volume space (RAS: x to the
+    /// patient's left, y anterior, z superior), e.g. -0.5,0.6,0.62.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_light, allow_hyphen_values = true)]
+    light: Option<[f32; 3]>,
+    /// Draw a Wavefront OBJ mesh inside the volume (repeatable). Coordinates in mm, in the
+    /// volume's RAS frame with the origin at the volume's centre.
+    #[arg(long, value_name = "FILE.obj")]
+    mesh: Vec<PathBuf>,
+    /// Colour of the meshes: straight R,G,B,A in 0…1 (A < 1: translucent).
+    #[arg(long, value_name = "R,G,B,A", value_parser = parse_rgba, default_value = "0.9,0.9,0.9,1")]
+    mesh_rgba: [f32; 4],
+    #[command(flatten)]
+    fast_ao: FastAoArgs,
+    /// Opacity modulation by local variance: α · min(σ²/σ²_max, 1) (Ruiz et al. §4.2),
+    /// σ² of the normalised density in a box of radius RADIUS voxels (default 10).
+    #[arg(long, value_name = "SIGMA2_MAX[,RADIUS]", value_parser = parse_modulation)]
+    opacity_modulation: Option<volao::ao::filter::OpacityModulation>,
     /// Render on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
@@ -157,6 +183,72 @@ struct RenderArgs {
     save_scene: Option<PathBuf>,
     #[command(flatten)]
     load: LoadArgs,
+}
+
+/// Flags of the filter-map and cone-traced AO methods (`volao render` and `volao ao`).
+#[derive(Args, Debug)]
+struct FastAoArgs {
+    /// Filter maps (cdf, gauss, penner): box radius r, side 2r + 1 (default 10 voxels).
+    #[arg(long)]
+    radius: Option<f32>,
+    /// The radius is in mm (rounded to voxels per axis) instead of voxels.
+    #[arg(long)]
+    radius_mm: bool,
+    /// Filter maps: statistics of the density (the paper) or of the TF opacity.
+    #[arg(long, value_parser = volao::ao::filter::StatisticSource::parse)]
+    statistic: Option<volao::ao::filter::StatisticSource>,
+    /// Cone tracing: 6, 14 or 26 cones (default 6).
+    #[arg(long, value_parser = volao::ao::cone::ConeSet::parse)]
+    cones: Option<volao::ao::cone::ConeSet>,
+    /// Cone tracing: low, medium or high = 3, 5 or 7 spheres per cone (default medium).
+    #[arg(long, value_parser = volao::ao::cone::ConePreset::parse)]
+    cone_preset: Option<volao::ao::cone::ConePreset>,
+}
+
+impl FastAoArgs {
+    fn apply(&self, ao: &mut volao::ao::AoSettings) -> Result<()> {
+        if let Some(r) = self.radius {
+            if !r.is_finite() || !(0.0..=1000.0).contains(&r) {
+                bail!("--radius must be between 0 and 1000");
+            }
+            ao.radius = r;
+        }
+        if self.radius_mm {
+            ao.radius_unit = volao::ao::filter::RadiusUnit::Mm;
+        }
+        if let Some(s) = self.statistic {
+            ao.statistic = s;
+        }
+        if let Some(c) = self.cones {
+            ao.cones = c;
+        }
+        if let Some(p) = self.cone_preset {
+            ao.cone_preset = p;
+        }
+        Ok(())
+    }
+}
+
+fn parse_modulation(s: &str) -> Result<volao::ao::filter::OpacityModulation, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    let mut m = volao::ao::filter::OpacityModulation::default();
+    match v.as_slice() {
+        [s2] if *s2 > 0.0 && s2.is_finite() => m.sigma2_max = *s2,
+        [s2, r] if *s2 > 0.0 && s2.is_finite() && (0.0..=1000.0).contains(r) => {
+            m.sigma2_max = *s2;
+            m.radius = *r;
+        }
+        _ => {
+            return Err(format!(
+                "{s:?}: expected SIGMA2_MAX[,RADIUS] with σ²_max > 0 and a radius of 0 to 1000 voxels, e.g. 0.001,10"
+            ));
+        }
+    }
+    Ok(m)
 }
 
 fn parse_camera(s: &str) -> Result<[f32; 3], String> {
@@ -169,6 +261,93 @@ fn parse_camera(s: &str) -> Result<[f32; 3], String> {
         [a, e, d] if v.iter().all(|x| x.is_finite()) => Ok([*a, *e, *d]),
         _ => Err(format!(
             "{s:?}: expected three numbers AZIMUTH,ELEVATION,DISTANCE, e.g. 30,20,3.2"
+        )),
+    }
+}
+
+/// Positional AO (`--ao vao`, `vao-live`) parameters; unset flags keep the scene's or the
+/// defaults.
+#[derive(Args, Debug, Default)]
+struct VaoArgs {
+    /// Positional AO: rays over the sphere, N_dir (default 20).
+    #[arg(long)]
+    vao_directions: Option<u32>,
+    /// Positional AO: stratified samples per ray, N_samples (default 8).
+    #[arg(long)]
+    vao_samples: Option<u32>,
+    /// Positional AO: ray length r_max in mm (default 20).
+    #[arg(long, value_name = "MM")]
+    vao_radius: Option<f32>,
+    /// Positional AO: an accepted sample at least this opaque stops a ray (default 0.95).
+    #[arg(long)]
+    vao_threshold: Option<f32>,
+    /// Positional AO, isosurface variant: occluded where a sample lies within TOL of
+    /// VALUE (data units).
+    #[arg(long, value_name = "VALUE,TOL", value_parser = parse_iso, allow_hyphen_values = true)]
+    vao_iso: Option<(f64, f64)>,
+}
+
+impl VaoArgs {
+    /// Applies the flags to `s` and checks the result.
+    fn apply(&self, s: &mut volao::ao::vao::VaoSettings) -> Result<()> {
+        if let Some(n) = self.vao_directions {
+            s.directions = n;
+        }
+        if let Some(n) = self.vao_samples {
+            s.samples = n;
+        }
+        if let Some(r) = self.vao_radius {
+            s.r_max_mm = r;
+        }
+        if let Some(t) = self.vao_threshold {
+            s.v_thres = t;
+        }
+        if let Some((value, tolerance)) = self.vao_iso {
+            s.isosurface = Some(volao::ao::vao::Isosurface { value, tolerance });
+        }
+        s.validate()?;
+        Ok(())
+    }
+}
+
+fn parse_iso(s: &str) -> Result<(f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    match v.as_slice() {
+        [value, tol] if value.is_finite() && tol.is_finite() && *tol > 0.0 => Ok((*value, *tol)),
+        _ => Err(format!(
+            "{s:?}: expected VALUE,TOL with a positive tolerance, e.g. 300,50"
+        )),
+    }
+}
+
+fn parse_rgba(s: &str) -> Result<[f32; 4], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    match v.as_slice() {
+        [r, g, b, a] if v.iter().all(|x| (0.0..=1.0).contains(x)) => Ok([*r, *g, *b, *a]),
+        _ => Err(format!(
+            "{s:?}: expected four numbers from 0 to 1, R,G,B,A, e.g. 1,0.8,0.2,1"
+        )),
+    }
+}
+
+fn parse_light(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    match v.as_slice() {
+        [x, y, z] => volao::render::shadow::light_direction([*x, *y, *z]).map(|d| d.to_array()),
+        _ => Err(format!(
+            "{s:?}: expected three numbers X,Y,Z, e.g. -0.5,0.6,0.62"
         )),
     }
 }
@@ -224,8 +403,9 @@ struct AoArgs {
     /// Output volume (.nii.gz, .nii or .raw), f32 values in [0, 1].
     #[arg(short, long)]
     output: PathBuf,
-    /// AO method.
-    #[arg(long, default_value = "lao", value_parser = volao::ao::AoMethod::parse)]
+    /// AO method: lao, cao, lao-full (with --clip), vao (positional AO; vao-live gives the
+    /// same volume), cdf, gauss, penner or cone.
+    #[arg(long, alias = "ao", default_value = "lao", value_parser = volao::ao::AoMethod::parse)]
     method: volao::ao::AoMethod,
     /// Ray pattern: 6, 14, 26, 54 or fib:N.
     #[arg(long, default_value = "54", value_parser = parse_rays)]
@@ -236,11 +416,85 @@ struct AoArgs {
     /// Transfer-function preset giving the opacity (default: by the data's range).
     #[arg(long)]
     tf: Option<String>,
+    #[command(flatten)]
+    clip: ClipArgs,
+    #[command(flatten)]
+    vao: VaoArgs,
+    #[command(flatten)]
+    fast_ao: FastAoArgs,
     /// Compute on the CPU twin instead of the GPU.
     #[arg(long)]
     cpu: bool,
     #[command(flatten)]
     load: LoadArgs,
+}
+
+/// Clip shapes and CAO parameters.
+#[derive(Args, Debug, Default)]
+struct ClipArgs {
+    /// A clip shape (repeatable, up to 8), lengths in mm from the volume's centre:
+    /// plane:PX,PY,PZ,NX,NY,NZ (removes the side the normal points to),
+    /// sphere:CX,CY,CZ,R, box:CX,CY,CZ,SX,SY,SZ[,RX,RY,RZ], cylinder:CX,CY,CZ,R,H[,RX,RY,RZ],
+    /// torus:CX,CY,CZ,R,r[,RX,RY,RZ], mesh:FILE.obj|stl[,CX,CY,CZ[,SCALE]]. Replaces a scene's shapes.
+    #[arg(long = "clip", value_name = "SHAPE", value_parser = volao::clip::ClipShape::parse)]
+    shapes: Vec<volao::clip::ClipShape>,
+    /// carve (remove the inside, default) or probe (keep only the inside) for --clip shapes.
+    #[arg(long, value_parser = volao::clip::ClipMode::parse)]
+    clip_mode: Option<volao::clip::ClipMode>,
+    /// CAO: extra anti-aliasing samples for partly clipped voxels (default 32; 41 in all).
+    #[arg(long)]
+    msaa: Option<u32>,
+    /// CAO: depth/dilation map size per clip shape in pixels (default 1024).
+    #[arg(long)]
+    clip_resolution: Option<u32>,
+}
+
+impl ClipArgs {
+    /// The shapes given on the command line with the mode applied, or `fallback`.
+    fn shapes_or(&self, fallback: Vec<volao::clip::ClipShape>) -> Vec<volao::clip::ClipShape> {
+        if self.shapes.is_empty() {
+            return fallback;
+        }
+        let mode = self.clip_mode.unwrap_or_default();
+        self.shapes
+            .iter()
+            .cloned()
+            .map(|mut s| {
+                s.mode = mode;
+                s
+            })
+            .collect()
+    }
+
+    fn apply(&self, ao: &mut volao::ao::AoSettings) -> Result<()> {
+        if let Some(n) = self.msaa {
+            if n > 256 {
+                bail!("--msaa: at most 256 extra samples");
+            }
+            ao.msaa = n;
+        }
+        if let Some(r) = self.clip_resolution {
+            if !(16..=8192).contains(&r) {
+                bail!("--clip-resolution must be 16 to 8192 pixels");
+            }
+            ao.clip_resolution = r;
+        }
+        Ok(())
+    }
+}
+
+/// One line per stage of a CAO frame.
+fn print_cao(stats: &volao::ao::cao::CaoStats) {
+    println!(
+        "{:.2} % of voxels ray cast ({} of {}; {} clipped); per frame: maps {:.1} ms, clip + mask {:.1} ms, ray cast {:.1} ms",
+        stats.percent_recomputed(),
+        stats.recomputed,
+        stats.voxels,
+        stats.clipped,
+        stats.maps_seconds * 1e3,
+        stats.clip_seconds * 1e3,
+        stats.lao_seconds * 1e3
+    );
 }
 
 /// How to read the input: 4-D frame and raw layout.
@@ -304,6 +558,15 @@ enum BenchCommand {
     Render(volao::bench::RenderBenchArgs),
     /// The CAO paper's Tables 5–6 (LAO accuracy vs rays) on the Engine, and LAO throughput.
     Lao(volao::bench::LaoBenchArgs),
+    /// The CAO paper's Tables 2–4: voxels recomputed, LAO every frame vs CAO, one vs
+    /// two meshes, per-stage times and GPU memory.
+    Cao(volao::bench_cao::CaoBenchArgs),
+    /// Positional AO by ray marching (time and RMS vs 512-ray LAO, live vs precomputed
+    /// frame times) and the cost of volumetric shadows, on the Engine.
+    Raymarch(volao::bench::raymarch::RaymarchBenchArgs),
+    /// Ruiz et al.'s Table 1 (filter maps on the cranium CT) and every cheap AO method's
+    /// RMS against 512-ray LAO with its compute time.
+    Filter(volao::bench_filter::FilterBenchArgs),
     /// (internal) load one file and print time and peak memory as JSON.
     #[command(hide = true)]
     LoadOne { file: PathBuf },
@@ -380,7 +643,14 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Ao(args)) => ambient_occlusion(&args),
         Some(Command::Bench(BenchCommand::Render(args))) => volao::bench::render_bench(&args),
         Some(Command::Bench(BenchCommand::Lao(args))) => volao::bench::lao_bench(&args),
+        Some(Command::Bench(BenchCommand::Raymarch(args))) => {
+            volao::bench::raymarch::raymarch_bench(&args)
+        }
+        Some(Command::Bench(BenchCommand::Filter(args))) => {
+            volao::bench_filter::filter_bench(&args)
+        }
         Some(Command::Bench(BenchCommand::Load(args))) => volao::bench::load_bench(&args),
+        Some(Command::Bench(BenchCommand::Cao(args))) => volao::bench_cao::cao_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
     }
 }
@@ -433,7 +703,7 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
     use volao::ao::{AoMethod, AoSettings};
     use volao::tf::{Preset, TransferFunction};
     if args.method == AoMethod::None {
-        bail!("--method none computes nothing; use lao");
+        bail!("--method none computes nothing; use lao, cao, vao, cdf, gauss, penner or cone");
     }
     if args.samples == 0 {
         bail!("--samples must be at least 1");
@@ -445,30 +715,68 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
         None => Preset::default_for(&stats),
     };
     let tf = TransferFunction::preset(preset, &stats);
-    let settings = AoSettings {
+    let mut settings = AoSettings {
         method: args.method,
         rays: args.rays,
         samples: args.samples,
+        ..Default::default()
     };
+    args.vao.apply(&mut settings.vao)?;
+    args.clip.apply(&mut settings)?;
+    let clip = args.clip.shapes_or(Vec::new());
+    if !clip.is_empty() && !matches!(args.method, AoMethod::Cao | AoMethod::LaoFull) {
+        bail!("--clip needs --method cao or lao-full (plain LAO ignores clipping)");
+    }
+    args.fast_ao.apply(&mut settings)?;
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", true);
-    let (ao, device) =
-        volao::ao::compute_volume(&volume, &tf, &settings, !args.cpu, &|done, total| {
+    let (ao, device, cao) = volao::ao::compute_volume_clipped(
+        &volume,
+        &tf,
+        &settings,
+        &clip,
+        !args.cpu,
+        &|done, total| {
             bar.set_length(total as u64);
             bar.set_position(done as u64);
-        })?;
+        },
+    )?;
     bar.finish_and_clear();
+    if let Some(stats) = &cao {
+        for e in &stats.clip_errors {
+            eprintln!("warning: {e}");
+        }
+        print_cao(stats);
+    }
     let seconds = start.elapsed().as_secs_f64();
     for w in volume::save(&ao, &args.output)? {
         eprintln!("warning: {}: {w}", args.output.display());
     }
     let s = ao.stats();
+    let what = if volao::ao::fast::handles(settings.method) {
+        volao::ao::fast::describe(&settings)
+    } else {
+        match settings.method {
+            AoMethod::Vao | AoMethod::VaoLive => format!(
+                "positional AO, {} directions × {} samples, r_max {} mm",
+                settings.vao.directions, settings.vao.samples, settings.vao.r_max_mm
+            ),
+            method => format!(
+                "{}, {} rays × {} samples",
+                match method {
+                    AoMethod::Cao => "CAO",
+                    AoMethod::LaoFull => "LAO (every voxel, clipped)",
+                    _ => "LAO",
+                },
+                settings.rays.name(),
+                settings.samples
+            ),
+        }
+    };
     println!(
-        "{}: {} LAO, {} rays × {} samples, TF {}, in {:.1} s on {device}; A from {:.4} to {:.4}, mean {:.4}",
+        "{}: {} {what}, TF {}, in {:.1} s on {device}; A from {:.4} to {:.4}, mean {:.4}",
         args.output.display(),
         fmt_dims(ao.dims),
-        settings.rays.name(),
-        settings.samples,
         tf.name,
         seconds,
         s.min,
@@ -559,6 +867,24 @@ fn render(args: &RenderArgs) -> Result<()> {
         }
         settings.step_voxels = step;
     }
+    settings.shadows |= args.shadows;
+    let light = match (args.light, scene.as_ref().map(|s| s.light)) {
+        (Some(direction), _) => Light::Directional { direction },
+        (None, Some(l)) => l,
+        (None, None) => Light::Headlight,
+    };
+    settings.light_direction = match light {
+        Light::Directional { direction } => direction,
+        // Shadows of a headlight fall behind what casts them, from the eye's direction.
+        Light::Headlight => camera.backward().to_array(),
+    };
+    if settings.shadows {
+        volao::render::shadow::light_direction(settings.light_direction)
+            .map_err(anyhow::Error::msg)?;
+    }
+    if args.opacity_modulation.is_some() {
+        settings.opacity_modulation = args.opacity_modulation;
+    }
     let width = args
         .width
         .or(scene.as_ref().map(|s| s.width))
@@ -593,15 +919,42 @@ fn render(args: &RenderArgs) -> Result<()> {
         }
         ao.samples = m;
     }
+    args.vao.apply(&mut ao.vao)?;
+
+    args.clip.apply(&mut ao)?;
+    let scene_clip = match (&scene, scene_path) {
+        (Some(s), Some(sp)) => s.clip_shapes_resolved(sp),
+        _ => Vec::new(),
+    };
+    let clip = args.clip.shapes_or(scene_clip);
+    let meshes = args
+        .mesh
+        .iter()
+        .map(|p| volao::render::surface::load_obj(p, args.mesh_rgba))
+        .collect::<Result<Vec<_>, _>>()?;
+    args.fast_ao.apply(&mut ao)?;
 
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", ao.method != volao::ao::AoMethod::None);
-    let out =
-        volao::render::offscreen::render(&volume, &tf, &frame, &ao, !args.cpu, &|done, total| {
+    let out = volao::render::offscreen::render_with(
+        &volume,
+        &tf,
+        &frame,
+        &ao,
+        volao::render::offscreen::Extras {
+            clip: &clip,
+            surfaces: &meshes,
+        },
+        !args.cpu,
+        &|done, total| {
             bar.set_length(total as u64);
             bar.set_position(done as u64);
-        })?;
+        },
+    )?;
     bar.finish_and_clear();
+    for e in &out.clip_errors {
+        eprintln!("warning: {e} (rendered without it)");
+    }
     let seconds = start.elapsed().as_secs_f64();
     if out.downsampled > 0 {
         eprintln!(
@@ -612,6 +965,28 @@ fn render(args: &RenderArgs) -> Result<()> {
     out.image.save_png(&args.output)?;
     let ao_note = if ao.method == volao::ao::AoMethod::None {
         String::new()
+    } else if matches!(
+        ao.method,
+        volao::ao::AoMethod::Vao | volao::ao::AoMethod::VaoLive
+    ) {
+        format!(
+            " (positional AO{}, {} directions × {} samples, r_max {} mm: {:.0} ms)",
+            if ao.method == volao::ao::AoMethod::VaoLive {
+                " live"
+            } else {
+                ""
+            },
+            ao.vao.directions,
+            ao.vao.samples,
+            ao.vao.r_max_mm,
+            out.ao_seconds * 1e3
+        )
+    } else if volao::ao::fast::handles(ao.method) {
+        format!(
+            " (AO {}: {:.0} ms)",
+            volao::ao::fast::describe(&ao),
+            out.ao_seconds * 1e3
+        )
     } else {
         format!(
             " (AO {} rays × {} samples: {:.0} ms)",
@@ -626,6 +1001,9 @@ fn render(args: &RenderArgs) -> Result<()> {
         seconds * 1e3,
         out.device
     );
+    if let Some(stats) = &out.cao {
+        print_cao(stats);
+    }
 
     if let Some(path) = &args.save_scene {
         let s = Scene {
@@ -637,15 +1015,12 @@ fn render(args: &RenderArgs) -> Result<()> {
             },
             transfer_function: tf,
             camera,
-            light: Light::Headlight,
+            light,
             render: settings,
             width,
             height,
             ambient_occlusion: ao,
-            clip_shapes: scene
-                .as_ref()
-                .map(|s| s.clip_shapes.clone())
-                .unwrap_or_default(),
+            clip_shapes: clip,
         };
         s.save(path)?;
         println!("scene: {}", path.display());

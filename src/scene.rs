@@ -76,12 +76,14 @@ pub struct VolumeSource {
     pub raw: Option<RawLayout>,
 }
 
-/// The light. Only a headlight exists today; the field keeps scenes forward-compatible.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+/// The light: a headlight, or a directional light (which volumetric shadows use).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase", tag = "kind")]
 pub enum Light {
     #[default]
     Headlight,
+    /// Parallel light arriving from `direction` (towards the light, volume RAS space).
+    Directional { direction: [f32; 3] },
 }
 
 /// A complete, reproducible view.
@@ -102,9 +104,10 @@ pub struct Scene {
     /// Ambient-occlusion method and parameters.
     #[serde(default)]
     pub ambient_occlusion: AoSettings,
-    /// Reserved for the clipping issue: kept as written.
+    /// Clip shapes with their poses (mm from the volume's centre) and modes. Mesh
+    /// paths, like the volume's, are relative to the scene file.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub clip_shapes: Vec<serde_json::Value>,
+    pub clip_shapes: Vec<crate::clip::ClipShape>,
 }
 
 impl Scene {
@@ -160,6 +163,11 @@ impl Scene {
         if let Some(vol) = &self.volume.path {
             scene.volume.path = Some(relative_to(vol, path.parent().unwrap_or(Path::new("."))));
         }
+        for c in &mut scene.clip_shapes {
+            if let crate::clip::Shape::Mesh { path: mesh } = &mut c.shape {
+                *mesh = relative_to(mesh, path.parent().unwrap_or(Path::new(".")));
+            }
+        }
         let text = serde_json::to_string_pretty(&scene).map_err(|e| SceneError::Io {
             path: path.to_owned(),
             message: e.to_string(),
@@ -168,6 +176,23 @@ impl Scene {
             path: path.to_owned(),
             message: e.to_string(),
         })
+    }
+
+    /// The clip shapes with mesh paths resolved against the scene file's folder.
+    pub fn clip_shapes_resolved(&self, scene_path: &Path) -> Vec<crate::clip::ClipShape> {
+        let base = scene_path.parent().unwrap_or(Path::new("."));
+        self.clip_shapes
+            .iter()
+            .cloned()
+            .map(|mut c| {
+                if let crate::clip::Shape::Mesh { path } = &mut c.shape
+                    && path.is_relative()
+                {
+                    *path = base.join(&*path);
+                }
+                c
+            })
+            .collect()
     }
 
     /// The volume's path resolved against the scene file's folder.
@@ -247,8 +272,23 @@ mod tests {
                 method: crate::ao::AoMethod::Lao,
                 rays: crate::ao::rays::RaySet::Fibonacci(96),
                 samples: 12,
+                ..Default::default()
             },
-            clip_shapes: vec![serde_json::json!({"shape": "sphere"})],
+            clip_shapes: vec![
+                crate::clip::ClipShape::new(
+                    crate::clip::Shape::Sphere,
+                    glam::Vec3::new(1.0, 2.0, 3.0),
+                    10.0,
+                ),
+                crate::clip::ClipShape {
+                    mode: crate::clip::ClipMode::Probe,
+                    ..crate::clip::ClipShape::new(
+                        crate::clip::Shape::Torus { tube: 0.3 },
+                        glam::Vec3::ZERO,
+                        20.0,
+                    )
+                },
+            ],
         }
     }
 

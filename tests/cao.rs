@@ -459,7 +459,8 @@ fn dilation_maps_match_the_cpu_twin() {
         let camera = s.cao.clip.cameras()[0];
         let (r_xy, r_z) = camera.dilation_radii();
         let z = [0, 1, 2, 3].map(|l| maps.layer(0, l));
-        let d = volao::clip::cpu::dilate(z, maps.resolution, r_xy, r_z, mode == ClipMode::Probe);
+        let f = volao::clip::gpu::block_size(r_xy);
+        let d = volao::clip::cpu::dilate(z, maps.resolution, r_xy, r_z, mode == ClipMode::Probe, f);
         for (k, dk) in d.iter().enumerate() {
             let g = maps.layer(0, 4 + k as u32);
             let worst = dk
@@ -559,4 +560,50 @@ fn bad_shapes_are_reported_and_the_rest_still_clip() {
     assert!(errors.contains("/nonexistent/shape.stl"), "{errors}");
     assert!(errors.contains("at most 8"), "{errors}");
     assert!(stats.clipped > 0, "the good shapes still clip");
+}
+
+#[test]
+fn clipped_rendering_matches_the_cpu_twin() {
+    use volao::render::cpu;
+    use volao::render::image::{Image, Tolerance, check};
+    let v = engine();
+    let mut s = scene(&v, Preset::CaoSingleColor, RaySet::TwentySix);
+    let reach = s.reach();
+    let half = Vec3::from(s.vol.texels.extent()) * 0.5;
+    let mut rng = Rng(17);
+    let shapes = [
+        random_shape(&mut rng, &Shape::Sphere, half, ClipMode::Carve),
+        random_shape(
+            &mut rng,
+            &Shape::Torus { tube: 0.35 },
+            half,
+            ClipMode::Carve,
+        ),
+    ];
+    let (ao, gpu_pixels, _) = s.frame(&shapes, CaoMode::Selective, reach);
+    let maps = s
+        .cao
+        .clip
+        .read_back(&s.gpu)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let (mut cv, occ) = cpu::prepare(&s.vol.texels, &s.vol.lut);
+    cv.ao = Some(ao);
+    cv.clip = Some(maps);
+    let c = cpu::render(&s.vol.texels, &cv, &s.vol.lut, &occ, &s.frame);
+    let g = Image {
+        width: s.frame.width,
+        height: s.frame.height,
+        pixels: gpu_pixels,
+    };
+    let twin = Tolerance {
+        max_channel_diff: 3,
+        max_outlier_fraction: 0.01,
+        max_outlier_diff: 64,
+    };
+    let out = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("cao");
+    check("twin_cao_clipped", &g, &c, twin, &out).unwrap_or_else(|e| panic!("{e}"));
+    // The clipping shows: without it the twin renders another image.
+    cv.clip = None;
+    let unclipped = cpu::render(&s.vol.texels, &cv, &s.vol.lut, &occ, &s.frame);
+    assert!(check("twin_cao_unclipped", &g, &unclipped, twin, &out).is_err());
 }

@@ -211,3 +211,157 @@ fn ao_writes_a_volume_in_the_input_geometry() {
     assert!(s.min >= 0.0 && s.max <= 1.0 && s.min < s.max, "{s:?}");
     assert_eq!(s.non_finite, 0);
 }
+
+#[test]
+fn cao_renders_with_clip_flags_prints_its_figures_and_its_scene_reproduces_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let p = |p: &std::path::Path| p.to_str().expect("utf-8 path").to_owned();
+    let (png, scene, again) = (
+        dir.path().join("cao.png"),
+        dir.path().join("cao.json"),
+        dir.path().join("again.png"),
+    );
+    let bucky = data("pvm/Bucky.pvm");
+    let out = volao(&[
+        "render",
+        &p(&bucky),
+        "-o",
+        &p(&png),
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--ao",
+        "cao",
+        "--rays",
+        "6",
+        "--samples",
+        "6",
+        "--clip",
+        "sphere:4,0,0,9",
+        "--clip",
+        "torus:-6,2,0,8,2,0,45,0",
+        "--clip-resolution",
+        "128",
+        "--save-scene",
+        &p(&scene),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let s = text(&out.stdout);
+    assert!(
+        s.contains("% of voxels ray cast") && s.contains("clip + mask"),
+        "{s}"
+    );
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&scene).expect("scene")).expect("json");
+    assert_eq!(saved["clip_shapes"].as_array().map(Vec::len), Some(2));
+    assert_eq!(saved["ambient_occlusion"]["method"], "cao");
+    let out = volao(&["render", &p(&scene), "-o", &p(&again)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(
+        std::fs::read(&png).expect("png"),
+        std::fs::read(&again).expect("png"),
+        "the saved scene reproduces the carved image byte for byte"
+    );
+    // A bad shape is refused before any work, in one line.
+    for bad in ["sphere:0,0,0", "blob:1,2,3", "torus:0,0,0,5,9"] {
+        let out = volao(&["render", &p(&bucky), "-o", &p(&png), "--clip", bad]);
+        assert!(!out.status.success(), "{bad} should fail");
+        assert!(
+            text(&out.stderr).contains("clip shape"),
+            "{}",
+            text(&out.stderr)
+        );
+    }
+    // A broken mesh is reported and the other shape still clips.
+    let open = dir.path().join("open.obj");
+    std::fs::write(
+        &open,
+        "v 0 0 0\nv 9 0 0\nv 0 9 0\nv 0 0 9\nf 1 2 3\nf 1 2 4\n",
+    )
+    .expect("write");
+    let out = volao(&[
+        "render",
+        &p(&bucky),
+        "-o",
+        &p(&png),
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--clip",
+        &format!("mesh:{}", p(&open)),
+        "--clip",
+        "sphere:0,0,0,8",
+        "--clip-resolution",
+        "64",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("open.obj") && err.contains("not closed"),
+        "{err}"
+    );
+}
+
+#[test]
+fn ao_with_clip_shapes_writes_the_cao_volume() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bucky = data("pvm/Bucky.pvm");
+    let p = |p: &std::path::Path| p.to_str().expect("utf-8 path").to_owned();
+    let run = |method: &str, name: &str| {
+        let out_path = dir.path().join(name);
+        let out = volao(&[
+            "ao",
+            &p(&bucky),
+            "-o",
+            &p(&out_path),
+            "--method",
+            method,
+            "--rays",
+            "6",
+            "--samples",
+            "6",
+            "--clip",
+            "sphere:5,5,0,8",
+            "--clip-resolution",
+            "64",
+        ]);
+        (out, out_path)
+    };
+    let (out, cao_path) = run("cao", "cao.nii.gz");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("% of voxels ray cast"),
+        "{}",
+        text(&out.stdout)
+    );
+    let (out, full_path) = run("lao-full", "full.nii.gz");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let load = |path: &std::path::Path| match volao::volume::load(path, &Default::default())
+        .expect("AO loads")
+        .volume
+        .data
+    {
+        volao::volume::VoxelData::F32(v) => v,
+        other => panic!("{:?}", other.voxel_type()),
+    };
+    let (cao, full) = (load(&cao_path), load(&full_path));
+    assert_eq!(cao.len(), 32 * 32 * 32);
+    assert!(cao.iter().all(|a| (0.0..=1.0).contains(a)));
+    assert_eq!(cao, full, "CAO equals LAO every frame");
+    let out = volao(&[
+        "ao",
+        &p(&bucky),
+        "-o",
+        &p(&dir.path().join("x.nii.gz")),
+        "--clip",
+        "sphere:0,0,0,5",
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("--method cao"),
+        "{}",
+        text(&out.stderr)
+    );
+}

@@ -223,11 +223,7 @@ impl Document {
             width: width.max(1),
             height: height.max(1),
             ambient_occlusion: self.ao,
-            clip_shapes: self
-                .clip_shapes
-                .iter()
-                .filter_map(|c| serde_json::to_value(c).ok())
-                .collect(),
+            clip_shapes: self.clip_shapes.clone(),
         }
     }
 }
@@ -303,17 +299,7 @@ pub fn load_document(
     let render = scene.as_ref().map(|s| s.render).unwrap_or_default();
     let clip_shapes = scene
         .as_ref()
-        .map(|s| {
-            s.clip_shapes
-                .iter()
-                .enumerate()
-                .map(|(i, v)| {
-                    serde_json::from_value::<crate::clip::ClipShape>(v.clone())
-                        .map_err(|e| format!("clip shape {}: {e}", i + 1))
-                })
-                .collect::<Result<Vec<_>, _>>()
-        })
-        .transpose()?
+        .map(|s| s.clip_shapes.clone())
         .unwrap_or_default();
     let info = format!(
         "{info}, {} {}, {} × {} × {} mm",

@@ -85,50 +85,103 @@ impl ClipMapsCpu {
     }
 }
 
-/// Algorithm 1 on the CPU: the dilation (carve) or contraction (probe) layers of one
-/// shape from its four resolved Z layers (`z[k]`, `resolution²` each).
-pub fn dilate(z: [&[f32]; 4], resolution: u32, r_xy: f32, r_z: f32, probe: bool) -> [Vec<f32>; 4] {
+/// The dilation (carve) or contraction (probe) layers of one shape from its four
+/// resolved Z layers (`z[k]`, `resolution²` each): Algorithm 1 over blocks of `f`×`f`
+/// pixels, as `clip_maps.wgsl` does it (reduce, dilate, expand).
+pub fn dilate(
+    z: [&[f32]; 4],
+    resolution: u32,
+    r_xy: f32,
+    r_z: f32,
+    probe: bool,
+    f: u32,
+) -> [Vec<f32>; 4] {
     let res = resolution as i32;
-    let reach = r_xy.floor() as i32;
-    let mut out: [Vec<f32>; 4] = std::array::from_fn(|_| vec![0.0; (res * res) as usize]);
-    for y in 0..res {
-        for x in 0..res {
-            let mut d = if probe {
-                [-EMPTY, EMPTY, -EMPTY, EMPTY]
-            } else {
-                [EMPTY, -EMPTY, EMPTY, -EMPTY]
-            };
+    let f = f.max(1) as i32;
+    let blocks = (res + f - 1) / f;
+    let identity = if probe {
+        [-EMPTY, EMPTY, -EMPTY, EMPTY]
+    } else {
+        [EMPTY, -EMPTY, EMPTY, -EMPTY]
+    };
+    let widest = |a: [f32; 4], b: [f32; 4]| -> [f32; 4] {
+        if probe {
+            [
+                a[0].max(b[0]),
+                a[1].min(b[1]),
+                a[2].max(b[2]),
+                a[3].min(b[3]),
+            ]
+        } else {
+            [
+                a[0].min(b[0]),
+                a[1].max(b[1]),
+                a[2].min(b[2]),
+                a[3].max(b[3]),
+            ]
+        }
+    };
+    let mut reduced = vec![identity; (blocks * blocks) as usize];
+    for by in 0..blocks {
+        for bx in 0..blocks {
+            let mut acc = identity;
+            for j in 0..f {
+                for i in 0..f {
+                    let (x, y) = (bx * f + i, by * f + j);
+                    if x < res && y < res {
+                        let q = (y * res + x) as usize;
+                        acc = widest(acc, [z[0][q], z[1][q], z[2][q], z[3][q]]);
+                    }
+                }
+            }
+            reduced[(by * blocks + bx) as usize] = acc;
+        }
+    }
+    let slack = (f - 1) as f32 * std::f32::consts::SQRT_2;
+    let reach = ((r_xy + slack) / f as f32).ceil() as i32;
+    let r = r_xy.ceil() as i32;
+    let mut dilated = vec![identity; (blocks * blocks) as usize];
+    for by in 0..blocks {
+        for bx in 0..blocks {
+            let mut d = identity;
             for j in -reach..=reach {
                 for i in -reach..=reach {
-                    let (qx, qy) = (x + i, y + j);
-                    if qx < 0 || qy < 0 || qx >= res || qy >= res {
+                    let (qx, qy) = (bx + i, by + j);
+                    if qx < 0 || qy < 0 || qx >= blocks || qy >= blocks {
                         continue;
                     }
-                    let dist = glam::Vec2::new(i as f32, j as f32).length();
+                    let dist =
+                        (glam::Vec2::new(i as f32, j as f32).length() * f as f32 - slack).max(0.0);
                     if dist > r_xy {
                         continue;
                     }
                     let ratio = dist / r_xy;
                     let h = r_z * (1.0 - ratio * ratio).max(0.0).sqrt();
-                    let q = (qy * res + qx) as usize;
-                    for (k, dk) in d.iter_mut().enumerate() {
-                        let zq = z[k][q];
-                        let front = k % 2 == 0;
-                        *dk = match (probe, front) {
-                            (false, true) => dk.min(zq - h),
-                            (false, false) => dk.max(zq + h),
-                            (true, true) => dk.max(zq + h),
-                            (true, false) => dk.min(zq - h),
-                        };
-                    }
+                    let zq = reduced[(qy * blocks + qx) as usize];
+                    let shifted = if probe {
+                        [zq[0] + h, zq[1] - h, zq[2] + h, zq[3] - h]
+                    } else {
+                        [zq[0] - h, zq[1] + h, zq[2] - h, zq[3] + h]
+                    };
+                    d = widest(d, shifted);
                 }
             }
-            if probe && (x < reach || y < reach || x >= res - reach || y >= res - reach) {
-                d = [EMPTY, -EMPTY, EMPTY, -EMPTY];
+            if probe {
+                let (lo_x, lo_y) = (bx * f, by * f);
+                let (hi_x, hi_y) = (lo_x + f - 1, lo_y + f - 1);
+                if lo_x < r || lo_y < r || hi_x >= res - r || hi_y >= res - r {
+                    d = [EMPTY, -EMPTY, EMPTY, -EMPTY];
+                }
             }
-            let p = (y * res + x) as usize;
+            dilated[(by * blocks + bx) as usize] = d;
+        }
+    }
+    let mut out: [Vec<f32>; 4] = std::array::from_fn(|_| vec![0.0; (res * res) as usize]);
+    for y in 0..res {
+        for x in 0..res {
+            let d = dilated[((y / f) * blocks + x / f) as usize];
             for k in 0..4 {
-                out[k][p] = d[k];
+                out[k][(y * res + x) as usize] = d[k];
             }
         }
     }

@@ -53,6 +53,9 @@ struct MapsParams {
     info: [u32; 4],
 }
 
+/// One pass of `clip_maps.wgsl`: entry point index, (binding, resource) pairs, size.
+type Step<'a> = (usize, Vec<(u32, wgpu::BindingResource<'a>)>, u32);
+
 /// What makes a shape's maps: if it is unchanged, the maps are reused.
 #[derive(Debug, Clone, PartialEq)]
 struct GeometryKey {
@@ -85,7 +88,8 @@ pub struct ClipUpdate {
 pub struct ClipMaps {
     peel_front: wgpu::RenderPipeline,
     peel_back: wgpu::RenderPipeline,
-    resolve: wgpu::ComputePipeline,
+    /// `clip_maps.wgsl` entry points: resolve, reduce, dilate, expand.
+    passes: [wgpu::ComputePipeline; 4],
     maps: wgpu::Texture,
     maps_view: wgpu::TextureView,
     dummy_depth: wgpu::TextureView,
@@ -136,6 +140,13 @@ fn array_view(texture: &wgpu::Texture) -> wgpu::TextureView {
         dimension: Some(wgpu::TextureViewDimension::D2Array),
         ..Default::default()
     })
+}
+
+/// Block size f of the dilation (`clip_maps.wgsl`): the smallest power of two keeping
+/// the kernel within 24 blocks, so building the maps costs O((r_xy / f)²) per block.
+pub fn block_size(r_xy: f32) -> u32 {
+    let need = (r_xy / 24.0).ceil().max(1.0) as u32;
+    need.next_power_of_two()
 }
 
 /// The bind group layout entries of `@group(1)` in `clip_common.wgsl`, for pipelines
@@ -223,13 +234,15 @@ impl ClipMaps {
                     cache: None,
                 })
             };
-            let resolve = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("ClipMaps::resolve"),
-                layout: None,
-                module: &maps_module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
+            let passes = ["resolve", "reduce", "dilate", "expand"].map(|entry| {
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: None,
+                    module: &maps_module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
             });
             let maps = maps_texture(device, 1, LAYERS_PER_SHAPE);
             let dummy = depth_texture(device, "ClipMaps::no_previous_layer", 1);
@@ -238,7 +251,7 @@ impl ClipMaps {
                 // Front faces: cull the back ones, and vice versa.
                 peel_front: peel("ClipMaps::peel_front", wgpu::Face::Back),
                 peel_back: peel("ClipMaps::peel_back", wgpu::Face::Front),
-                resolve,
+                passes,
                 maps_view: array_view(&maps),
                 maps,
                 dummy_depth: dummy.create_view(&Default::default()),
@@ -460,13 +473,15 @@ impl ClipMaps {
                 pass.draw_indexed(0..indices.len() as u32, 0, 0..1);
             }
             let (r_xy, r_z) = camera.dilation_radii();
+            let f = block_size(r_xy);
+            let blocks = res.div_ceil(f);
             let params = MapsParams {
                 radii: [r_xy, r_z, 0.0, 0.0],
                 info: [
                     res,
                     slot as u32 * LAYERS_PER_SHAPE,
                     u32::from(mode == ClipMode::Probe),
-                    0,
+                    f,
                 ],
             };
             let uniforms = uniform_buffer(
@@ -475,31 +490,93 @@ impl ClipMaps {
                 "ClipMaps::maps_params",
                 bytemuck::bytes_of(&params),
             );
-            let storage = self.maps.create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
-            });
-            let group = bind_group(
-                device,
-                "ClipMaps::resolve",
-                &self.resolve.get_bind_group_layout(0),
-                &[
-                    uniforms.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&views[0]),
-                    wgpu::BindingResource::TextureView(&views[1]),
-                    wgpu::BindingResource::TextureView(&views[2]),
-                    wgpu::BindingResource::TextureView(&views[3]),
-                    wgpu::BindingResource::TextureView(&storage),
-                ],
+            let storage = array_view(&self.maps);
+            let block_texture = |label| {
+                device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d {
+                        width: blocks,
+                        height: blocks,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::Rgba32Float,
+                    usage: wgpu::TextureUsages::STORAGE_BINDING
+                        | wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                })
+            };
+            let (reduced, dilated) = (
+                block_texture("ClipMaps::reduced").create_view(&Default::default()),
+                block_texture("ClipMaps::dilated").create_view(&Default::default()),
             );
-            {
+            use wgpu::BindingResource::TextureView as Tex;
+            let depth = |k: usize| Tex(&views[k]);
+            // (pass, bindings it uses, workgroups)
+            let steps: [Step<'_>; 4] = [
+                (
+                    0,
+                    vec![
+                        (0, uniforms.as_entire_binding()),
+                        (1, depth(0)),
+                        (2, depth(1)),
+                        (3, depth(2)),
+                        (4, depth(3)),
+                        (5, Tex(&storage)),
+                    ],
+                    res,
+                ),
+                (
+                    1,
+                    vec![
+                        (0, uniforms.as_entire_binding()),
+                        (1, depth(0)),
+                        (2, depth(1)),
+                        (3, depth(2)),
+                        (4, depth(3)),
+                        (6, Tex(&reduced)),
+                    ],
+                    blocks,
+                ),
+                (
+                    2,
+                    vec![
+                        (0, uniforms.as_entire_binding()),
+                        (6, Tex(&dilated)),
+                        (7, Tex(&reduced)),
+                    ],
+                    blocks,
+                ),
+                (
+                    3,
+                    vec![
+                        (0, uniforms.as_entire_binding()),
+                        (5, Tex(&storage)),
+                        (7, Tex(&dilated)),
+                    ],
+                    res,
+                ),
+            ];
+            for (pass_index, entries, size) in steps {
+                let pipeline = &self.passes[pass_index];
+                let entries: Vec<wgpu::BindGroupEntry<'_>> = entries
+                    .into_iter()
+                    .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource })
+                    .collect();
+                let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("ClipMaps::maps"),
+                    layout: &pipeline.get_bind_group_layout(0),
+                    entries: &entries,
+                });
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("ClipMaps::resolve"),
+                    label: Some("ClipMaps::maps"),
                     timestamp_writes: None,
                 });
-                pass.set_pipeline(&self.resolve);
+                pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &group, &[]);
-                pass.dispatch_workgroups(res.div_ceil(8), res.div_ceil(8), 1);
+                pass.dispatch_workgroups(size.div_ceil(8), size.div_ceil(8), 1);
             }
             gpu.queue.submit([encoder.finish()]);
         })

@@ -343,3 +343,145 @@ pub fn torus(tube: f32, major_segments: u32, minor_segments: u32) -> TriMesh {
         triangles,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn checked(m: TriMesh) -> TriMesh {
+        m.validate("test").unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn built_in_shapes_are_closed_outward_and_the_right_size() {
+        let pi = std::f32::consts::PI;
+        let cases = [
+            (checked(sphere(48, 96)), 4.0 / 3.0 * pi, 0.01),
+            (checked(cuboid(Vec3::NEG_ONE, Vec3::ONE)), 8.0, 1e-6),
+            (checked(cylinder(96)), 2.0 * pi, 0.01),
+            // Torus volume 2π²Rr².
+            (checked(torus(0.3, 96, 48)), 2.0 * pi * pi * 0.09, 0.01),
+        ];
+        for (m, volume, tol) in cases {
+            let v = m.signed_volume();
+            assert!((v - volume).abs() / volume < tol, "volume {v} vs {volume}");
+        }
+    }
+
+    #[test]
+    fn inside_out_meshes_are_turned_around() {
+        let mut m = cuboid(Vec3::ZERO, Vec3::ONE);
+        for t in &mut m.triangles {
+            t.swap(1, 2);
+        }
+        assert!(m.signed_volume() < 0.0);
+        assert!(checked(m).signed_volume() > 0.0);
+    }
+
+    #[test]
+    fn broken_meshes_are_refused_with_the_reason() {
+        let mut open = cuboid(Vec3::ZERO, Vec3::ONE);
+        open.triangles.pop();
+        let e = open.validate("open.stl").expect_err("open").to_string();
+        assert!(e.contains("open.stl") && e.contains("not closed"), "{e}");
+
+        let mut wound = cuboid(Vec3::ZERO, Vec3::ONE);
+        wound.triangles[0].swap(1, 2);
+        let e = wound.validate("w").expect_err("winding").to_string();
+        assert!(e.contains("not closed") || e.contains("wound"), "{e}");
+
+        let flat = TriMesh {
+            vertices: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::X + Vec3::Y],
+            triangles: vec![[0, 1, 2], [1, 3, 2], [0, 2, 1], [1, 2, 3]],
+        };
+        let e = flat.validate("flat").expect_err("flat").to_string();
+        assert!(e.contains("zero extent"), "{e}");
+
+        let mut nan = cuboid(Vec3::ZERO, Vec3::ONE);
+        nan.vertices[3].y = f32::NAN;
+        assert!(
+            nan.validate("nan")
+                .expect_err("nan")
+                .to_string()
+                .contains("not finite")
+        );
+
+        let degenerate = TriMesh {
+            vertices: vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0],
+            triangles: vec![[0, 1, 2], [0, 0, 1]],
+        };
+        let e = degenerate
+            .validate("d")
+            .expect_err("degenerate")
+            .to_string();
+        assert!(e.contains("no triangles"), "{e}");
+
+        let out_of_range = TriMesh {
+            vertices: vec![Vec3::ZERO],
+            triangles: vec![[0, 5, 9]],
+        };
+        assert!(out_of_range.validate("r").is_err());
+    }
+
+    #[test]
+    fn obj_and_stl_files_load_and_bad_ones_fail_clearly() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let cube = cuboid(Vec3::splat(-2.0), Vec3::splat(3.0));
+        // OBJ (1-based indices).
+        let mut obj = String::new();
+        for v in &cube.vertices {
+            obj += &format!("v {} {} {}\n", v.x, v.y, v.z);
+        }
+        for t in &cube.triangles {
+            obj += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+        }
+        let obj_path = dir.path().join("cube.obj");
+        std::fs::write(&obj_path, obj).expect("write");
+        let m = load(&obj_path).unwrap_or_else(|e| panic!("{e}"));
+        assert!((m.signed_volume() - 125.0).abs() < 1e-3);
+        // Binary STL: every triangle carries its own vertices; they are welded.
+        let stl: Vec<stl_io::Triangle> = cube
+            .triangles
+            .iter()
+            .map(|t| stl_io::Triangle {
+                normal: stl_io::Normal::new([0.0; 3]),
+                vertices: t.map(|i| stl_io::Vertex::new(cube.vertices[i as usize].to_array())),
+            })
+            .collect();
+        let stl_path = dir.path().join("cube.stl");
+        let mut f = std::fs::File::create(&stl_path).expect("create");
+        stl_io::write_stl(&mut f, stl.iter()).expect("write stl");
+        drop(f);
+        let m = load(&stl_path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(m.vertices.len(), 8);
+        assert!((m.signed_volume() - 125.0).abs() < 1e-3);
+        // An open OBJ, garbage, a missing file and an unknown extension.
+        let open_path = dir.path().join("open.obj");
+        std::fs::write(
+            &open_path,
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n",
+        )
+        .expect("write");
+        let e = load(&open_path).expect_err("open").to_string();
+        assert!(e.contains("open.obj") && e.contains("not closed"), "{e}");
+        let junk = dir.path().join("junk.stl");
+        std::fs::write(&junk, b"solid x\nfacet garbage").expect("write");
+        assert!(
+            load(&junk)
+                .expect_err("junk")
+                .to_string()
+                .contains("junk.stl")
+        );
+        let missing = dir.path().join("missing.obj");
+        assert!(
+            load(&missing)
+                .expect_err("missing")
+                .to_string()
+                .contains("missing.obj")
+        );
+        let e = load(&dir.path().join("mesh.ply"))
+            .expect_err("ply")
+            .to_string();
+        assert!(e.contains(".obj or .stl"), "{e}");
+    }
+}

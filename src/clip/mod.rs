@@ -166,6 +166,20 @@ impl ClipShape {
         Ok(mesh.validate(&self.describe())?)
     }
 
+    /// The mesh posed in the volume's physical space (for drawing the shape).
+    pub fn posed_geometry(&self, volume_radius: f32) -> Result<TriMesh, ClipError> {
+        let m = self.geometry(volume_radius)?;
+        let to_volume = self.shape_to_volume();
+        Ok(TriMesh {
+            vertices: m
+                .vertices
+                .iter()
+                .map(|v| to_volume.transform_point3(*v))
+                .collect(),
+            triangles: m.triangles,
+        })
+    }
+
     /// e.g. "sphere at (10, 0, -5) mm".
     pub fn describe(&self) -> String {
         let name = match &self.shape {
@@ -304,4 +318,67 @@ pub fn check_all(shapes: &[ClipShape]) -> Result<(), ClipError> {
         });
     }
     shapes.iter().enumerate().try_for_each(|(i, s)| s.check(i))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cli_shapes_parse_with_their_sizes() {
+        let s = ClipShape::parse("sphere:1,2,3,10").expect("sphere");
+        assert_eq!((s.translation, s.scale), ([1.0, 2.0, 3.0], [10.0; 3]));
+        let b = ClipShape::parse("box:0,0,0,10,20,30,0,90,0").expect("box");
+        assert_eq!(
+            (b.scale, b.rotation_deg),
+            ([5.0, 10.0, 15.0], [0.0, 90.0, 0.0])
+        );
+        let c = ClipShape::parse("cylinder:0,0,0,5,40").expect("cylinder");
+        assert_eq!(c.scale, [5.0, 5.0, 20.0]);
+        let t = ClipShape::parse("torus:0,0,0,20,5").expect("torus");
+        assert_eq!(t.shape, Shape::Torus { tube: 0.25 });
+        let p = ClipShape::parse("plane:0,0,5,0,0,-1").expect("plane");
+        // The plane's local +z (the removed side) is the given normal.
+        let n = p.rotation() * Vec3::Z;
+        assert!((n - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-5, "{n}");
+        let m = ClipShape::parse("mesh:part.stl,1,2,3,0.5").expect("mesh");
+        assert_eq!(
+            m.shape,
+            Shape::Mesh {
+                path: "part.stl".into()
+            }
+        );
+        assert_eq!(m.scale, [0.5; 3]);
+    }
+
+    #[test]
+    fn bad_cli_shapes_say_what_is_wrong() {
+        let err = |s: &str| ClipShape::parse(s).expect_err(s);
+        assert!(err("sphere").contains("KIND:NUMBERS"));
+        assert!(err("sphere:1,2,3").contains("takes [4] numbers"));
+        assert!(err("sphere:1,2,3,x").contains("not a number"));
+        assert!(err("sphere:1,2,3,NaN").contains("not a number"));
+        assert!(err("sphere:0,0,0,-4").contains("positive"));
+        assert!(err("plane:0,0,0,0,0,0").contains("normal is zero"));
+        assert!(err("torus:0,0,0,10,12").contains("tube radius"));
+        assert!(err("cone:0,0,0,1").contains("unknown clip shape"));
+        let too_many = vec![ClipShape::new(Shape::Sphere, Vec3::ZERO, 1.0); MAX_SHAPES + 1];
+        assert!(check_all(&too_many).is_err());
+        assert!(check_all(&too_many[..MAX_SHAPES]).is_ok());
+    }
+
+    #[test]
+    fn scene_json_round_trips() {
+        let s = ClipShape {
+            mode: ClipMode::Probe,
+            ..ClipShape::new(Shape::Torus { tube: 0.3 }, Vec3::new(1.0, 2.0, 3.0), 7.0)
+        };
+        let text = serde_json::to_string(&s).expect("json");
+        assert!(
+            text.contains("\"type\":\"torus\"") && text.contains("\"probe\""),
+            "{text}"
+        );
+        assert_eq!(serde_json::from_str::<ClipShape>(&text).expect("parse"), s);
+        assert!(serde_json::from_str::<ClipShape>(r#"{"shape":{"type":"cone"},"translation":[0,0,0],"rotation_deg":[0,0,0],"scale":[1,1,1]}"#).is_err());
+    }
 }

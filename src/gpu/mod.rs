@@ -36,6 +36,8 @@ pub enum GpuError {
     Readback { stage: String, message: String },
     #[error("shader {name}: {message}")]
     Shader { name: String, message: String },
+    #[error("{what}")]
+    Unsupported { what: String },
 }
 
 /// Features volao uses when the adapter offers them (lavapipe and desktop GPUs do):

@@ -8,6 +8,14 @@ use super::GpuError;
 /// Every shader in `shaders/`, embedded at build time. A test checks this list against
 /// the directory so a new file cannot be forgotten.
 pub const SOURCES: &[(&str, &str)] = &[
+    (
+        "ambient_maps.wgsl",
+        include_str!("../../shaders/ambient_maps.wgsl"),
+    ),
+    (
+        "box_stats.wgsl",
+        include_str!("../../shaders/box_stats.wgsl"),
+    ),
     ("cao_clip.wgsl", include_str!("../../shaders/cao_clip.wgsl")),
     ("cao_lao.wgsl", include_str!("../../shaders/cao_lao.wgsl")),
     (
@@ -23,10 +31,18 @@ pub const SOURCES: &[(&str, &str)] = &[
         include_str!("../../shaders/clip_maps.wgsl"),
     ),
     ("common.wgsl", include_str!("../../shaders/common.wgsl")),
+    ("cone.wgsl", include_str!("../../shaders/cone.wgsl")),
     ("lao.wgsl", include_str!("../../shaders/lao.wgsl")),
+    ("light.wgsl", include_str!("../../shaders/light.wgsl")),
     ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
     ("smoke.wgsl", include_str!("../../shaders/smoke.wgsl")),
     ("viewport.wgsl", include_str!("../../shaders/viewport.wgsl")),
+    ("surface.wgsl", include_str!("../../shaders/surface.wgsl")),
+    ("vao.wgsl", include_str!("../../shaders/vao.wgsl")),
+    (
+        "vao_common.wgsl",
+        include_str!("../../shaders/vao_common.wgsl"),
+    ),
 ];
 
 const DIRECTIVE: &str = "//!include ";

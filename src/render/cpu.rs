@@ -15,6 +15,29 @@ pub struct CpuVolume {
     pub norm: Vec<f32>,
     /// Ambient occlusion per voxel in [0, 1]; `None` means 1 everywhere.
     pub ao: Option<Vec<f32>>,
+    /// Live positional AO: evaluated at every sample instead of `ao` (CPU twin of the
+    /// ray caster's live mode).
+    pub live_vao: Option<crate::ao::vao::PositionalAo>,
+    /// Light volume for shadows from a directional light.
+    pub light: Option<super::shadow::LightVolume>,
+    /// Geometry drawn inside the volume, with what `nearest_hit` needs besides the ray.
+    pub surfaces: Option<CpuSurfaces>,
+    /// Opacity factor per voxel in [0, 1] (variance modulation); `None` means 1.
+    pub modulation: Option<Vec<f32>>,
+    /// Clip shapes' maps (read back from the GPU): shadow-test clipping of every sample.
+    pub clip: Option<crate::clip::cpu::ClipMapsCpu>,
+}
+
+/// Surfaces for the CPU twin: the meshes, and the frame and texels that place the camera.
+#[derive(Debug, Clone)]
+pub struct CpuSurfaces {
+    pub surfaces: Vec<super::surface::Surface>,
+    pub frame: Frame,
+    pub texels: VolumeTexels,
+}
+
+fn over(acc: Vec4, rgb: Vec3, a: f32) -> Vec4 {
+    (acc.truncate() + (1.0 - acc.w) * a * rgb).extend(acc.w + (1.0 - acc.w) * a)
 }
 
 impl CpuVolume {
@@ -23,6 +46,11 @@ impl CpuVolume {
             dims: texels.dims,
             norm: texels.norm_values(),
             ao: None,
+            live_vao: None,
+            light: None,
+            surfaces: None,
+            modulation: None,
+            clip: None,
         }
     }
 }
@@ -72,12 +100,20 @@ fn classify(p: &RaycastParams, lut: &Lut, norm: f32) -> Vec4 {
 
 fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -> Vec3 {
     let k = p.shading[0];
-    let ao = vol
+    let mut ao = vol
         .ao
         .as_ref()
         .map_or(1.0, |ao| trilinear(ao, vol.dims, uvw));
+    if let Some(pao) = &vol.live_vao {
+        ao = 1.0 - pao.positional_ao(uvw);
+    }
+    let lit = vol.light.as_ref().map_or(1.0, |l| {
+        let half_step = -view * (0.5 * p.step[0])
+            / (2.0 * Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]));
+        super::shadow::shadow_factor(&l.values, vol.dims, uvw, half_step)
+    });
     if p.shading[3] == 0.0 {
-        return rgb * (k * ao + (1.0 - k));
+        return rgb * (k * ao + (1.0 - k) * lit);
     }
     let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
     let s = |o: Vec3| trilinear(&vol.norm, vol.dims, uvw + o);
@@ -89,12 +125,19 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -
     let strength = g.length() * p.lut_map[0].abs() * p.voxel_uvw[3] * p.lut_map[3];
     let edge = strength.clamp(0.0, 1.0);
     let (mut diffuse, mut specular) = (1.0, 0.0);
-    if strength > 0.0 {
+    if let (true, Some(l)) = (strength > 0.0, &vol.light) {
+        let n = g.normalize();
+        diffuse = 1.0 + (n.dot(l.direction).abs() - 1.0) * edge;
+        let h = l.direction + view;
+        if h.dot(h) > 1e-12 {
+            specular = p.shading[1] * n.dot(h.normalize()).abs().powf(p.shading[2]) * edge;
+        }
+    } else if strength > 0.0 {
         let n_dot_v = g.normalize().dot(view).abs();
         diffuse = 1.0 + (n_dot_v - 1.0) * edge;
         specular = p.shading[1] * n_dot_v.powf(p.shading[2]) * edge;
     }
-    rgb * (k * ao + (1.0 - k) * diffuse) + Vec3::splat(specular)
+    rgb * (k * ao + (1.0 - k) * diffuse * lit) + Vec3::splat(specular * lit)
 }
 
 /// One pixel, exactly as `main` in raycast.wgsl computes it (before 8-bit quantisation).
@@ -119,6 +162,12 @@ pub fn pixel(
     let t_exit = t1;
     let dt = p.step[0];
     let mut acc = Vec4::ZERO;
+    let hit = vol
+        .surfaces
+        .as_ref()
+        .and_then(|s| super::surface::nearest_hit(&s.surfaces, &s.frame, &s.texels, origin, dir));
+    let mut pending = hit.is_some();
+    let (t_surf, surf) = hit.unwrap_or((0.0, Vec4::ZERO));
     if t_exit > t_enter {
         let offset = if p.step[1] != 0.0 {
             jitter(px, py)
@@ -132,6 +181,13 @@ pub fn pixel(
         let mut k = 0u32;
         while k < max_steps {
             let t = t_enter + (k as f32 + offset) * dt;
+            if pending && t_surf <= t {
+                acc = over(acc, surf.truncate(), surf.w);
+                pending = false;
+                if surf.w >= 1.0 {
+                    break;
+                }
+            }
             if t >= t_exit {
                 break;
             }
@@ -153,22 +209,47 @@ pub fn pixel(
                     continue;
                 }
             }
+            // Shadow-test clipping (CAO step VI): clipped samples are empty.
+            if let Some(c) = &vol.clip
+                && c.uniforms.counts[0] > 0
+                && !c.classify(pos).0
+            {
+                k += 1;
+                continue;
+            }
             let norm = trilinear(&vol.norm, vol.dims, uvw);
             let mut rgba = classify(p, lut, norm);
             if rgba.w > 0.0 {
-                let len = dt.min(t_exit - t);
-                if len < dt {
-                    rgba.w = 1.0 - (1.0 - rgba.w).powf(len / dt);
+                if let Some(m) = &vol.modulation {
+                    rgba.w *= trilinear(m, vol.dims, uvw);
                 }
+                let len = dt.min(t_exit - t);
                 let rgb = shade(p, vol, rgba.truncate(), uvw, -dir);
-                acc = (acc.truncate() + (1.0 - acc.w) * rgba.w * rgb)
-                    .extend(acc.w + (1.0 - acc.w) * rgba.w);
+                if pending && t_surf < t + len {
+                    let before = (t_surf - t).max(0.0);
+                    acc = over(acc, rgb, 1.0 - (1.0 - rgba.w).powf(before / dt));
+                    acc = over(acc, surf.truncate(), surf.w);
+                    pending = false;
+                    if surf.w >= 1.0 {
+                        break;
+                    }
+                    acc = over(acc, rgb, 1.0 - (1.0 - rgba.w).powf((len - before) / dt));
+                } else {
+                    if len < dt {
+                        rgba.w = 1.0 - (1.0 - rgba.w).powf(len / dt);
+                    }
+                    acc = (acc.truncate() + (1.0 - acc.w) * rgba.w * rgb)
+                        .extend(acc.w + (1.0 - acc.w) * rgba.w);
+                }
                 if acc.w > OPAQUE {
                     break;
                 }
             }
             k += 1;
         }
+    }
+    if pending {
+        acc = over(acc, surf.truncate(), surf.w);
     }
     let bg = Vec4::from(p.background);
     let alpha = acc.w + (1.0 - acc.w) * bg.w;

@@ -26,6 +26,10 @@ pub struct RayCaster {
     /// `@group(1)` with no clip shapes (zeroed uniforms, a blank map).
     no_clip: wgpu::BindGroup,
     sampler: wgpu::Sampler,
+    /// Group 2: live positional AO and shadows (`render::shadow`).
+    layout_2: wgpu::BindGroupLayout,
+    placeholders: super::shadow::Placeholders,
+    surfaces: super::surface::SurfaceRenderer,
 }
 
 /// One volume on the GPU with its transfer function baked.
@@ -35,6 +39,7 @@ pub struct GpuVolume {
     ranges: BlockRanges,
     volume_view: wgpu::TextureView,
     ao_view: wgpu::TextureView,
+    modulation_view: wgpu::TextureView,
     occupancy: wgpu::Texture,
     occupancy_view: wgpu::TextureView,
     lut_buffer: wgpu::Buffer,
@@ -42,6 +47,8 @@ pub struct GpuVolume {
     pub lut: Lut,
     lut_step: f32,
     tf: TransferFunction,
+    /// Live positional AO and the light volume (bind group 1), see `render::shadow`.
+    pub extras: super::shadow::RayExtras,
 }
 
 fn texture_3d(
@@ -164,6 +171,14 @@ impl GpuVolume {
                 wgpu::TextureFormat::R32Float,
             );
             write_3d(queue, &ao, [1, 1, 1], 4, bytemuck::bytes_of(&1.0f32));
+            // No opacity modulation: a single texel of 1.
+            let modulation = texture_3d(
+                device,
+                "GpuVolume::opacity_modulation",
+                [1, 1, 1],
+                wgpu::TextureFormat::R8Unorm,
+            );
+            write_3d(queue, &modulation, [1, 1, 1], 1, &[255]);
             let occupancy = texture_3d(
                 device,
                 "GpuVolume::occupancy",
@@ -181,12 +196,14 @@ impl GpuVolume {
             GpuVolume {
                 volume_view: volume.create_view(&Default::default()),
                 ao_view: ao.create_view(&Default::default()),
+                modulation_view: modulation.create_view(&Default::default()),
                 occupancy_view: occupancy.create_view(&Default::default()),
                 occupancy,
                 lut_buffer,
                 lut,
                 lut_step: step_voxels,
                 tf: tf.clone(),
+                extras: Default::default(),
                 ranges,
                 texels,
             }
@@ -201,6 +218,9 @@ impl GpuVolume {
         self.lut = bake_lut(tf, &self.texels, step_voxels);
         self.tf = tf.clone();
         self.lut_step = step_voxels;
+        if let Some(live) = &mut self.extras.live_vao {
+            live.set_transfer_function(gpu, &self.texels, tf);
+        }
         gpu.queue
             .write_buffer(&self.lut_buffer, 0, bytemuck::cast_slice(&self.lut.rgba));
         let occ = self.ranges.occupancy(&self.texels, &self.lut);
@@ -253,6 +273,32 @@ impl GpuVolume {
         self.ao_view = ao.create_view(&Default::default());
     }
 
+    /// Uses `values` (one per voxel, x fastest, in [0, 1]) as the opacity factor of
+    /// variance modulation. Stored as R16Unorm like the AO volume; returns the values as
+    /// the GPU will sample them (for the CPU twin).
+    pub fn set_opacity_modulation(&mut self, gpu: &Gpu, values: &[f32]) -> Vec<f32> {
+        let dims = self.texels.dims.map(|d| d as u32);
+        let quantised: Vec<u16> = values
+            .iter()
+            .map(|&a| (a.clamp(0.0, 1.0) * 65535.0).round() as u16)
+            .collect();
+        let texture = texture_3d(
+            &gpu.device,
+            "GpuVolume::opacity_modulation",
+            dims,
+            wgpu::TextureFormat::R16Unorm,
+        );
+        write_3d(
+            &gpu.queue,
+            &texture,
+            dims,
+            2,
+            bytemuck::cast_slice(&quantised),
+        );
+        self.modulation_view = texture.create_view(&Default::default());
+        quantised.iter().map(|&q| q as f32 / 65535.0).collect()
+    }
+
     /// The occupancy grid for the current LUT (for the CPU twin).
     pub fn occupancy(&self) -> Vec<u8> {
         self.ranges.occupancy(&self.texels, &self.lut)
@@ -262,6 +308,7 @@ impl GpuVolume {
 impl RayCaster {
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
         let module = shaders::module(device, "raycast.wgsl")?;
+        let surfaces = super::surface::SurfaceRenderer::new(device)?;
         validated(device, "RayCaster::new", || {
             let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
                 binding,
@@ -308,15 +355,20 @@ impl RayCaster {
                             view_dimension: wgpu::TextureViewDimension::D2,
                         },
                     ),
+                    entry(7, tex(wgpu::TextureSampleType::Float { filterable: true })),
                 ],
             });
             let clip_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("RayCaster::clip_layout"),
                 entries: &crate::clip::gpu::layout_entries(wgpu::ShaderStages::COMPUTE),
             });
+            let layout_2 = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("RayCaster::layout_2"),
+                entries: &super::shadow::layout_entries(),
+            });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("RayCaster::pipeline_layout"),
-                bind_group_layouts: &[Some(&layout), Some(&clip_layout)],
+                bind_group_layouts: &[Some(&layout), Some(&clip_layout), Some(&layout_2)],
                 immediate_size: 0,
             });
             let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -374,6 +426,9 @@ impl RayCaster {
                 clip_layout,
                 no_clip,
                 sampler,
+                layout_2,
+                placeholders: super::shadow::Placeholders::new(device),
+                surfaces,
             }
         })
     }
@@ -417,7 +472,18 @@ impl RayCaster {
                     wgpu::BindingResource::TextureView(&vol.ao_view),
                     wgpu::BindingResource::TextureView(&vol.occupancy_view),
                     wgpu::BindingResource::TextureView(&target_view),
+                    wgpu::BindingResource::TextureView(&vol.modulation_view),
                 ],
+            );
+            // Surfaces rasterised into the volume are not drawn in this path yet.
+            let group_2 = super::shadow::bind_group_2(
+                device,
+                queue,
+                &self.layout_2,
+                &vol.extras,
+                None,
+                &self.placeholders,
+                &self.sampler,
             );
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("RayCaster::encode_tile"),
@@ -426,6 +492,7 @@ impl RayCaster {
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &group, &[]);
             pass.set_bind_group(1, clip_group, &[]);
+            pass.set_bind_group(2, &group_2, &[]);
             pass.dispatch_workgroups(tw.div_ceil(8), th.div_ceil(8), 1);
         })
     }
@@ -451,12 +518,22 @@ impl RayCaster {
             height: h,
             pixels: vec![[0; 4]; (w * h) as usize],
         };
+        let layer = match vol.extras.surfaces.is_empty() {
+            true => None,
+            false => {
+                Some(
+                    self.surfaces
+                        .rasterise(gpu, &vol.extras.surfaces, frame, &vol.texels)?,
+                )
+            }
+        };
         let mut y0 = 0;
         while y0 < h {
             let mut x0 = 0;
             while x0 < w {
                 let size = ((w - x0).min(TILE), (h - y0).min(TILE));
-                let tile = self.render_tile(gpu, vol, frame, clip_group, (x0, y0), size)?;
+                let tile =
+                    self.render_tile(gpu, vol, frame, clip_group, layer.as_ref(), (x0, y0), size)?;
                 image.blit(&tile, x0, y0);
                 x0 += TILE;
             }
@@ -465,12 +542,17 @@ impl RayCaster {
         Ok(image)
     }
 
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "one tile of one frame: every argument is a different input"
+    )]
     fn render_tile(
         &self,
         gpu: &Gpu,
         vol: &GpuVolume,
         frame: &Frame,
         clip_group: &wgpu::BindGroup,
+        layer: Option<&super::surface::SurfaceLayer>,
         (x0, y0): (u32, u32),
         (tw, th): (u32, u32),
     ) -> Result<Image, GpuError> {
@@ -512,14 +594,24 @@ impl RayCaster {
                     wgpu::BindingResource::TextureView(&vol.ao_view),
                     wgpu::BindingResource::TextureView(&vol.occupancy_view),
                     wgpu::BindingResource::TextureView(&target_view),
+                    wgpu::BindingResource::TextureView(&vol.modulation_view),
                 ],
+            );
+            let group_2 = super::shadow::bind_group_2(
+                device,
+                &gpu.queue,
+                &self.layout_2,
+                &vol.extras,
+                layer,
+                &self.placeholders,
+                &self.sampler,
             );
             crate::gpu::submit_compute_with(
                 device,
                 &gpu.queue,
                 "RayCaster::tile",
                 &self.pipeline,
-                &[&group, clip_group],
+                &[&group, clip_group, &group_2],
                 [tw.div_ceil(8), th.div_ceil(8), 1],
                 |encoder| {
                     encoder.copy_texture_to_buffer(

@@ -13,6 +13,8 @@ pub mod cpu;
 pub mod gpu;
 pub mod image;
 pub mod offscreen;
+pub mod shadow;
+pub mod surface;
 pub mod texels;
 
 pub use camera::Camera;
@@ -52,6 +54,16 @@ pub struct RenderSettings {
     pub empty_space_skipping: bool,
     /// Straight RGBA; alpha 0 gives a transparent background.
     pub background: [f32; 4],
+    /// Volumetric shadows from the directional light (see [`shadow`]).
+    pub shadows: bool,
+    /// Unit direction towards the light in volume space (RAS), for shadows. Not saved
+    /// here: scene files keep it in their `light`.
+    #[serde(skip)]
+    pub light_direction: [f32; 3],
+    /// Multiply each sample's opacity by `min(σ²/σ²_max, 1)` (Ruiz et al. §4.2); off
+    /// when absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub opacity_modulation: Option<crate::ao::filter::OpacityModulation>,
 }
 
 impl Default for RenderSettings {
@@ -65,6 +77,9 @@ impl Default for RenderSettings {
             jitter: true,
             empty_space_skipping: true,
             background: [0.0, 0.0, 0.0, 1.0],
+            shadows: false,
+            light_direction: shadow::DEFAULT_LIGHT,
+            opacity_modulation: None,
         }
     }
 }

@@ -1,0 +1,157 @@
+//! The cheap AO methods behind one call each for the GPU and the CPU twin: the filter
+//! maps of Ruiz et al. ([`super::filter`]) and cone tracing ([`super::cone`]). They take
+//! a fraction of a second, so callers recompute them whenever the transfer function
+//! changes instead of caching.
+
+use super::cone::{ConeGpu, MipPyramid, cone_cpu, opacity};
+use super::filter::{self, AmbientMap, FilterGpu, OpacityModulation, RadiusUnit, Source};
+use super::{AoMethod, AoSettings};
+use crate::gpu::{Gpu, GpuError};
+use crate::render::gpu::GpuVolume;
+use crate::render::texels::VolumeTexels;
+use crate::tf::TransferFunction;
+
+/// The filter map a method asks for, if it is one.
+pub fn map_of(method: AoMethod) -> Option<AmbientMap> {
+    match method {
+        AoMethod::Cdf => Some(AmbientMap::Cdf),
+        AoMethod::Gauss => Some(AmbientMap::Gauss),
+        AoMethod::Penner => Some(AmbientMap::Penner),
+        _ => None,
+    }
+}
+
+/// True for the methods this module computes.
+pub fn handles(method: AoMethod) -> bool {
+    map_of(method).is_some() || method == AoMethod::Cone
+}
+
+/// Box radius in voxels per axis for these settings on these texels.
+pub fn box_radius(settings: &AoSettings, texels: &VolumeTexels) -> [u32; 3] {
+    filter::radius_voxels(
+        settings.radius,
+        settings.radius_unit == RadiusUnit::Mm,
+        texels.spacing,
+    )
+}
+
+/// Reach of the cones in mm: LAO's, `samples × 1 mm`, so the two compare like for like.
+pub fn cone_reach(settings: &AoSettings) -> f32 {
+    settings.samples.max(1) as f32 * super::lao::STEP_MM
+}
+
+/// One line saying what was computed, for descriptions and the CLI.
+pub fn describe(settings: &AoSettings) -> String {
+    let unit = match settings.radius_unit {
+        RadiusUnit::Voxels => "voxels",
+        RadiusUnit::Mm => "mm",
+    };
+    match settings.method {
+        AoMethod::Cone => format!(
+            "cone-traced AO, {} cones × {} spheres ({}), reach {} mm",
+            settings.cones.count(),
+            settings.cone_preset.spheres(),
+            settings.cone_preset.name(),
+            cone_reach(settings)
+        ),
+        m => format!(
+            "{m:?} map of the {:?} box statistics, radius {} {unit}",
+            settings.statistic, settings.radius
+        )
+        .to_lowercase(),
+    }
+}
+
+/// `A(x)` on the GPU for a method of this module (`None` for any other method).
+pub fn compute_gpu(
+    gpu: &Gpu,
+    vol: &GpuVolume,
+    tf: &TransferFunction,
+    settings: &AoSettings,
+) -> Result<Option<Vec<f32>>, GpuError> {
+    let texels = &vol.texels;
+    if let Some(map) = map_of(settings.method) {
+        let source = Source::new(texels, tf, settings.statistic);
+        let radius = box_radius(settings, texels);
+        let mut maps = FilterGpu::new(&gpu.device)?.compute(gpu, vol, &source, radius, &[map])?;
+        return Ok(maps.pop());
+    }
+    if settings.method == AoMethod::Cone {
+        let pyramid = MipPyramid::new(texels.dims, opacity(texels, tf));
+        let a = ConeGpu::new(&gpu.device)?.compute(
+            gpu,
+            texels,
+            &pyramid,
+            settings.cones,
+            settings.cone_preset,
+            cone_reach(settings),
+        )?;
+        return Ok(Some(a));
+    }
+    Ok(None)
+}
+
+/// CPU twin of [`compute_gpu`].
+pub fn compute_cpu(
+    texels: &VolumeTexels,
+    tf: &TransferFunction,
+    settings: &AoSettings,
+) -> Option<Vec<f32>> {
+    if let Some(map) = map_of(settings.method) {
+        let source = Source::new(texels, tf, settings.statistic);
+        let radius = box_radius(settings, texels);
+        return filter::compute_cpu(texels, &source, radius, &[map]).pop();
+    }
+    if settings.method == AoMethod::Cone {
+        let pyramid = MipPyramid::new(texels.dims, opacity(texels, tf));
+        return Some(cone_cpu(
+            texels,
+            &pyramid,
+            settings.cones,
+            settings.cone_preset,
+            cone_reach(settings),
+        ));
+    }
+    None
+}
+
+fn modulation_radius(m: &OpacityModulation) -> [u32; 3] {
+    filter::radius_voxels(m.radius, false, [1.0; 3])
+}
+
+/// Opacity modulation factors `min(σ²/σ²_max, 1)` per voxel on the GPU.
+pub fn modulation_gpu(
+    gpu: &Gpu,
+    vol: &GpuVolume,
+    tf: &TransferFunction,
+    m: &OpacityModulation,
+) -> Result<Vec<f32>, GpuError> {
+    let source = Source::new(&vol.texels, tf, m.source);
+    let mut maps = FilterGpu::new(&gpu.device)?.compute(
+        gpu,
+        vol,
+        &source,
+        modulation_radius(m),
+        &[AmbientMap::Variance],
+    )?;
+    Ok(filter::modulation(
+        &maps.pop().unwrap_or_default(),
+        m.sigma2_max,
+    ))
+}
+
+/// CPU twin of [`modulation_gpu`].
+pub fn modulation_cpu(
+    texels: &VolumeTexels,
+    tf: &TransferFunction,
+    m: &OpacityModulation,
+) -> Vec<f32> {
+    let source = Source::new(texels, tf, m.source);
+    let mut maps = filter::compute_cpu(
+        texels,
+        &source,
+        modulation_radius(m),
+        &[AmbientMap::Variance],
+    );
+    filter::modulation(&maps.pop().unwrap_or_default(), m.sigma2_max)
+}
