@@ -15,6 +15,7 @@
 //! writers, the demo volume and the GPU device path.
 
 pub mod ao;
+pub mod app;
 pub mod bench;
 pub mod bench_cao;
 pub mod bench_filter;

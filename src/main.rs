@@ -20,6 +20,9 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Open the viewer on a volume file or a scene (.json). `volao` alone opens it on the
+    /// built-in demo volume.
+    View(Box<ViewArgs>),
     /// Describe a volume: format, size, spacing, type, value range, orientation, histogram.
     /// Without FILE, describes the built-in demo volume.
     Info(InfoArgs),
@@ -48,6 +51,46 @@ struct InfoArgs {
     bins: usize,
     #[command(flatten)]
     load: LoadArgs,
+}
+
+#[derive(Args, Debug)]
+struct ViewArgs {
+    /// Volume file (.nii, .nii.gz, .hdr/.img, .pvm, .raw/.dat) or scene (.json). Omit for
+    /// the demo volume.
+    file: Option<PathBuf>,
+    /// Write a PNG of the viewport (and its scene beside it) after --exit-after-frames
+    /// frames, then close. For scripted figures and smoke tests.
+    #[arg(long, requires = "exit_after_frames")]
+    screenshot: Option<PathBuf>,
+    /// Close after this many frames showing the volume (with its ambient occlusion).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    exit_after_frames: Option<u64>,
+    /// (benchmark) Show only the viewport; once AO is ready move the scene's first clip
+    /// shape 1 mm per frame for N frames and print the frame times.
+    #[arg(long, hide = true, value_name = "N")]
+    bench_clip_drag: Option<u64>,
+    /// Edge of the clip shapes' depth maps (default 1024; smaller builds faster on a CPU
+    /// driver).
+    #[arg(long, value_name = "PIXELS", value_parser = clap::value_parser!(u32).range(16..=8192))]
+    clip_maps: Option<u32>,
+    /// Window size in points, e.g. 1280x800.
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    size: Option<[f32; 2]>,
+    #[command(flatten)]
+    load: LoadArgs,
+}
+
+fn parse_size(s: &str) -> Result<[f32; 2], String> {
+    let bad = || format!("{s:?}: expected WIDTHxHEIGHT, e.g. 1280x800");
+    let (w, h) = s.split_once(['x', 'X', '×']).ok_or_else(bad)?;
+    let (w, h) = (
+        w.trim().parse::<u32>().map_err(|_| bad())?,
+        h.trim().parse::<u32>().map_err(|_| bad())?,
+    );
+    if !(64..=16384).contains(&w) || !(64..=16384).contains(&h) {
+        return Err(format!("{s:?}: each side must be 64 to 16384"));
+    }
+    Ok([w as f32, h as f32])
 }
 
 #[derive(Args, Debug)]
@@ -540,14 +583,8 @@ fn main() {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        None => {
-            eprintln!(
-                "volao: the viewer is not built yet. Today volao inspects, converts and renders volumes \
-                 headless (see `volao --help`; `volao render -o demo.png --ao lao` renders this one);\n\
-                 here is the built-in demo volume the viewer will open on:\n"
-            );
-            print_info(&describe_demo(&volume::demo::head_phantom(128), 32), false)
-        }
+        None => Ok(volao::app::run(volao::app::ViewerOptions::default())?),
+        Some(Command::View(args)) => view(&args),
         Some(Command::Info(args)) => {
             let report = match &args.file {
                 Some(path) => {
@@ -616,6 +653,50 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Bench(BenchCommand::Cao(args))) => volao::bench_cao::cao_bench(&args),
         Some(Command::Bench(BenchCommand::LoadOne { file })) => volao::bench::load_one(&file),
     }
+}
+
+fn view(args: &ViewArgs) -> Result<()> {
+    use volao::app::{OpenRequest, ViewerOptions};
+    let open = match &args.file {
+        None => OpenRequest::Demo,
+        Some(p)
+            if p.extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("json")) =>
+        {
+            OpenRequest::Scene(p.clone())
+        }
+        Some(p) => OpenRequest::Volume {
+            path: p.clone(),
+            options: args.load.options(),
+        },
+    };
+    if let Some(p) = &args.file
+        && !p.exists()
+    {
+        bail!("{}: no such file", p.display());
+    }
+    let mut options = ViewerOptions {
+        open,
+        screenshot: args.screenshot.clone(),
+        exit_after_frames: args.exit_after_frames,
+        bench_clip_drag: args.bench_clip_drag,
+        ..Default::default()
+    };
+    if let Some(size) = args.size {
+        options.window_size = size;
+    }
+    if let Some(n) = args.clip_maps {
+        options.clip_resolution = n;
+    }
+    // A scripted run must not touch the user's recent-files list.
+    if args.exit_after_frames.is_some() || args.bench_clip_drag.is_some() {
+        options.recent_file = None;
+    }
+    volao::app::run(options)?;
+    if let Some(p) = &args.screenshot {
+        println!("{}", p.display());
+    }
+    Ok(())
 }
 
 fn ambient_occlusion(args: &AoArgs) -> Result<()> {

@@ -36,6 +36,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("light.wgsl", include_str!("../../shaders/light.wgsl")),
     ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
     ("smoke.wgsl", include_str!("../../shaders/smoke.wgsl")),
+    ("viewport.wgsl", include_str!("../../shaders/viewport.wgsl")),
     ("surface.wgsl", include_str!("../../shaders/surface.wgsl")),
     ("vao.wgsl", include_str!("../../shaders/vao.wgsl")),
     (

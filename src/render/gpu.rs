@@ -260,6 +260,19 @@ impl GpuVolume {
         self.ao_view = view.clone();
     }
 
+    /// Back to no ambient occlusion (A = 1 everywhere), as right after upload. The viewer
+    /// shows this while a new AO volume is computed for a changed transfer function.
+    pub fn clear_ambient_occlusion(&mut self, gpu: &Gpu) {
+        let ao = texture_3d(
+            &gpu.device,
+            "GpuVolume::ambient_occlusion",
+            [1, 1, 1],
+            wgpu::TextureFormat::R32Float,
+        );
+        write_3d(&gpu.queue, &ao, [1, 1, 1], 4, bytemuck::bytes_of(&1.0f32));
+        self.ao_view = ao.create_view(&Default::default());
+    }
+
     /// Uses `values` (one per voxel, x fastest, in [0, 1]) as the opacity factor of
     /// variance modulation. Stored as R16Unorm like the AO volume; returns the values as
     /// the GPU will sample them (for the CPU twin).
@@ -380,6 +393,70 @@ impl RayCaster {
                 placeholders: super::shadow::Placeholders::new(device),
                 surfaces,
             }
+        })
+    }
+
+    /// Encodes the ray casting of one tile of `frame` into `encoder`, writing the caller's
+    /// `target` (Rgba8Unorm with `STORAGE_BINDING`; its size is the tile's, `origin` where
+    /// it sits in the frame), with no readback, clipped by `clip` as
+    /// [`Self::render_clipped`] is. The viewer draws `target` through a paint callback and
+    /// copies screenshot tiles out of it asynchronously; the pixels are those
+    /// [`Self::render_clipped`] reads back for the same frame.
+    pub fn encode_tile(
+        &self,
+        (device, queue): (&wgpu::Device, &wgpu::Queue),
+        vol: &GpuVolume,
+        frame: &Frame,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        (target, origin): (&wgpu::Texture, (u32, u32)),
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<(), GpuError> {
+        let params = frame.params(&vol.texels, &vol.lut, origin.0, origin.1);
+        let clip_group = clip.map(|c| c.bind_group(device, &self.clip_layout));
+        let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
+        let (tw, th) = (target.width(), target.height());
+        validated(device, "RayCaster::encode_tile", || {
+            let uniforms = uniform_buffer(
+                device,
+                queue,
+                "RayCaster::params",
+                bytemuck::bytes_of(&params),
+            );
+            let target_view = target.create_view(&Default::default());
+            let group = bind_group(
+                device,
+                "RayCaster::bind_group",
+                &self.layout,
+                &[
+                    uniforms.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&vol.volume_view),
+                    wgpu::BindingResource::Sampler(&self.sampler),
+                    vol.lut_buffer.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&vol.ao_view),
+                    wgpu::BindingResource::TextureView(&vol.occupancy_view),
+                    wgpu::BindingResource::TextureView(&target_view),
+                    wgpu::BindingResource::TextureView(&vol.modulation_view),
+                ],
+            );
+            // Surfaces rasterised into the volume are not drawn in this path yet.
+            let group_2 = super::shadow::bind_group_2(
+                device,
+                queue,
+                &self.layout_2,
+                &vol.extras,
+                None,
+                &self.placeholders,
+                &self.sampler,
+            );
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("RayCaster::encode_tile"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.set_bind_group(1, clip_group, &[]);
+            pass.set_bind_group(2, &group_2, &[]);
+            pass.dispatch_workgroups(tw.div_ceil(8), th.div_ceil(8), 1);
         })
     }
 

@@ -1,0 +1,217 @@
+//! Long work off the UI thread: loading a file, AO precomputation, writing screenshots.
+//!
+//! A [`Job`] runs a closure on its own thread and hands back its result through a
+//! channel; the closure reports progress through [`Progress`], which also asks egui to
+//! repaint so the progress bar moves. Cancel is cooperative: the next progress report
+//! after [`Job::cancel`] unwinds the worker with a private payload (no panic message),
+//! so loaders and AO code that only take a progress callback stop at their next report.
+
+use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, TryRecvError, channel};
+use std::time::{Duration, Instant};
+
+/// Why a job produced no result.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum JobError {
+    #[error("cancelled")]
+    Cancelled,
+    #[error("{0}")]
+    Failed(String),
+}
+
+/// The payload a cancelled worker unwinds with.
+struct Cancelled;
+
+/// Progress and cancellation shared between a job and the UI.
+pub struct Progress {
+    done: AtomicU64,
+    total: AtomicU64,
+    cancel: AtomicBool,
+    repaint: Box<dyn Fn() + Send + Sync>,
+}
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Progress")
+            .field("done", &self.done)
+            .field("total", &self.total)
+            .field("cancel", &self.cancel)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Progress {
+    fn new(repaint: Box<dyn Fn() + Send + Sync>) -> Self {
+        Progress {
+            done: AtomicU64::new(0),
+            total: AtomicU64::new(0),
+            cancel: AtomicBool::new(false),
+            repaint,
+        }
+    }
+
+    /// Reports `done` of `total` units; stops the job here if it was cancelled.
+    pub fn set(&self, done: u64, total: u64) {
+        self.total.store(total, Ordering::Relaxed);
+        self.done.store(done, Ordering::Relaxed);
+        (self.repaint)();
+        self.check();
+    }
+
+    /// Stops the job here if it was cancelled.
+    pub fn check(&self) {
+        if self.cancel.load(Ordering::Relaxed) {
+            resume_unwind(Box::new(Cancelled));
+        }
+    }
+
+    /// Fraction done in [0, 1], or `None` before the first report.
+    pub fn fraction(&self) -> Option<f32> {
+        let total = self.total.load(Ordering::Relaxed);
+        (total > 0).then(|| (self.done.load(Ordering::Relaxed) as f64 / total as f64) as f32)
+    }
+}
+
+/// A closure running on a worker thread.
+#[derive(Debug)]
+pub struct Job<T> {
+    /// What the progress bar says ("loading engine.raw").
+    pub label: String,
+    progress: Arc<Progress>,
+    rx: Receiver<Result<T, JobError>>,
+    started: Instant,
+}
+
+impl<T: Send + 'static> Job<T> {
+    /// Starts `work` on a new thread; `repaint` is called on every progress report and
+    /// when the job ends (the viewer passes `egui::Context::request_repaint`).
+    pub fn spawn(
+        label: impl Into<String>,
+        repaint: impl Fn() + Send + Sync + 'static,
+        work: impl FnOnce(&Progress) -> Result<T, String> + Send + 'static,
+    ) -> Self {
+        let label = label.into();
+        let progress = Arc::new(Progress::new(Box::new(repaint)));
+        let (tx, rx) = channel();
+        let p = Arc::clone(&progress);
+        let spawned = std::thread::Builder::new()
+            .name(format!("volao job: {label}"))
+            .spawn(move || {
+                let result = match catch_unwind(AssertUnwindSafe(|| work(&p))) {
+                    Ok(r) => r.map_err(JobError::Failed),
+                    Err(payload) if payload.is::<Cancelled>() => Err(JobError::Cancelled),
+                    Err(payload) => Err(JobError::Failed(format!(
+                        "internal error: {}",
+                        panic_message(payload.as_ref())
+                    ))),
+                };
+                let _ = tx.send(result);
+                (p.repaint)();
+            });
+        let job = Job {
+            label,
+            progress,
+            rx,
+            started: Instant::now(),
+        };
+        if let Err(e) = spawned {
+            // No thread: report the failure through the job itself.
+            let (tx, rx) = channel();
+            let _ = tx.send(Err(JobError::Failed(format!(
+                "could not start a worker thread: {e}"
+            ))));
+            return Job { rx, ..job };
+        }
+        job
+    }
+
+    /// The result once the job has ended (`None` while it runs).
+    pub fn poll(&mut self) -> Option<Result<T, JobError>> {
+        match self.rx.try_recv() {
+            Ok(r) => Some(r),
+            Err(TryRecvError::Empty) => None,
+            Err(TryRecvError::Disconnected) => Some(Err(JobError::Failed(
+                "the worker thread ended without a result".into(),
+            ))),
+        }
+    }
+
+    /// Waits at most `timeout` for the result (tests and the CLI; never the UI thread).
+    pub fn wait(&mut self, timeout: Duration) -> Option<Result<T, JobError>> {
+        self.rx.recv_timeout(timeout).ok()
+    }
+}
+
+impl<T> Job<T> {
+    /// Asks the job to stop at its next progress report.
+    pub fn cancel(&self) {
+        self.progress.cancel.store(true, Ordering::Relaxed);
+    }
+
+    pub fn fraction(&self) -> Option<f32> {
+        self.progress.fraction()
+    }
+
+    pub fn elapsed(&self) -> Duration {
+        self.started.elapsed()
+    }
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_owned())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a worker thread panicked".into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn results_progress_and_cancel() {
+        let mut ok = Job::spawn(
+            "sum",
+            || {},
+            |p| {
+                p.set(1, 2);
+                Ok(41 + 1)
+            },
+        );
+        assert_eq!(ok.wait(Duration::from_secs(10)), Some(Ok(42)));
+
+        let mut failing: Job<()> = Job::spawn("fail", || {}, |_| Err("bad file".into()));
+        assert_eq!(
+            failing.wait(Duration::from_secs(10)),
+            Some(Err(JobError::Failed("bad file".into())))
+        );
+
+        // A job that reports forever stops at the first report after cancel.
+        let (started_tx, started_rx) = channel();
+        let mut endless: Job<()> = Job::spawn(
+            "endless",
+            || {},
+            move |p| {
+                p.set(1, 10);
+                let _ = started_tx.send(());
+                loop {
+                    p.set(1, 10);
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            },
+        );
+        started_rx
+            .recv_timeout(Duration::from_secs(10))
+            .expect("job started");
+        assert_eq!(endless.fraction(), Some(0.1));
+        assert!(endless.poll().is_none(), "still running");
+        endless.cancel();
+        assert_eq!(
+            endless.wait(Duration::from_secs(10)),
+            Some(Err(JobError::Cancelled))
+        );
+    }
+}

@@ -1,0 +1,573 @@
+//! The viewer driven through its real UI with egui_kittest, on the same lavapipe device
+//! the other GPU tests use (never skipped): open a file through the app's API, switch
+//! presets and the AO method by clicking, orbit with the mouse, take screenshots, and
+//! check the viewport against `volao render` of the saved scene.
+
+mod common;
+
+use common::data;
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+use volao::app::{OpenRequest, ShotSize, Viewer, ViewerOptions};
+use volao::render::Image;
+use volao::render::image::{Tolerance, check};
+use volao::tf::{Preset, TransferFunction};
+use volao::volume::LoadOptions;
+
+/// Depth-map edge for clip shapes (the default 1024 is slow on lavapipe, as in tests/cao.rs).
+const CLIP_MAPS: u32 = 128;
+
+/// The window the tests drive (points = pixels: pixels_per_point 1).
+const WINDOW: (f32, f32) = (760.0, 520.0);
+
+fn out_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("viewer")
+}
+
+fn golden_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden")
+}
+
+/// A harness whose egui renderer and viewer share one device from `request_device`.
+fn harness(open: OpenRequest, screenshot_dir: &Path) -> Harness<'static, Viewer> {
+    harness_on(device(), open, screenshot_dir)
+}
+
+fn device() -> volao::gpu::Gpu {
+    volao::gpu::request_device().unwrap_or_else(|e| {
+        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
+    })
+}
+
+fn harness_on(
+    gpu: volao::gpu::Gpu,
+    open: OpenRequest,
+    screenshot_dir: &Path,
+) -> Harness<'static, Viewer> {
+    let setup = egui_wgpu::WgpuSetup::Existing(egui_wgpu::WgpuSetupExisting {
+        instance: gpu.instance.clone(),
+        adapter: gpu.adapter.clone(),
+        device: gpu.device.clone(),
+        queue: gpu.queue.clone(),
+    });
+    let render_state =
+        egui_kittest::wgpu::create_render_state(setup, egui_wgpu::RendererOptions::PREDICTABLE);
+    let renderer = egui_kittest::wgpu::WgpuTestRenderer::from_render_state(render_state.clone());
+    let ctx = egui::Context::default();
+    let options = ViewerOptions {
+        open,
+        recent_file: Some(screenshot_dir.join("recent.json")),
+        screenshot_dir: screenshot_dir.to_owned(),
+        clip_resolution: CLIP_MAPS,
+        ..Default::default()
+    };
+    let viewer = Viewer::new(&ctx, render_state, options).unwrap_or_else(|e| panic!("{e}"));
+    Harness::builder()
+        .with_size(egui::vec2(WINDOW.0, WINDOW.1))
+        .with_pixels_per_point(1.0)
+        .renderer(renderer)
+        .build_ui_state(|ui, viewer: &mut Viewer| viewer.show(ui), viewer)
+}
+
+/// Steps until no load, AO or screenshot is running (bounded), then a few frames more.
+fn settle(h: &mut Harness<'static, Viewer>) {
+    let start = Instant::now();
+    loop {
+        h.step();
+        if !h.state().is_busy() {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(180),
+            "the viewer is still busy after 3 minutes"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    h.run_steps(3);
+}
+
+fn bucky() -> OpenRequest {
+    OpenRequest::Volume {
+        path: data("pvm/Bucky.pvm"),
+        options: LoadOptions::default(),
+    }
+}
+
+fn rgba_image(img: &image::RgbaImage) -> Image {
+    Image {
+        width: img.width(),
+        height: img.height(),
+        pixels: img.pixels().map(|p| p.0).collect(),
+    }
+}
+
+/// Opens the combo box labelled `combo` and clicks its entry `option`, as a user does.
+fn choose(h: &mut Harness<'static, Viewer>, combo: &str, option: &str) {
+    h.get_by_label(combo).scroll_to_me();
+    // Scrolling animates over a few frames; the click must land where it ends.
+    h.run_steps(8);
+    h.get_by_label(combo).click();
+    h.run_steps(2);
+    if h.query_by_label(option).is_none() {
+        let _ = std::fs::create_dir_all(out_dir());
+        let shot = out_dir().join(format!("choose_{combo}.png"));
+        if let Ok(img) = h.render() {
+            let _ = img.save(&shot);
+        }
+        panic!(
+            "no {option:?} in the {combo:?} list; the window is in {}",
+            shot.display()
+        );
+    }
+    h.get_by_label(option).click();
+}
+
+/// The viewport's pixels from a rendering of the whole window.
+fn viewport_pixels(h: &mut Harness<'static, Viewer>) -> Image {
+    let rect = h.state().viewport_rect();
+    let (w, ht) = h.state().viewport_size();
+    let full = h.render().unwrap_or_else(|e| panic!("render: {e}"));
+    let (x0, y0) = (rect.min.x.round() as u32, rect.min.y.round() as u32);
+    let crop = image::imageops::crop_imm(&full, x0, y0, w, ht).to_image();
+    rgba_image(&crop)
+}
+
+/// `volao render SCENE -o PNG`, the real binary.
+fn volao_render(scene: &Path, png: &Path) -> Image {
+    let out = Command::new(env!("CARGO_BIN_EXE_volao"))
+        .args([
+            "render",
+            &scene.display().to_string(),
+            "-o",
+            &png.display().to_string(),
+        ])
+        .output()
+        .expect("volao runs");
+    assert!(
+        out.status.success(),
+        "volao render failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Image::load_png(png).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The viewport draws the ray caster's own texels 1:1, so on the same adapter it must
+/// match `volao render` exactly; one level is allowed for a render target that stores
+/// sRGB (decode in the shader, encode on write).
+const SAME_RENDERER: Tolerance = Tolerance {
+    max_channel_diff: 1,
+    max_outlier_fraction: 0.0,
+    max_outlier_diff: 1,
+};
+
+/// UI snapshots: text antialiasing is deterministic on one driver, but allow a few
+/// levels on a handful of pixels for another LLVM build of lavapipe.
+const SNAPSHOT: Tolerance = Tolerance {
+    max_channel_diff: 2,
+    max_outlier_fraction: 0.002,
+    max_outlier_diff: 64,
+};
+
+/// A snapshot of the controls: the window left of the viewport (the viewport itself is
+/// compared with `volao render` exactly).
+fn snapshot(h: &mut Harness<'static, Viewer>, name: &str) {
+    let left = h.state().viewport_rect().min.x.round() as u32;
+    let full = h.render().unwrap_or_else(|e| panic!("render: {e}"));
+    let (w, ht) = (full.width(), full.height());
+    let actual = rgba_image(&image::imageops::crop_imm(&full, 0, 0, left.min(w), ht).to_image());
+    let path = golden_dir().join(format!("{name}.png"));
+    if std::env::var_os("VOLAO_BLESS").is_some() {
+        actual.save_png(&path).unwrap_or_else(|e| panic!("{e}"));
+    }
+    let expected = Image::load_png(&path)
+        .unwrap_or_else(|e| panic!("{e} (run with VOLAO_BLESS=1 to create it)"));
+    if let Err(e) = check(name, &actual, &expected, SNAPSHOT, &out_dir()) {
+        panic!("{e}");
+    }
+}
+
+#[test]
+fn open_switch_preset_and_the_viewport_matches_volao_render() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    let doc = h.state().document().expect("Bucky.pvm loaded");
+    assert_eq!(doc.title, "Bucky.pvm");
+    assert_eq!(doc.volume.dims, [32, 32, 32]);
+    let stats = doc.stats;
+
+    // Switch the preset through the combo box, as a user does.
+    choose(&mut h, "Preset", "cao-single-color");
+    settle(&mut h);
+    let tf = &h.state().document().expect("doc").tf;
+    assert_eq!(
+        *tf,
+        TransferFunction::preset(Preset::CaoSingleColor, &stats)
+    );
+    assert!(
+        h.state().has_unsaved_changes(),
+        "a preset change is a change"
+    );
+
+    // Save the scene and render it headless: same pixels as the viewport.
+    let scene = dir.path().join("view.json");
+    h.state_mut().save_scene(&scene).expect("scene saved");
+    assert!(!h.state().has_unsaved_changes());
+    let viewport = viewport_pixels(&mut h);
+    let (w, ht) = h.state().viewport_size();
+    assert!(w > 200 && ht > 200, "viewport {w}×{ht}");
+    let rendered = volao_render(&scene, &dir.path().join("render.png"));
+    assert_eq!((rendered.width, rendered.height), (w, ht));
+    let cmp = check(
+        "viewport_vs_render",
+        &viewport,
+        &rendered,
+        SAME_RENDERER,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    eprintln!(
+        "viewport vs volao render: max diff {}, mean {:.4}",
+        cmp.max_diff, cmp.mean_diff
+    );
+    // Not a trivially empty picture: the buckyball covers a good part of the view.
+    let lit = viewport.pixels.iter().filter(|p| p[0] > 40).count();
+    assert!(lit > viewport.pixels.len() / 20, "only {lit} lit pixels");
+    snapshot(&mut h, "viewer_bucky_cao_single_color");
+}
+
+#[test]
+fn ao_method_from_the_panel_matches_volao_render_with_lao() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    choose(&mut h, "Method", "lao");
+    settle(&mut h);
+    assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
+    let doc = h.state().document().expect("doc");
+    assert_eq!(doc.ao.method, volao::ao::AoMethod::Lao);
+    let scene = dir.path().join("lao.json");
+    h.state_mut().save_scene(&scene).expect("scene saved");
+    let viewport = viewport_pixels(&mut h);
+    let rendered = volao_render(&scene, &dir.path().join("lao.png"));
+    check(
+        "viewport_lao_vs_render",
+        &viewport,
+        &rendered,
+        SAME_RENDERER,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    // And AO changed the picture: without it the same view is brighter somewhere.
+    let mut none = volao::scene::Scene::load(&scene).expect("scene");
+    none.ambient_occlusion.method = volao::ao::AoMethod::None;
+    none.save(&scene).expect("save");
+    let plain = volao_render(&scene, &dir.path().join("plain.png"));
+    let darker = viewport
+        .pixels
+        .iter()
+        .zip(&plain.pixels)
+        .filter(|(a, b)| a[0] + 2 < b[0])
+        .count();
+    assert!(darker > 100, "AO darkened only {darker} pixels");
+}
+
+#[test]
+fn orbit_with_the_mouse_and_standard_views() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    let rect = h.state().viewport_rect();
+    let c = rect.center();
+    h.drag_at(c);
+    h.step();
+    for i in 1..=5 {
+        h.hover_at(c + egui::vec2(10.0 * i as f32, 0.0));
+        h.step();
+    }
+    h.drop_at(c + egui::vec2(50.0, 0.0));
+    h.run_steps(2);
+    let az = h.state().document().expect("doc").camera.azimuth_deg;
+    // The drag moved 50 points; egui starts a drag after a few points of movement.
+    let expected = 50.0 * volao::app::camera_input::ORBIT_DEG_PER_POINT;
+    assert!(az > 0.5 * expected && az <= expected + 1e-3, "azimuth {az}");
+
+    h.get_by_label("Superior").click();
+    h.run_steps(2);
+    let cam = h.state().document().expect("doc").camera;
+    assert_eq!((cam.azimuth_deg, cam.elevation_deg), (0.0, 90.0));
+    h.get_by_label("Orthographic").click();
+    h.run_steps(2);
+    assert!(h.state().document().expect("doc").camera.orthographic);
+}
+
+#[test]
+fn screenshots_write_png_and_scene_and_survive_a_failed_write() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+
+    // The shortcut: F12 writes volao-1.png and volao-1.json in the screenshot folder.
+    h.key_press(egui::Key::F12);
+    settle(&mut h);
+    let png = dir.path().join("volao-1.png");
+    let json = dir.path().join("volao-1.json");
+    assert!(png.is_file() && json.is_file(), "F12 wrote nothing");
+    assert!(
+        h.state()
+            .toasts()
+            .iter()
+            .any(|t| !t.error && t.text.contains("volao-1.png")),
+        "a toast says where it went"
+    );
+    let shot = Image::load_png(&png).expect("png");
+    assert_eq!((shot.width, shot.height), h.state().viewport_size());
+    // (The viewport itself matches `volao render` in the first test; here a toast covers
+    // part of it.)
+    let rendered = volao_render(&json, &dir.path().join("again.png"));
+    check(
+        "f12_vs_render",
+        &shot,
+        &rendered,
+        Tolerance::EXACT,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+
+    // A chosen size with a transparent background, in several tiles' worth of pixels.
+    h.state_mut().document_mut().expect("doc").render.background = [0.0; 4];
+    let big = dir.path().join("big.png");
+    h.state_mut()
+        .request_screenshot(big.clone(), ShotSize::Fixed(2100, 90));
+    settle(&mut h);
+    let img = Image::load_png(&big).expect("big png");
+    assert_eq!((img.width, img.height), (2100, 90));
+    assert_eq!(img.pixels[0][3], 0, "transparent corner");
+    let again = volao_render(&dir.path().join("big.json"), &dir.path().join("big2.png"));
+    check(
+        "tiled_vs_render",
+        &img,
+        &again,
+        Tolerance::EXACT,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+
+    // A failed write shows an error and keeps the image for another try.
+    let bad = dir.path().join("no-such-folder").join("x.png");
+    h.state_mut()
+        .request_screenshot(bad, ShotSize::Fixed(64, 48));
+    settle(&mut h);
+    assert!(
+        h.state()
+            .toasts()
+            .iter()
+            .any(|t| t.error && t.text.contains("no-such-folder")),
+        "error toast"
+    );
+    assert!(h.state().failed_shot.is_some(), "the image is kept");
+    let retry = dir.path().join("retry.png");
+    h.state_mut().retry_screenshot(retry.clone());
+    settle(&mut h);
+    let img = Image::load_png(&retry).expect("retried png");
+    assert_eq!((img.width, img.height), (64, 48));
+    assert!(h.state().failed_shot.is_none());
+}
+
+#[test]
+fn a_bad_file_is_an_error_and_the_volume_stays() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    h.state_mut()
+        .open(OpenRequest::for_path(data("nifti/not-nifti.nii")));
+    settle(&mut h);
+    assert_eq!(h.state().document().expect("doc").title, "Bucky.pvm");
+    assert!(
+        h.state()
+            .toasts()
+            .iter()
+            .any(|t| t.error && t.text.contains("not-nifti.nii")),
+        "{:?}",
+        h.state().toasts()
+    );
+    // Recent files remember what opened, in the file the options name.
+    let recent = std::fs::read_to_string(dir.path().join("recent.json")).expect("recent list");
+    assert!(recent.contains("Bucky.pvm"), "{recent}");
+}
+
+#[test]
+fn unsaved_changes_are_asked_about_before_opening_another_file() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    h.state_mut()
+        .document_mut()
+        .expect("doc")
+        .camera
+        .azimuth_deg = 42.0;
+    h.state_mut()
+        .open(OpenRequest::for_path(data("pvm/Storm-t11.pvm")));
+    h.run_steps(2);
+    h.get_by_label("Unsaved changes");
+    h.get_by_label("Cancel").click();
+    h.run_steps(2);
+    assert!(
+        h.query_by_label("Unsaved changes").is_none(),
+        "prompt closed"
+    );
+    assert_eq!(h.state().document().expect("doc").title, "Bucky.pvm");
+
+    h.state_mut()
+        .open(OpenRequest::for_path(data("pvm/Storm-t11.pvm")));
+    h.run_steps(2);
+    h.get_by_label("Discard").click();
+    settle(&mut h);
+    assert_eq!(h.state().document().expect("doc").title, "Storm-t11.pvm");
+    assert!(!h.state().has_unsaved_changes());
+}
+
+#[test]
+fn scenes_reopen_as_saved() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    {
+        let doc = h.state_mut().document_mut().expect("doc");
+        doc.camera.azimuth_deg = 33.0;
+        doc.camera.orthographic = true;
+        doc.tf = doc.tf.with_window_level(120.0, 90.0);
+    }
+    let scene = dir.path().join("s.json");
+    h.state_mut().save_scene(&scene).expect("saved");
+    let saved = h.state().document().expect("doc").clone();
+    let mut h2 = harness(OpenRequest::Scene(scene.clone()), dir.path());
+    settle(&mut h2);
+    let doc = h2.state().document().expect("scene opened");
+    assert_eq!(doc.camera, saved.camera);
+    assert_eq!(doc.tf, saved.tf);
+    assert_eq!(
+        doc.source
+            .path
+            .as_deref()
+            .map(Path::canonicalize)
+            .and_then(Result::ok),
+        data("pvm/Bucky.pvm").canonicalize().ok()
+    );
+    assert!(!h2.state().has_unsaved_changes());
+}
+
+#[test]
+fn add_a_clip_shape_drag_it_and_cao_follows() {
+    use volao::clip::gpu::ClipMaps;
+    use volao::render::gpu::{GpuVolume, RayCaster};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let gpu = device();
+    let twin = volao::gpu::Gpu {
+        instance: gpu.instance.clone(),
+        adapter: gpu.adapter.clone(),
+        device: gpu.device.clone(),
+        queue: gpu.queue.clone(),
+        info: gpu.info.clone(),
+    };
+    let mut h = harness_on(gpu, bucky(), dir.path());
+    settle(&mut h);
+    h.get_by_label("Sphere").scroll_to_me();
+    h.run_steps(8);
+    h.get_by_label("Sphere").click();
+    settle(&mut h);
+    let doc = h.state().document().expect("doc").clone();
+    assert_eq!(doc.clip_shapes.len(), 1);
+    let sphere = doc.clip_shapes[0].clone();
+
+    // Drag the sphere by its outline, 40 points to the right: it follows the mouse.
+    let rect = h.state().viewport_rect();
+    let project = |p: glam::Vec3, cam: &volao::render::Camera| {
+        let s = cam
+            .view_proj(doc.radius, rect.width() / rect.height())
+            .project_point3(p);
+        egui::pos2(
+            rect.left() + (s.x + 1.0) * 0.5 * rect.width(),
+            rect.top() + (1.0 - s.y) * 0.5 * rect.height(),
+        )
+    };
+    // The silhouette circle facing the anterior view lies in the xz plane.
+    let grab = project(
+        glam::Vec3::from(sphere.translation) + glam::Vec3::X * sphere.scale[0],
+        &doc.camera,
+    );
+    let centre_before = project(glam::Vec3::from(sphere.translation), &doc.camera);
+    h.drag_at(grab);
+    h.step();
+    for i in 1..=8 {
+        h.hover_at(grab + egui::vec2(5.0 * i as f32, 0.0));
+        h.step();
+    }
+    h.drop_at(grab + egui::vec2(40.0, 0.0));
+    settle(&mut h);
+    let doc = h.state().document().expect("doc").clone();
+    assert_eq!(
+        doc.camera,
+        volao::render::Camera::default(),
+        "the camera stayed"
+    );
+    let moved = project(
+        glam::Vec3::from(doc.clip_shapes[0].translation),
+        &doc.camera,
+    ) - centre_before;
+    // egui starts a drag after a few points of movement; those are not applied.
+    assert!(
+        moved.x > 25.0 && moved.x <= 40.5 && moved.y.abs() < 0.5,
+        "the sphere moved {moved:?} for a 40-point drag"
+    );
+
+    // The viewport clips exactly as an independent clipped render of the same scene.
+    h.state_mut().show_outlines = false;
+    h.run_steps(2);
+    let viewport = viewport_pixels(&mut h);
+    let frame = h.state().view_frame().expect("frame");
+    let vol = GpuVolume::new(
+        &twin,
+        &doc.volume,
+        &doc.view_tf(),
+        frame.settings.step_voxels,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let mut clip = ClipMaps::new(&twin).unwrap_or_else(|e| panic!("{e}"));
+    let reach = volao::ao::cao::reach_mm(doc.ao.samples, vol.texels.spacing);
+    clip.update(&twin, &doc.clip_shapes, doc.radius, reach, CLIP_MAPS)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let expected = RayCaster::new(&twin.device)
+        .and_then(|rc| rc.render_clipped(&twin, &vol, &frame, Some(&clip)))
+        .unwrap_or_else(|e| panic!("{e}"));
+    check(
+        "clipped_viewport",
+        &viewport,
+        &expected,
+        SAME_RENDERER,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let unclipped = RayCaster::new(&twin.device)
+        .and_then(|rc| rc.render(&twin, &vol, &frame))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_ne!(
+        viewport.pixels, unclipped.pixels,
+        "the sphere carved something"
+    );
+
+    // CAO: exact AO every frame, recomputing a share.
+    choose(&mut h, "Method", "cao");
+    settle(&mut h);
+    assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
+    let with_ao = viewport_pixels(&mut h);
+    assert_ne!(with_ao.pixels, viewport.pixels, "CAO shades the picture");
+    h.state_mut().document_mut().expect("doc").clip_shapes[0].translation[2] += 3.0;
+    settle(&mut h);
+    assert!(h.state().ao_ready());
+    let percent = h.state().cao_percent_recomputed().expect("CAO statistics");
+    assert!(percent > 0.0 && percent < 100.0, "{percent} % recomputed");
+}

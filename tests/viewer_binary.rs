@@ -1,0 +1,148 @@
+//! The real `volao` binary opens its window under Xvfb on lavapipe, draws frames, writes a
+//! screenshot through `--screenshot … --exit-after-frames N` and exits; the screenshot
+//! and its scene reproduce with `volao render`. Needs `xvfb-run` (`.ci/run` installs
+//! xvfb and xauth); without it the test fails with that instruction, it never skips.
+
+mod common;
+
+use common::data;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+use volao::render::Image;
+use volao::render::image::{Tolerance, check};
+
+fn out_dir() -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("viewer_binary")
+}
+
+/// Runs `cmd`, killing it after `limit`. Returns (success, stderr).
+fn run_bounded(mut cmd: Command, limit: Duration) -> (bool, String) {
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("cannot start {cmd:?}: {e}"));
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            let out = child.wait_with_output().expect("output");
+            let text = String::from_utf8_lossy(&out.stderr).into_owned()
+                + &String::from_utf8_lossy(&out.stdout);
+            return (status.success(), text);
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let out = child.wait_with_output().expect("output");
+            panic!(
+                "{cmd:?} did not finish within {limit:?}; output:\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn xvfb_run() -> Command {
+    let found = Command::new("sh")
+        .args(["-c", "command -v xvfb-run"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    assert!(
+        found,
+        "xvfb-run is missing: the viewer smoke test needs a virtual X server. \
+         Install it with: sudo apt-get install -y xvfb xauth (.ci/run does)"
+    );
+    let mut cmd = Command::new("xvfb-run");
+    cmd.args(["-a", "-s", "-screen 0 1280x800x24"]);
+    // Mesa wants a private runtime dir; keep the user's settings out of the run.
+    let runtime = out_dir().join("xdg");
+    let _ = std::fs::create_dir_all(&runtime);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = std::fs::set_permissions(&runtime, std::fs::Permissions::from_mode(0o700));
+    }
+    cmd.env("XDG_RUNTIME_DIR", &runtime);
+    cmd
+}
+
+fn render(scene: &Path, png: &Path) -> Image {
+    let out = Command::new(env!("CARGO_BIN_EXE_volao"))
+        .args([
+            "render",
+            &scene.display().to_string(),
+            "-o",
+            &png.display().to_string(),
+        ])
+        .output()
+        .expect("volao runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Image::load_png(png).unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn the_binary_opens_a_window_renders_and_writes_a_screenshot() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let shot = dir.path().join("shot.png");
+    let mut cmd = xvfb_run();
+    cmd.arg(env!("CARGO_BIN_EXE_volao")).args([
+        "view",
+        &data("pvm/Bucky.pvm").display().to_string(),
+        "--size",
+        "640x480",
+        "--exit-after-frames",
+        "5",
+        "--screenshot",
+        &shot.display().to_string(),
+    ]);
+    let (ok, output) = run_bounded(cmd, Duration::from_secs(240));
+    assert!(ok, "volao view failed:\n{output}");
+    let img = Image::load_png(&shot).unwrap_or_else(|e| panic!("{e}\n{output}"));
+    // The viewport is the window less the side panel, menu and status bars.
+    assert!(
+        img.width > 200 && img.width < 640 && img.height > 300 && img.height < 480,
+        "screenshot {}×{}",
+        img.width,
+        img.height
+    );
+    let lit = img.pixels.iter().filter(|p| p[0] > 40).count();
+    assert!(lit > img.pixels.len() / 20, "only {lit} lit pixels");
+    // Its scene reproduces it headless, pixel for pixel (same renderer, same adapter).
+    let scene = dir.path().join("shot.json");
+    let again = render(&scene, &dir.path().join("again.png"));
+    check(
+        "binary_shot_vs_render",
+        &img,
+        &again,
+        Tolerance::EXACT,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+}
+
+#[test]
+fn a_bad_file_exits_with_one_error_line() {
+    let (ok, output) = run_bounded(
+        {
+            let mut c = Command::new(env!("CARGO_BIN_EXE_volao"));
+            c.args([
+                "view",
+                "/nonexistent/scan.nii.gz",
+                "--exit-after-frames",
+                "1",
+            ]);
+            c
+        },
+        Duration::from_secs(30),
+    );
+    assert!(!ok);
+    assert!(
+        output.starts_with("error: ") && output.contains("/nonexistent/scan.nii.gz"),
+        "{output}"
+    );
+}
