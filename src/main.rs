@@ -169,6 +169,10 @@ struct RenderArgs {
     /// Colour of the meshes: straight R,G,B,A in 0…1 (A < 1: translucent).
     #[arg(long, value_name = "R,G,B,A", value_parser = parse_rgba, default_value = "0.9,0.9,0.9,1")]
     mesh_rgba: [f32; 4],
+    /// Draw the clip shapes as surfaces inside the rendering: straight R,G,B,A in 0…1
+    /// (A < 1: translucent), e.g. 1,0.8,0.2,0.3.
+    #[arg(long, value_name = "R,G,B,A", value_parser = parse_rgba)]
+    show_clip: Option<[f32; 4]>,
     #[command(flatten)]
     fast_ao: FastAoArgs,
     /// Opacity modulation by local variance: α · min(σ²/σ²_max, 1) (Ruiz et al. §4.2),
@@ -885,6 +889,9 @@ fn render(args: &RenderArgs) -> Result<()> {
     if args.opacity_modulation.is_some() {
         settings.opacity_modulation = args.opacity_modulation;
     }
+    if args.show_clip.is_some() {
+        settings.clip_surface = args.show_clip;
+    }
     let width = args
         .width
         .or(scene.as_ref().map(|s| s.width))
@@ -927,10 +934,24 @@ fn render(args: &RenderArgs) -> Result<()> {
         _ => Vec::new(),
     };
     let clip = args.clip.shapes_or(scene_clip);
-    let meshes = args
-        .mesh
+    // Meshes: the flags', or else the scene's.
+    let mesh_sources: Vec<volao::scene::MeshSource> = if args.mesh.is_empty() {
+        match (&scene, scene_path) {
+            (Some(s), Some(sp)) => s.meshes_resolved(sp),
+            _ => Vec::new(),
+        }
+    } else {
+        args.mesh
+            .iter()
+            .map(|p| volao::scene::MeshSource {
+                path: p.clone(),
+                rgba: args.mesh_rgba,
+            })
+            .collect()
+    };
+    let meshes = mesh_sources
         .iter()
-        .map(|p| volao::render::surface::load_obj(p, args.mesh_rgba))
+        .map(|m| volao::render::surface::load_obj(&m.path, m.rgba))
         .collect::<Result<Vec<_>, _>>()?;
     args.fast_ao.apply(&mut ao)?;
 
@@ -1021,6 +1042,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             height,
             ambient_occlusion: ao,
             clip_shapes: clip,
+            meshes: mesh_sources,
         };
         s.save(path)?;
         println!("scene: {}", path.display());

@@ -108,6 +108,19 @@ pub struct Scene {
     /// paths, like the volume's, are relative to the scene file.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub clip_shapes: Vec<crate::clip::ClipShape>,
+    /// Meshes drawn inside the volume (OBJ, mm from the volume's centre); paths relative
+    /// to the scene file.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub meshes: Vec<MeshSource>,
+}
+
+/// A mesh file drawn inside the volume, with its colour.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshSource {
+    pub path: PathBuf,
+    /// Straight RGBA in 0…1 (A < 1: translucent).
+    pub rgba: [f32; 4],
 }
 
 impl Scene {
@@ -163,6 +176,9 @@ impl Scene {
         if let Some(vol) = &self.volume.path {
             scene.volume.path = Some(relative_to(vol, path.parent().unwrap_or(Path::new("."))));
         }
+        for m in &mut scene.meshes {
+            m.path = relative_to(&m.path, path.parent().unwrap_or(Path::new(".")));
+        }
         for c in &mut scene.clip_shapes {
             if let crate::clip::Shape::Mesh { path: mesh } = &mut c.shape {
                 *mesh = relative_to(mesh, path.parent().unwrap_or(Path::new(".")));
@@ -191,6 +207,22 @@ impl Scene {
                     *path = base.join(&*path);
                 }
                 c
+            })
+            .collect()
+    }
+
+    /// The meshes with paths resolved against the scene file's folder.
+    pub fn meshes_resolved(&self, scene_path: &Path) -> Vec<MeshSource> {
+        let base = scene_path.parent().unwrap_or(Path::new("."));
+        self.meshes
+            .iter()
+            .map(|m| MeshSource {
+                path: if m.path.is_relative() {
+                    base.join(&m.path)
+                } else {
+                    m.path.clone()
+                },
+                rgba: m.rgba,
             })
             .collect()
     }
@@ -289,6 +321,7 @@ mod tests {
                     )
                 },
             ],
+            meshes: Vec::new(),
         }
     }
 

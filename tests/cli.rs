@@ -365,3 +365,107 @@ fn ao_with_clip_shapes_writes_the_cao_volume() {
         text(&out.stderr)
     );
 }
+
+#[test]
+fn clip_shapes_and_meshes_drawn_as_surfaces_are_saved_in_the_scene() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let p = |p: &std::path::Path| p.to_str().expect("utf-8 path").to_owned();
+    let bucky = data("pvm/Bucky.pvm");
+    // A small cube (mm from the volume's centre), drawn green and opaque.
+    let cube = dir.path().join("cube.obj");
+    let mut obj = String::new();
+    for i in 0..8 {
+        let c = |b: i32| if i & b == 0 { -3 } else { 3 };
+        obj += &format!("v {} {} {}\n", c(1) + 8, c(2), c(4));
+    }
+    for f in [
+        [1, 3, 4, 2],
+        [5, 6, 8, 7],
+        [1, 2, 6, 5],
+        [3, 7, 8, 4],
+        [1, 5, 7, 3],
+        [2, 4, 8, 6],
+    ] {
+        obj += &format!(
+            "f {} {} {}\nf {} {} {}\n",
+            f[0], f[1], f[2], f[0], f[2], f[3]
+        );
+    }
+    std::fs::write(&cube, obj).expect("write");
+    let (png, scene, again, plain) = (
+        dir.path().join("shown.png"),
+        dir.path().join("shown.json"),
+        dir.path().join("again.png"),
+        dir.path().join("plain.png"),
+    );
+    let common = |out: &std::path::Path| {
+        vec![
+            "render".to_owned(),
+            p(&bucky),
+            "-o".into(),
+            p(out),
+            "--width".into(),
+            "48".into(),
+            "--height".into(),
+            "48".into(),
+            "--clip".into(),
+            "sphere:-6,0,0,7".into(),
+            "--clip-resolution".into(),
+            "64".into(),
+        ]
+    };
+    let mut shown = common(&png);
+    shown.extend(
+        [
+            "--show-clip",
+            "1,0,0,0.6",
+            "--mesh",
+            &p(&cube),
+            "--mesh-rgba",
+            "0,1,0,1",
+            "--save-scene",
+        ]
+        .map(str::to_owned),
+    );
+    shown.push(p(&scene));
+    let args: Vec<&str> = shown.iter().map(String::as_str).collect();
+    let out = volao(&args);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = volao(
+        &common(&plain)
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&scene).expect("scene")).expect("json");
+    assert_eq!(
+        saved["meshes"][0]["path"], "cube.obj",
+        "relative to the scene"
+    );
+    assert_eq!(
+        saved["render"]["clip_surface"],
+        serde_json::json!([1.0, 0.0, 0.0, 0.6])
+    );
+    let out = volao(&["render", &p(&scene), "-o", &p(&again)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(
+        std::fs::read(&png).expect("png"),
+        std::fs::read(&again).expect("png"),
+        "the scene reproduces the surfaces"
+    );
+    let (a, b) = (
+        volao::render::Image::load_png(&png).expect("png"),
+        volao::render::Image::load_png(&plain).expect("png"),
+    );
+    let more = |c: usize| {
+        a.pixels
+            .iter()
+            .zip(&b.pixels)
+            .filter(|(x, y)| x[c] as i32 > y[c] as i32 + 40)
+            .count()
+    };
+    let (redder, greener) = (more(0), more(1));
+    assert!(redder > 20 && greener > 5, "red {redder}, green {greener}");
+}

@@ -411,6 +411,7 @@ fn a_saved_scene_renders_the_same_image() {
         height: 90,
         ambient_occlusion: Default::default(),
         clip_shapes: Vec::new(),
+        meshes: Vec::new(),
     };
     let render = |s: &Scene, scene_path: &std::path::Path| {
         let p = s.volume_path(scene_path).expect("scene names a volume");

@@ -224,6 +224,7 @@ impl Document {
             height: height.max(1),
             ambient_occlusion: self.ao,
             clip_shapes: self.clip_shapes.clone(),
+            meshes: Vec::new(),
         }
     }
 }

@@ -64,6 +64,9 @@ pub struct RenderSettings {
     /// when absent.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub opacity_modulation: Option<crate::ao::filter::OpacityModulation>,
+    /// Draw the clip shapes as surfaces of this straight RGBA (A < 1: translucent).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clip_surface: Option<[f32; 4]>,
 }
 
 impl Default for RenderSettings {
@@ -80,6 +83,7 @@ impl Default for RenderSettings {
             shadows: false,
             light_direction: shadow::DEFAULT_LIGHT,
             opacity_modulation: None,
+            clip_surface: None,
         }
     }
 }

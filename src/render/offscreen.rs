@@ -99,6 +99,29 @@ pub fn render_with(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Rendered, GpuError> {
     let Extras { clip, surfaces } = extras;
+    let mut surfaces = surfaces.to_vec();
+    if let Some(rgba) = frame.settings.clip_surface {
+        let radius = glam::Vec3::new(
+            volume.dims[0] as f32 * volume.spacing[0],
+            volume.dims[1] as f32 * volume.spacing[1],
+            volume.dims[2] as f32 * volume.spacing[2],
+        )
+        .length()
+            * 0.5;
+        // Shapes that cannot be built are reported by the clipping below.
+        surfaces.extend(clip.iter().filter_map(|c| {
+            let m = c.posed_geometry(radius).ok()?;
+            Some(super::surface::Surface {
+                triangles: m
+                    .triangles
+                    .iter()
+                    .map(|t| t.map(|i| m.vertices[i as usize]))
+                    .collect(),
+                rgba,
+            })
+        }));
+    }
+    let surfaces = surfaces.as_slice();
     let rays = Rays::uniform(ao.rays.directions());
     if matches!(ao.method, AoMethod::Vao | AoMethod::VaoLive) {
         ao.vao.validate().map_err(|e| GpuError::Validation {
