@@ -21,6 +21,47 @@ const PICK: f32 = 8.0;
 pub struct ClipEditor {
     pub selected: Option<usize>,
     drag: Option<usize>,
+    /// Draw the shapes as translucent surfaces as well as outlines.
+    pub translucent: bool,
+}
+
+/// The front-facing triangles of `shape` projected over the viewport, filled with
+/// `colour`: a translucent surface one layer thick (back faces would double it). Mesh
+/// files are shown by their outline only (they would be reloaded every frame).
+pub fn surface_mesh(
+    shape: &ClipShape,
+    camera: &Camera,
+    radius: f32,
+    rect: egui::Rect,
+    colour: egui::Color32,
+) -> egui::Mesh {
+    let mut mesh = egui::Mesh::default();
+    if matches!(shape.shape, Shape::Mesh { .. }) {
+        return mesh;
+    }
+    let Ok(m) = shape.posed_geometry(radius) else {
+        return mesh;
+    };
+    let points: Vec<Option<egui::Pos2>> = m
+        .vertices
+        .iter()
+        .map(|&v| project(camera, radius, rect, v))
+        .collect();
+    for t in &m.triangles {
+        let [Some(a), Some(b), Some(c)] = t.map(|i| points[i as usize]) else {
+            continue;
+        };
+        // Screen y points down: counter-clockwise in the volume is clockwise here.
+        if (b - a).x * (c - a).y - (b - a).y * (c - a).x >= 0.0 {
+            continue;
+        }
+        let base = mesh.vertices.len() as u32;
+        for p in [a, b, c] {
+            mesh.colored_vertex(p, colour);
+        }
+        mesh.add_triangle(base, base + 1, base + 2);
+    }
+    mesh
 }
 
 /// Makes a fresh shape of one kind.
@@ -250,6 +291,7 @@ impl ClipEditor {
             ui.weak("No clip shapes. Click one to add it, then drag it in the viewport.");
         } else {
             ui.weak("Click an outline to select · drag moves · Ctrl+drag rotates · wheel pushes a plane");
+            ui.checkbox(&mut self.translucent, "Show as translucent surfaces");
         }
         let mut remove = None;
         for (i, s) in shapes.iter_mut().enumerate() {
@@ -318,6 +360,13 @@ impl ClipEditor {
                 }
             };
             let stroke = egui::Stroke::new(if selected { 2.0 } else { 1.2 }, colour);
+            if self.translucent {
+                let fill =
+                    egui::Color32::from_rgba_unmultiplied(colour.r(), colour.g(), colour.b(), 50);
+                painter.add(egui::Shape::mesh(surface_mesh(
+                    s, camera, radius, rect, fill,
+                )));
+            }
             for line in outline(s, radius) {
                 let pts: Vec<egui::Pos2> = line
                     .iter()
@@ -434,6 +483,22 @@ mod tests {
         // The anterior view's up is +z: a 90° turn about it takes +x to ±y.
         assert!(n.z.abs() < 1e-4 && n.x.abs() < 1e-4, "{n}");
         p.check(0).expect("still a valid pose");
+    }
+
+    #[test]
+    fn translucent_surfaces_keep_only_front_faces() {
+        let camera = Camera::default();
+        let rect = egui::Rect::from_min_size(egui::pos2(0.0, 0.0), egui::vec2(200.0, 200.0));
+        let s = ClipShape::new(Shape::Sphere, Vec3::ZERO, 20.0);
+        let all = s.posed_geometry(100.0).expect("sphere").triangles.len();
+        let m = surface_mesh(&s, &camera, 100.0, rect, egui::Color32::WHITE);
+        let shown = m.indices.len() / 3;
+        assert!(
+            shown > all * 2 / 5 && shown < all * 3 / 5,
+            "{shown} of {all}"
+        );
+        let centre = project(&camera, 100.0, rect, Vec3::ZERO).expect("in front");
+        assert!(rect.contains(centre));
     }
 
     #[test]
