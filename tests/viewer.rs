@@ -276,6 +276,39 @@ fn ao_method_from_the_panel_matches_volao_render_with_lao() {
 }
 
 #[test]
+fn live_positional_ao_runs_in_the_ray_caster_and_matches_volao_render() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    choose(&mut h, "Method", "vao-live");
+    settle(&mut h);
+    assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
+    let scene = dir.path().join("live.json");
+    h.state_mut().save_scene(&scene).expect("scene saved");
+    let viewport = viewport_pixels(&mut h);
+    let rendered = volao_render(&scene, &dir.path().join("live.png"));
+    check(
+        "viewport_vao_live_vs_render",
+        &viewport,
+        &rendered,
+        SAME_RENDERER,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    // Back to none: the live AO is switched off again.
+    choose(&mut h, "Method", "none");
+    settle(&mut h);
+    let mut none = volao::scene::Scene::load(&scene).expect("scene");
+    none.ambient_occlusion.method = volao::ao::AoMethod::None;
+    none.save(&scene).expect("save");
+    let plain = volao_render(&scene, &dir.path().join("plain.png"));
+    let off = viewport_pixels(&mut h);
+    check("viewport_vao_off", &off, &plain, SAME_RENDERER, &out_dir())
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_ne!(off.pixels, viewport.pixels, "live AO changed the picture");
+}
+
+#[test]
 fn orbit_with_the_mouse_and_standard_views() {
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());

@@ -922,10 +922,15 @@ impl Viewer {
         self.cancel_ao();
         if had_ao {
             let gpu = Arc::clone(&self.gpu);
+            let tf = self.doc.as_ref().map(|d| d.tf.clone());
             self.with_viewport(|v| {
                 v.cao = None;
                 if let Some(g) = &mut v.volume {
                     g.clear_ambient_occlusion(&gpu);
+                    if let Some(tf) = &tf {
+                        // Turning live positional AO off cannot fail (nothing is uploaded).
+                        let _ = g.set_live_vao(&gpu, tf, None);
+                    }
                     v.touch();
                 }
             });
@@ -934,6 +939,32 @@ impl Viewer {
         let Some(key) = want else {
             return;
         };
+        // Live positional AO needs no precomputation: the ray caster evaluates it at every
+        // sample, so it follows the transfer function and the clip shapes at once.
+        if key.settings.method == AoMethod::VaoLive {
+            let gpu = Arc::clone(&self.gpu);
+            let Some(tf) = self.doc.as_ref().map(|d| d.tf.clone()) else {
+                return;
+            };
+            let vao = key.settings.vao;
+            let applied = self.with_viewport(|v| {
+                let g = v.volume.as_mut()?;
+                let r = g
+                    .set_live_vao(&gpu, &tf, Some(&vao))
+                    .map_err(|e| e.to_string());
+                v.touch();
+                Some(r)
+            });
+            self.ao_state = match applied.flatten() {
+                Some(Ok(())) => AoState::Ready { key },
+                Some(Err(message)) => {
+                    self.toast(format!("Ambient occlusion failed: {message}"), true);
+                    AoState::Failed { key, message }
+                }
+                None => AoState::Off,
+            };
+            return;
+        }
         let resting = self.tf_changed_at.elapsed() >= AO_DEBOUNCE && !self.tf_editor_dragging();
         if !resting {
             self.ctx.request_repaint_after(AO_DEBOUNCE);
