@@ -5,6 +5,8 @@
 
 mod common;
 
+use common::{crop, device, texels};
+
 use common::{Rng, data};
 use glam::Vec3;
 use volao::ao::cao::{CaoGpu, CaoMode, clip_volume_cpu, lao_on_opacity_cpu, reach_mm};
@@ -12,44 +14,16 @@ use volao::ao::lao::{Rays, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::clip::camera::EMPTY;
 use volao::clip::{ClipMode, ClipShape, Shape};
-use volao::gpu::{self, Gpu};
+use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
-use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, RenderSettings};
 use volao::tf::{Preset, TransferFunction};
-use volao::volume::{self, LoadOptions, Volume, VoxelData};
+use volao::volume::{self, LoadOptions, Volume};
 
 /// Depth-map size in these tests (the default is 1024; small keeps lavapipe quick).
 const MAP: u32 = 128;
 /// Samples per LAO ray here (the default is 20).
 const SAMPLES: u32 = 8;
-
-fn device() -> Gpu {
-    gpu::request_device().unwrap_or_else(|e| {
-        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
-    })
-}
-
-fn crop(v: &Volume, origin: [usize; 3], size: [usize; 3]) -> Volume {
-    let [nx, ny, _] = v.dims;
-    let idx = |i: usize| {
-        let (x, y, z) = (
-            i % size[0],
-            (i / size[0]) % size[1],
-            i / (size[0] * size[1]),
-        );
-        origin[0] + x + nx * (origin[1] + y + ny * (origin[2] + z))
-    };
-    let n = size.iter().product::<usize>();
-    let data = match &v.data {
-        VoxelData::U8(d) => VoxelData::U8((0..n).map(|i| d[idx(i)]).collect()),
-        VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
-        other => panic!("crop: {:?} not needed here", other.voxel_type()),
-    };
-    let mut out = Volume::new(size, v.spacing, data).expect("valid crop");
-    out.scaling = v.scaling;
-    out
-}
 
 fn load(rel: &str, opts: LoadOptions) -> Volume {
     volume::format::load(&data(rel), &opts)
@@ -79,16 +53,6 @@ fn cranium() -> Volume {
         &load("raw/cranium-ct.raw", opts),
         [90, 60, 40],
         [40, 40, 28],
-    )
-}
-
-fn texels(v: &Volume) -> VolumeTexels {
-    VolumeTexels::new(
-        v,
-        UploadLimits {
-            max_dim: 4096,
-            max_bytes: 1 << 30,
-        },
     )
 }
 

@@ -3,28 +3,12 @@
 
 mod common;
 
+use common::{crop, device, texels};
+
 use common::data;
 use volao::ao::cone::{ConeGpu, ConePreset, ConeSet, MipPyramid, cone_cpu, opacity, spheres};
-use volao::gpu::{self, Gpu};
-use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::tf::{ColorStop, OpacityPoint, Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
-
-fn device() -> Gpu {
-    gpu::request_device().unwrap_or_else(|e| {
-        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
-    })
-}
-
-fn texels(v: &Volume) -> VolumeTexels {
-    VolumeTexels::new(
-        v,
-        UploadLimits {
-            max_dim: 4096,
-            max_bytes: 1 << 30,
-        },
-    )
-}
 
 /// Opacity 0 below 100, 1 from 155 up (u8 data).
 fn step_tf() -> TransferFunction {
@@ -142,26 +126,6 @@ fn opaque_half_space_blocks_the_cones_pointing_into_it() {
         far > got,
         "further from the surface is lighter: {far} vs {got}"
     );
-}
-
-/// A sub-box of a volume (same type and spacing).
-fn crop(v: &Volume, origin: [usize; 3], size: [usize; 3]) -> Volume {
-    let [nx, ny, _] = v.dims;
-    let idx = |i: usize| {
-        let (x, y, z) = (
-            i % size[0],
-            (i / size[0]) % size[1],
-            i / (size[0] * size[1]),
-        );
-        origin[0] + x + nx * (origin[1] + y + ny * (origin[2] + z))
-    };
-    let n = size.iter().product::<usize>();
-    let data = match &v.data {
-        VoxelData::U8(d) => VoxelData::U8((0..n).map(|i| d[idx(i)]).collect()),
-        VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
-        other => panic!("crop: {:?} not needed here", other.voxel_type()),
-    };
-    Volume::new(size, v.spacing, data).expect("valid crop")
 }
 
 #[test]

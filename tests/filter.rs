@@ -4,31 +4,15 @@
 
 mod common;
 
+use common::{crop, device, texels};
+
 use common::{Rng, data};
 use volao::ao::filter::{
     AmbientMap, BoxStats, FilterGpu, Source, StatisticSource, box_stats_cpu, compute_cpu, map_cpu,
 };
-use volao::gpu::{self, Gpu};
 use volao::render::gpu::GpuVolume;
-use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
-
-fn device() -> Gpu {
-    gpu::request_device().unwrap_or_else(|e| {
-        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
-    })
-}
-
-fn texels(v: &Volume) -> VolumeTexels {
-    VolumeTexels::new(
-        v,
-        UploadLimits {
-            max_dim: 4096,
-            max_bytes: 1 << 30,
-        },
-    )
-}
 
 fn u8_volume(dims: [usize; 3], mut f: impl FnMut(usize, usize, usize) -> u8) -> Volume {
     let n = dims.iter().product::<usize>();
@@ -318,26 +302,6 @@ fn step_edge_and_staircase() {
         t.powf(beta)
     );
     assert!(maps[1][i] > 0.0 && maps[1][i] < 1.0);
-}
-
-/// A sub-box of a volume (same type and spacing).
-fn crop(v: &Volume, origin: [usize; 3], size: [usize; 3]) -> Volume {
-    let [nx, ny, _] = v.dims;
-    let idx = |i: usize| {
-        let (x, y, z) = (
-            i % size[0],
-            (i / size[0]) % size[1],
-            i / (size[0] * size[1]),
-        );
-        origin[0] + x + nx * (origin[1] + y + ny * (origin[2] + z))
-    };
-    let n = size.iter().product::<usize>();
-    let data = match &v.data {
-        VoxelData::U8(d) => VoxelData::U8((0..n).map(|i| d[idx(i)]).collect()),
-        VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
-        other => panic!("crop: {:?} not needed here", other.voxel_type()),
-    };
-    Volume::new(size, v.spacing, data).expect("valid crop")
 }
 
 #[test]

@@ -3,20 +3,14 @@
 
 mod common;
 
+use common::{crop, device, texels};
+
 use common::data;
 use volao::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
 use volao::ao::rays::RaySet;
-use volao::gpu::{self, Gpu};
 use volao::render::gpu::GpuVolume;
-use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
-
-fn device() -> Gpu {
-    gpu::request_device().unwrap_or_else(|e| {
-        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
-    })
-}
 
 /// Opacity 0 below 100, 1 from 155 up (u8 data): a sharp, fully opaque material.
 fn step_tf() -> TransferFunction {
@@ -37,16 +31,6 @@ fn step_tf() -> TransferFunction {
             rgb: [1.0; 3],
         }],
     }
-}
-
-fn texels(v: &Volume) -> VolumeTexels {
-    VolumeTexels::new(
-        v,
-        UploadLimits {
-            max_dim: 4096,
-            max_bytes: 1 << 30,
-        },
-    )
 }
 
 fn cpu(v: &Volume, tf: &TransferFunction, set: RaySet, samples: u32) -> Vec<f32> {
@@ -209,24 +193,4 @@ fn gpu_matches_cpu_twin_for_every_ray_set() {
             );
         }
     }
-}
-
-/// A sub-box of a volume (same type and spacing).
-fn crop(v: &Volume, origin: [usize; 3], size: [usize; 3]) -> Volume {
-    let [nx, ny, _] = v.dims;
-    let idx = |i: usize| {
-        let (x, y, z) = (
-            i % size[0],
-            (i / size[0]) % size[1],
-            i / (size[0] * size[1]),
-        );
-        origin[0] + x + nx * (origin[1] + y + ny * (origin[2] + z))
-    };
-    let n = size.iter().product::<usize>();
-    let data = match &v.data {
-        VoxelData::U8(d) => VoxelData::U8((0..n).map(|i| d[idx(i)]).collect()),
-        VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
-        other => panic!("crop: {:?} not needed here", other.voxel_type()),
-    };
-    Volume::new(size, v.spacing, data).expect("valid crop")
 }

@@ -3,21 +3,17 @@
 
 mod common;
 
+use common::device;
+
 use common::data;
 use std::path::PathBuf;
-use volao::gpu::{self, Gpu};
+use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::image::{Tolerance, check};
 use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume};
-
-fn device() -> Gpu {
-    gpu::request_device().unwrap_or_else(|e| {
-        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
-    })
-}
 
 fn out_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("render")

@@ -3,34 +3,19 @@
 
 mod common;
 
+use common::{crop, device, texels};
+
 use common::data;
 use glam::Vec3;
-use volao::gpu::{self, Gpu};
+use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::image::{Tolerance, check};
 use volao::render::shadow::{
     LightGpu, LightVolume, light_cpu, light_direction, light_lut, quantise, shadow_factor,
 };
-use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
 use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
-
-fn device() -> Gpu {
-    gpu::request_device().unwrap_or_else(|e| {
-        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
-    })
-}
-
-fn texels(v: &Volume) -> VolumeTexels {
-    VolumeTexels::new(
-        v,
-        UploadLimits {
-            max_dim: 4096,
-            max_bytes: 1 << 30,
-        },
-    )
-}
 
 fn filled(n: [usize; 3], f: impl Fn(usize, usize, usize) -> u8) -> Volume {
     let data = (0..n[0] * n[1] * n[2])
@@ -128,26 +113,6 @@ fn bad_light_directions_are_refused() {
     for d in [[0.0; 3], [f32::NAN, 1.0, 0.0], [f32::INFINITY, 0.0, 0.0]] {
         assert!(light_direction(d).is_err(), "{d:?}");
     }
-}
-
-/// A sub-box of a volume (same type and spacing).
-fn crop(v: &Volume, origin: [usize; 3], size: [usize; 3]) -> Volume {
-    let [nx, ny, _] = v.dims;
-    let idx = |i: usize| {
-        let (x, y, z) = (
-            i % size[0],
-            (i / size[0]) % size[1],
-            i / (size[0] * size[1]),
-        );
-        origin[0] + x + nx * (origin[1] + y + ny * (origin[2] + z))
-    };
-    let n = size.iter().product::<usize>();
-    let data = match &v.data {
-        VoxelData::U8(d) => VoxelData::U8((0..n).map(|i| d[idx(i)]).collect()),
-        VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
-        other => panic!("crop: {:?} not needed here", other.voxel_type()),
-    };
-    Volume::new(size, v.spacing, data).expect("valid crop")
 }
 
 fn real_crops() -> Vec<(&'static str, Volume, TransferFunction)> {

@@ -3,9 +3,11 @@
 
 mod common;
 
+use common::{device, texels};
+
 use common::data;
 use glam::Vec3;
-use volao::gpu::{self, Gpu};
+use volao::gpu::Gpu;
 use volao::render::cpu::{self, CpuSurfaces};
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::image::{Tolerance, check};
@@ -14,22 +16,6 @@ use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading};
 use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
-
-fn device() -> Gpu {
-    gpu::request_device().unwrap_or_else(|e| {
-        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
-    })
-}
-
-fn texels(v: &Volume) -> VolumeTexels {
-    VolumeTexels::new(
-        v,
-        UploadLimits {
-            max_dim: 4096,
-            max_bytes: 1 << 30,
-        },
-    )
-}
 
 /// A square in the plane y = `y`, half side `r`, as two triangles.
 fn square_y(y: f32, r: f32, rgba: [f32; 4]) -> Surface {

@@ -4,22 +4,17 @@
 
 mod common;
 
+use common::{crop, device, texels};
+
 use common::data;
 use glam::Vec3;
 use volao::ao::vao::{Isosurface, PositionalAo, VaoGpu, VaoInputs, VaoSettings, vao_cpu};
-use volao::gpu::{self, Gpu};
+use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::image::{Tolerance, check, compare};
-use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
 use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
-
-fn device() -> Gpu {
-    gpu::request_device().unwrap_or_else(|e| {
-        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
-    })
-}
 
 /// Opacity rising linearly from 0 at value 0 to `top` at 255 (u8 data).
 fn ramp_tf(top: f32) -> TransferFunction {
@@ -58,16 +53,6 @@ fn flat_tf(alpha: f32) -> TransferFunction {
             rgb: [1.0; 3],
         }],
     }
-}
-
-fn texels(v: &Volume) -> VolumeTexels {
-    VolumeTexels::new(
-        v,
-        UploadLimits {
-            max_dim: 4096,
-            max_bytes: 1 << 30,
-        },
-    )
 }
 
 fn filled(n: [usize; 3], f: impl Fn(usize, usize, usize) -> u8) -> Volume {
@@ -224,26 +209,6 @@ fn bad_settings_are_refused_with_a_reason() {
         assert!(e.to_string().starts_with("positional AO: "), "{e}");
     }
     assert!(VaoSettings::default().validate().is_ok());
-}
-
-/// A sub-box of a volume (same type and spacing).
-fn crop(v: &Volume, origin: [usize; 3], size: [usize; 3]) -> Volume {
-    let [nx, ny, _] = v.dims;
-    let idx = |i: usize| {
-        let (x, y, z) = (
-            i % size[0],
-            (i / size[0]) % size[1],
-            i / (size[0] * size[1]),
-        );
-        origin[0] + x + nx * (origin[1] + y + ny * (origin[2] + z))
-    };
-    let n = size.iter().product::<usize>();
-    let data = match &v.data {
-        VoxelData::U8(d) => VoxelData::U8((0..n).map(|i| d[idx(i)]).collect()),
-        VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
-        other => panic!("crop: {:?} not needed here", other.voxel_type()),
-    };
-    Volume::new(size, v.spacing, data).expect("valid crop")
 }
 
 /// Cropped real volumes with the CT-bone preset.

@@ -77,3 +77,49 @@ impl Rng {
         (self.next() % n.max(1) as u64) as usize
     }
 }
+
+/// The GPU device for a test. No adapter is a failure that says how to get one, never a
+/// skip: GPU tests run on Mesa's lavapipe in CI.
+pub fn device() -> volao::gpu::Gpu {
+    volao::gpu::request_device().unwrap_or_else(|e| {
+        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
+    })
+}
+
+/// A volume's texels at full resolution (no halving).
+pub fn texels(v: &volao::volume::Volume) -> volao::render::texels::VolumeTexels {
+    volao::render::texels::VolumeTexels::new(
+        v,
+        volao::render::texels::UploadLimits {
+            max_dim: 4096,
+            max_bytes: 1 << 30,
+        },
+    )
+}
+
+/// The `size` voxels of `v` starting at `origin` (u8 and i16 volumes), scaling kept.
+pub fn crop(
+    v: &volao::volume::Volume,
+    origin: [usize; 3],
+    size: [usize; 3],
+) -> volao::volume::Volume {
+    use volao::volume::VoxelData;
+    let [nx, ny, _] = v.dims;
+    let idx = |i: usize| {
+        let (x, y, z) = (
+            i % size[0],
+            (i / size[0]) % size[1],
+            i / (size[0] * size[1]),
+        );
+        origin[0] + x + nx * (origin[1] + y + ny * (origin[2] + z))
+    };
+    let n = size.iter().product::<usize>();
+    let data = match &v.data {
+        VoxelData::U8(d) => VoxelData::U8((0..n).map(|i| d[idx(i)]).collect()),
+        VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
+        other => panic!("crop: {:?} not needed here", other.voxel_type()),
+    };
+    let mut out = volao::volume::Volume::new(size, v.spacing, data).expect("valid crop");
+    out.scaling = v.scaling;
+    out
+}
