@@ -3,9 +3,8 @@
 
 mod common;
 
-use common::{crop, device, texels};
+use common::{device, real_crops, texels};
 
-use common::data;
 use glam::Vec3;
 use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
@@ -15,7 +14,7 @@ use volao::render::shadow::{
 };
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
 use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
-use volao::volume::{self, LoadOptions, Volume, VoxelData};
+use volao::volume::{Volume, VoxelData};
 
 fn filled(n: [usize; 3], f: impl Fn(usize, usize, usize) -> u8) -> Volume {
     let data = (0..n[0] * n[1] * n[2])
@@ -113,23 +112,6 @@ fn bad_light_directions_are_refused() {
     for d in [[0.0; 3], [f32::NAN, 1.0, 0.0], [f32::INFINITY, 0.0, 0.0]] {
         assert!(light_direction(d).is_err(), "{d:?}");
     }
-}
-
-fn real_crops() -> Vec<(&'static str, Volume, TransferFunction)> {
-    [
-        ("engine", "raw/engine.raw", [96, 96, 40], [40, 40, 24]),
-        ("cranium", "raw/cranium-ct.raw", [30, 108, 40], [40, 32, 24]),
-    ]
-    .into_iter()
-    .map(|(name, file, origin, size)| {
-        let full = volume::load(&data(file), &LoadOptions::default())
-            .unwrap_or_else(|e| panic!("{e}"))
-            .volume;
-        let v = crop(&full, origin, size);
-        let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
-        (name, v, tf)
-    })
-    .collect()
 }
 
 #[test]

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{crop, device, texels};
+use common::{crop, device, real_crops, texels};
 
 use common::data;
 use glam::Vec3;
@@ -209,24 +209,6 @@ fn bad_settings_are_refused_with_a_reason() {
         assert!(e.to_string().starts_with("positional AO: "), "{e}");
     }
     assert!(VaoSettings::default().validate().is_ok());
-}
-
-/// Cropped real volumes with the CT-bone preset.
-pub fn real_crops() -> Vec<(&'static str, Volume, TransferFunction)> {
-    [
-        ("engine", "raw/engine.raw", [96, 96, 40], [40, 40, 24]),
-        ("cranium", "raw/cranium-ct.raw", [30, 108, 40], [40, 32, 24]),
-    ]
-    .into_iter()
-    .map(|(name, file, origin, size)| {
-        let full = volume::load(&data(file), &LoadOptions::default())
-            .unwrap_or_else(|e| panic!("{e}"))
-            .volume;
-        let v = crop(&full, origin, size);
-        let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
-        (name, v, tf)
-    })
-    .collect()
 }
 
 #[test]

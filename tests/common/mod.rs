@@ -123,3 +123,26 @@ pub fn crop(
     out.scaling = v.scaling;
     out
 }
+
+/// Cropped real volumes (engine, cranium CT) with the CT-bone preset, small enough for
+/// CPU twins.
+pub fn real_crops() -> Vec<(
+    &'static str,
+    volao::volume::Volume,
+    volao::tf::TransferFunction,
+)> {
+    [
+        ("engine", "raw/engine.raw", [96, 96, 40], [40, 40, 24]),
+        ("cranium", "raw/cranium-ct.raw", [30, 108, 40], [40, 32, 24]),
+    ]
+    .into_iter()
+    .map(|(name, file, origin, size)| {
+        let full = volao::volume::load(&data(file), &Default::default())
+            .unwrap_or_else(|e| panic!("{e}"))
+            .volume;
+        let v = crop(&full, origin, size);
+        let tf = volao::tf::TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
+        (name, v, tf)
+    })
+    .collect()
+}
