@@ -234,11 +234,7 @@ impl FastAoArgs {
 }
 
 fn parse_modulation(s: &str) -> Result<volao::ao::filter::OpacityModulation, String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
+    let v: Vec<f32> = numbers(s)?;
     let mut m = volao::ao::filter::OpacityModulation::default();
     match v.as_slice() {
         [s2] if *s2 > 0.0 && s2.is_finite() => m.sigma2_max = *s2,
@@ -255,12 +251,19 @@ fn parse_modulation(s: &str) -> Result<volao::ao::filter::OpacityModulation, Str
     Ok(m)
 }
 
-fn parse_camera(s: &str) -> Result<[f32; 3], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f32>())
+/// Comma-separated numbers, e.g. "30,20,3.2"; the error names the input.
+fn numbers<T: std::str::FromStr>(s: &str) -> Result<Vec<T>, String>
+where
+    T::Err: std::fmt::Display,
+{
+    s.split(',')
+        .map(|x| x.trim().parse::<T>())
         .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
+        .map_err(|e| format!("{s:?}: {e}"))
+}
+
+fn parse_camera(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = numbers(s)?;
     match v.as_slice() {
         [a, e, d] if v.iter().all(|x| x.is_finite()) => Ok([*a, *e, *d]),
         _ => Err(format!(
@@ -315,11 +318,7 @@ impl VaoArgs {
 }
 
 fn parse_iso(s: &str) -> Result<(f64, f64), String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
+    let v: Vec<f64> = numbers(s)?;
     match v.as_slice() {
         [value, tol] if value.is_finite() && tol.is_finite() && *tol > 0.0 => Ok((*value, *tol)),
         _ => Err(format!(
@@ -329,11 +328,7 @@ fn parse_iso(s: &str) -> Result<(f64, f64), String> {
 }
 
 fn parse_rgba(s: &str) -> Result<[f32; 4], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
+    let v: Vec<f32> = numbers(s)?;
     match v.as_slice() {
         [r, g, b, a] if v.iter().all(|x| (0.0..=1.0).contains(x)) => Ok([*r, *g, *b, *a]),
         _ => Err(format!(
@@ -343,11 +338,7 @@ fn parse_rgba(s: &str) -> Result<[f32; 4], String> {
 }
 
 fn parse_light(s: &str) -> Result<[f32; 3], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
+    let v: Vec<f32> = numbers(s)?;
     match v.as_slice() {
         [x, y, z] => volao::render::shadow::light_direction([*x, *y, *z]).map(|d| d.to_array()),
         _ => Err(format!(
@@ -357,11 +348,7 @@ fn parse_light(s: &str) -> Result<[f32; 3], String> {
 }
 
 fn parse_window_level(s: &str) -> Result<(f64, f64), String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
+    let v: Vec<f64> = numbers(s)?;
     match v.as_slice() {
         [w, l] if *w > 0.0 && w.is_finite() && l.is_finite() => Ok((*w, *l)),
         _ => Err(format!(
