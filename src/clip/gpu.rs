@@ -330,7 +330,7 @@ impl ClipMaps {
                 shape: s.shape.clone(),
                 scale: s.scale,
                 plane_reach: if s.shape == Shape::Plane {
-                    4.0 * volume_radius.max(1.0) + glam::Vec3::from(s.translation).length()
+                    s.plane_slab_size(volume_radius)
                 } else {
                     0.0
                 },

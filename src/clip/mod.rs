@@ -139,13 +139,19 @@ impl ClipShape {
         Ok(())
     }
 
+    /// Half the side of a plane's slab (mm): it covers the volume from wherever the plane
+    /// sits, so it depends on the translation (and a plane's maps with it).
+    pub fn plane_slab_size(&self, volume_radius: f32) -> f32 {
+        4.0 * volume_radius.max(1.0) + Vec3::from(self.translation).length()
+    }
+
     /// The mesh in shape space (scaled, not posed). `volume_radius` (mm) sizes the plane's
     /// slab so it covers the volume from any pose inside it.
     pub fn geometry(&self, volume_radius: f32) -> Result<TriMesh, ClipError> {
         let scale = Vec3::from(self.scale);
         let mesh = match &self.shape {
             Shape::Plane => {
-                let l = 4.0 * volume_radius.max(1.0) + Vec3::from(self.translation).length();
+                let l = self.plane_slab_size(volume_radius);
                 mesh::cuboid(Vec3::new(-l, -l, 0.0), Vec3::new(l, l, l))
             }
             Shape::Sphere => mesh::sphere(48, 96).scaled(scale),
