@@ -1,6 +1,7 @@
 // Ambient maps from box statistics (Ruiz et al. 2010 §3.2–3.3, Penner's baseline, and
 // the variance of §4.2). One invocation per voxel.
-// CPU twin: src/ao/filter.rs (`BoxStats::moments`, `ambient`); keep the two in step.
+// CPU twin: src/ao/filter/mod.rs (`ambient`, `ambient_run`), which evaluates pow and exp
+// with vectorisable approximations (within 1e-6); keep the two in step.
 
 struct Params {
     dims: vec4<u32>,    // x, y, z, map (0 Penner, 1 CDF, 2 Gauss, 3 variance)

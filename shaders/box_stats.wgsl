@@ -3,7 +3,7 @@
 // L = min(2r + 1, 64) outputs of one line; every window of the segment contains the
 // pivot m = c + r, so window(i) = op(S[i − r], P[i + r]) with the suffixes
 // S[a] = op(v[a..m)) and prefixes P[b] = op(v[m..=b]). Windows are cropped at the faces.
-// CPU twin: src/ao/filter.rs (`segment`, `box_stats_cpu`); keep the two in step.
+// CPU twin: src/ao/filter/cpu.rs (`segment`, `FilterCpu`); keep the two in step.
 
 struct Params {
     dims: vec4<u32>,    // x, y, z, axis

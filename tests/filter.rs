@@ -8,7 +8,8 @@ use common::{crop, device, texels};
 
 use common::{Rng, data};
 use volao::ao::filter::{
-    AmbientMap, BoxStats, FilterGpu, Source, StatisticSource, box_stats_cpu, compute_cpu, map_cpu,
+    AmbientMap, BoxStats, FilterCpu, FilterGpu, Source, StatisticSource, box_stats_cpu,
+    compute_cpu, map_cpu,
 };
 use volao::render::gpu::GpuVolume;
 use volao::tf::{Preset, TransferFunction};
@@ -100,11 +101,55 @@ const RADII: [[u32; 3]; 6] = [
 #[test]
 fn separable_statistics_equal_brute_force_cpu() {
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
-    for dims in [[13, 7, 9], [1, 1, 5], [90, 5, 4], [3, 70, 6]] {
+    // [40, 30, 23]: slices wider than one z-pass tile, rows not a multiple of the x
+    // pass's interleave, and more slices than the ring of planes holds for small r_z.
+    for dims in [[13, 7, 9], [1, 1, 5], [90, 5, 4], [3, 70, 6], [40, 30, 23]] {
         let values = random_values(&mut rng, dims.iter().product());
         for r in RADII {
             let stats = box_stats_cpu(&values, dims, r);
             assert_matches_brute(&format!("CPU {dims:?} r {r:?}"), &stats, &values);
+        }
+    }
+}
+
+/// A `FilterCpu` reused across volumes of other sizes, radii and maps gives the same
+/// bits as fresh buffers: stale ring planes and output contents are never read.
+#[test]
+fn reused_cpu_buffers_give_the_same_maps_as_fresh_ones() {
+    let mut rng = Rng(0x5151_7777_0000_abcd);
+    let mut filter = FilterCpu::default();
+    let mut reused = Vec::new();
+    for (dims, r) in [
+        ([40, 30, 23], [5, 5, 5]),
+        ([17, 9, 31], [1, 2, 1]),
+        ([40, 30, 23], [2, 7, 3]),
+        ([8, 8, 8], [0, 0, 0]),
+    ] {
+        let n = dims.iter().product::<usize>();
+        let v = u8_volume(dims, |_, _, _| rng.below(256) as u8);
+        let t = texels(&v);
+        let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
+        let source = Source::new(&t, &tf, StatisticSource::Density);
+        filter.compute_into(&t, &source, r, &MAPS, &mut reused);
+        let fresh = compute_cpu(&t, &source, r, &MAPS);
+        for ((map, a), b) in MAPS.iter().zip(&reused).zip(&fresh) {
+            assert_eq!(a.len(), n);
+            assert!(
+                a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{dims:?} r {r:?} {map:?}: reused buffers differ from fresh ones"
+            );
+        }
+        // The fused path (maps straight from the z pass) equals maps from whole
+        // statistics volumes.
+        let values = source.values(&t);
+        let stats = filter.box_stats(&values, dims, r);
+        assert_eq!(stats, box_stats_cpu(&values, dims, r), "{dims:?} r {r:?}");
+        for (map, a) in MAPS.iter().zip(&reused) {
+            let b = map_cpu(*map, &stats, &values);
+            assert!(
+                a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{dims:?} r {r:?} {map:?}: fused maps differ from maps of the statistics"
+            );
         }
     }
 }

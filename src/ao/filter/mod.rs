@@ -33,11 +33,15 @@ use crate::render::texels::VolumeTexels;
 use crate::tf::{Lut, TransferFunction};
 use rayon::prelude::*;
 
+mod cpu;
+
+pub use cpu::{FilterCpu, box_stats_cpu, compute_cpu, map_cpu};
+
 /// Most outputs one segment (one GPU invocation) produces; bounds its private array.
 pub const SEGMENT_MAX: usize = 64;
 
 /// Identity of `min` / `max` in the passes (finite, so WGSL can write it too).
-const BIG: f32 = 3.0e38;
+pub(crate) const BIG: f32 = 3.0e38;
 
 /// Variance floor for the Gaussian and Penner maps.
 pub const VARIANCE_FLOOR: f32 = 1e-12;
@@ -186,30 +190,55 @@ impl Source {
             return norm * p[0] + p[1];
         }
         let t = (norm * p[0] + p[1]).clamp(0.0, p[2]);
-        let i0 = t.floor() as usize;
+        // t ≥ 0, so truncation is floor (and no libm call).
+        let i0 = t as usize;
         let i1 = (i0 + 1).min(p[2] as usize);
-        let f = t - t.floor();
+        let f = t - i0 as f32;
         self.alpha[i0] + (self.alpha[i1] - self.alpha[i0]) * f
     }
 
     /// `v` for every voxel, x fastest.
     pub fn values(&self, texels: &VolumeTexels) -> Vec<f32> {
+        let mut out = vec![0.0; texels.dims.iter().product()];
+        out.par_chunks_mut(1 << 16)
+            .enumerate()
+            .for_each(|(k, run)| self.decode(texels, k << 16, run));
+        out
+    }
+
+    /// `v` of voxels `start..start + out.len()` (x fastest) into `out`, decoded per
+    /// format (the same numbers as `VolumeTexels::norm_at`).
+    pub fn decode(&self, texels: &VolumeTexels, start: usize, out: &mut [f32]) {
         use crate::render::texels::TexelFormat;
-        let b = &texels.bytes;
-        // Decoded per format (the same numbers as `VolumeTexels::norm_at`).
+        let bytes = &texels.bytes[start * texels.format.bytes()..];
         match texels.format {
-            TexelFormat::R8Unorm => b
-                .par_iter()
-                .map(|&x| self.value(x as f32 / 255.0))
-                .collect(),
-            TexelFormat::R16Unorm => b
-                .par_chunks_exact(2)
-                .map(|c| self.value(u16::from_le_bytes([c[0], c[1]]) as f32 / 65535.0))
-                .collect(),
-            TexelFormat::R32Float => b
-                .par_chunks_exact(4)
-                .map(|c| self.value(f32::from_le_bytes([c[0], c[1], c[2], c[3]])))
-                .collect(),
+            TexelFormat::R8Unorm => self.decode_as(bytes, out, |[b]| b as f32 / 255.0),
+            TexelFormat::R16Unorm => {
+                self.decode_as(bytes, out, |b| u16::from_le_bytes(b) as f32 / 65535.0)
+            }
+            TexelFormat::R32Float => self.decode_as(bytes, out, f32::from_le_bytes),
+        }
+    }
+
+    /// [`Self::decode`] for texels of `N` bytes read by `norm`; density is one
+    /// multiply-add per texel, kept free of the LUT branch so that the loop vectorises.
+    #[inline(always)]
+    fn decode_as<const N: usize>(
+        &self,
+        bytes: &[u8],
+        out: &mut [f32],
+        norm: impl Fn([u8; N]) -> f32,
+    ) {
+        let texels = bytes.as_chunks::<N>().0.iter().take(out.len());
+        let [a, b, _, opacity] = self.params;
+        if opacity == 0.0 {
+            for (o, &t) in out.iter_mut().zip(texels) {
+                *o = norm(t) * a + b;
+            }
+        } else {
+            for (o, &t) in out.iter_mut().zip(texels) {
+                *o = self.value(norm(t));
+            }
         }
     }
 }
@@ -223,101 +252,6 @@ pub fn window_count(i: usize, r: usize, n: usize) -> usize {
 /// Outputs per segment for radius `r`.
 pub fn segment_len(r: usize) -> usize {
     (2 * r + 1).min(SEGMENT_MAX)
-}
-
-/// One segment of a line of `n` elements, each `elem` contiguous floats (1 for an
-/// x-line, a row for y, a z-slice for z, so the CPU works on whole rows and slices at
-/// once): writes the windows `[i − r, i + r]` of outputs `i ∈ [c, c + L)` into `out`.
-/// The same runs in the same order as `main` in `box_stats.wgsl`: suffixes
-/// `S = op(v, S)` backward from the pivot, prefixes `P = op(P, v)` forward, `op(S, P)`.
-#[allow(
-    clippy::too_many_arguments,
-    reason = "one flat kernel; a struct would hide the loop it mirrors"
-)]
-fn segment<F: Fn(f32, f32) -> f32>(
-    input: &[f32],
-    out: &mut [f32],
-    acc: &mut [f32],
-    n: usize,
-    elem: usize,
-    r: usize,
-    c: usize,
-    (op, identity): (F, f32),
-) {
-    let outs = segment_len(r).min(n - c);
-    let (ci, ri, ni) = (c as i64, r as i64, n as i64);
-    let (m, first) = (ci + ri, ci - ri);
-    // S[j] for j = a − first; the run reaches j ≤ 2r − 1, so S[2r] (when L = 2r + 1) is
-    // the empty suffix.
-    for j in (2 * r).min(outs)..outs {
-        out[j * elem..(j + 1) * elem].fill(identity);
-    }
-    acc.fill(identity);
-    let mut a = m - 1;
-    while a >= first {
-        // Outside the line the run is cropped: a < 0 repeats S[0], a ≥ n adds nothing.
-        if a >= 0 && a < ni {
-            let src = &input[a as usize * elem..][..elem];
-            for (x, &v) in acc.iter_mut().zip(src) {
-                *x = op(v, *x);
-            }
-        }
-        let j = a - first;
-        if j < outs as i64 {
-            out[j as usize * elem..][..elem].copy_from_slice(acc);
-        }
-        a -= 1;
-    }
-    acc.fill(identity);
-    for j in 0..outs {
-        let b = m as usize + j;
-        if b < n {
-            let src = &input[b * elem..][..elem];
-            for (x, &v) in acc.iter_mut().zip(src) {
-                *x = op(*x, v);
-            }
-        }
-        for (o, &p) in out[j * elem..][..elem].iter_mut().zip(acc.iter()) {
-            *o = op(*o, p);
-        }
-    }
-}
-
-/// [`segment`] for single-float elements (the x pass), without the per-element slices.
-fn segment_scalar<F: Fn(f32, f32) -> f32>(
-    input: &[f32],
-    out: &mut [f32],
-    r: usize,
-    c: usize,
-    (op, identity): (F, f32),
-) {
-    let n = input.len();
-    let outs = segment_len(r).min(n - c);
-    let (ci, ri, ni) = (c as i64, r as i64, n as i64);
-    let (m, first) = (ci + ri, ci - ri);
-    for o in out.iter_mut().take(outs).skip((2 * r).min(outs)) {
-        *o = identity;
-    }
-    let mut acc = identity;
-    let mut a = m - 1;
-    while a >= first {
-        if a >= 0 && a < ni {
-            acc = op(input[a as usize], acc);
-        }
-        let j = a - first;
-        if j < outs as i64 {
-            out[j as usize] = acc;
-        }
-        a -= 1;
-    }
-    let mut acc = identity;
-    for (j, o) in out.iter_mut().enumerate().take(outs) {
-        let b = m as usize + j;
-        if b < n {
-            acc = op(acc, input[b]);
-        }
-        *o = op(*o, acc);
-    }
 }
 
 /// Box statistics over the cropped box of every voxel, x fastest, one array per
@@ -363,175 +297,163 @@ impl BoxStats {
     }
 }
 
-/// One statistic through the three separable passes (x, then y, then z).
-fn separable<F: Fn(f32, f32) -> f32 + Copy + Sync>(
-    values: &[f32],
-    dims: [usize; 3],
-    r: [usize; 3],
-    op: (F, f32),
-) -> Vec<f32> {
-    let [nx, ny, nz] = dims;
-    let slice = nx * ny;
-    // x: one chunk per line.
-    let mut a = vec![0.0; slice * nz];
-    a.par_chunks_mut(nx).enumerate().for_each(|(line, out)| {
-        let input = &values[line * nx..(line + 1) * nx];
-        let len = segment_len(r[0]);
-        for c in (0..nx).step_by(len) {
-            let end = (c + len).min(nx);
-            segment_scalar(input, &mut out[c..end], r[0], c, op);
-        }
-    });
-    // y: one chunk per z-slice; elements are rows.
-    let mut b = vec![0.0; slice * nz];
-    b.par_chunks_mut(slice).enumerate().for_each(|(z, out)| {
-        let input = &a[z * slice..(z + 1) * slice];
-        let len = segment_len(r[1]);
-        let mut acc = vec![0.0; nx];
-        for c in (0..ny).step_by(len) {
-            let end = (c + len).min(ny);
-            segment(
-                input,
-                &mut out[c * nx..end * nx],
-                &mut acc,
-                ny,
-                nx,
-                r[1],
-                c,
-                op,
-            );
-        }
-    });
-    // z: one chunk per segment of z-slices; elements are slices.
-    let len = segment_len(r[2]);
-    a.par_chunks_mut(slice * len)
-        .enumerate()
-        .for_each(|(k, out)| {
-            let mut acc = vec![0.0; slice];
-            segment(&b, out, &mut acc, nz, slice, r[2], k * len, op);
-        });
-    a
+/// `2^y`, branch-free so that loops over it vectorise: `y = i + f` with `i` the nearest
+/// integer and `f ∈ [−½, ½]`, `2^f` by its degree-7 Taylor polynomial (relative error
+/// below 1e-7 before rounding) and `2^i` by the exponent bits. `y` is clamped to
+/// [−127, 127]; results below 2^−126 flush to 0.
+#[inline(always)]
+pub fn exp2_approx(y: f32) -> f32 {
+    // Adding 1.5 · 2^23 rounds to an integer, which then sits in the low mantissa bits.
+    const ROUND: f32 = 12_582_912.0;
+    let y = y.clamp(-127.0, 127.0);
+    let shifted = y + ROUND;
+    let i = shifted.to_bits() as i32 - ROUND.to_bits() as i32;
+    let l = (y - (shifted - ROUND)) * std::f32::consts::LN_2;
+    let p = 1.0
+        + l * (1.0
+            + l * (0.5
+                + l * (1.0 / 6.0
+                    + l * (1.0 / 24.0 + l * (1.0 / 120.0 + l * (1.0 / 720.0 + l / 5040.0))))));
+    p * f32::from_bits(((i + 127) << 23) as u32)
 }
 
-/// CPU twin of the three `box_stats.wgsl` passes, on rayon. Each statistic runs on its
-/// own arrays, whole rows and slices at a time, so the loops vectorise.
-pub fn box_stats_cpu(values: &[f32], dims: [usize; 3], radius: [u32; 3]) -> BoxStats {
-    let r = radius.map(|r| r as usize);
-    let squares: Vec<f32> = values.par_iter().map(|v| v * v).collect();
-    let ((min, max), (sum, sum_sq)) = rayon::join(
-        || {
-            rayon::join(
-                || separable(values, dims, r, (f32::min, BIG)),
-                || separable(values, dims, r, (f32::max, -BIG)),
-            )
-        },
-        || {
-            rayon::join(
-                || separable(values, dims, r, (|a, b| a + b, 0.0)),
-                || separable(&squares, dims, r, (|a, b| a + b, 0.0)),
-            )
-        },
-    );
-    BoxStats {
-        dims,
-        radius,
-        min,
-        max,
-        sum,
-        sum_sq,
-    }
+/// `log2(x)` for finite `x > 0` (subnormals included), branch-free: `x = m · 2^e` with
+/// `m ∈ [√½, √2)` and `ln m = 2 atanh(s)`, `s = (m − 1)/(m + 1)`, by its series to `s¹¹`
+/// (`|s| ≤ 0.172`: relative error below 1e-9 before rounding).
+#[inline(always)]
+pub fn log2_approx(x: f32) -> f32 {
+    // Subnormals are scaled by 2^64 first.
+    let tiny = x < f32::MIN_POSITIVE;
+    let x = if tiny {
+        x * 18_446_744_073_709_551_616.0
+    } else {
+        x
+    };
+    let bits = x.to_bits() as i32;
+    let m = f32::from_bits(((bits & 0x007f_ffff) | 0x3f80_0000) as u32);
+    let big = m > std::f32::consts::SQRT_2;
+    let m = if big { m * 0.5 } else { m };
+    let e = ((bits >> 23) & 0xff) - 127 + i32::from(big) - if tiny { 64 } else { 0 };
+    let s = (m - 1.0) / (m + 1.0);
+    let s2 = s * s;
+    let ln_m = 2.0
+        * s
+        * (1.0
+            + s2 * (1.0 / 3.0
+                + s2 * (1.0 / 5.0 + s2 * (1.0 / 7.0 + s2 * (1.0 / 9.0 + s2 / 11.0)))));
+    e as f32 + ln_m * std::f32::consts::LOG2_E
 }
 
 /// Winitzki's approximation of erf (Ruiz et al. §3.3).
-#[inline]
+#[inline(always)]
 pub fn erf_approx(x: f32) -> f32 {
     let x2 = x * x;
     let ax2 = ERF_A * x2;
-    let e = (1.0 - (-x2 * (4.0 / std::f32::consts::PI + ax2) / (1.0 + ax2)).exp())
+    let arg = -x2 * (4.0 / std::f32::consts::PI + ax2) / (1.0 + ax2);
+    let e = (1.0 - exp2_approx(arg * std::f32::consts::LOG2_E))
         .max(0.0)
         .sqrt();
     if x < 0.0 { -e } else { e }
 }
 
-/// One map value from the moments and the voxel's own value. Mirrors `ambient` in
-/// `ambient_maps.wgsl`.
-pub fn ambient(map: AmbientMap, v_x: f32, m: Moments) -> f32 {
-    let [v_min, v_max, mean, mean_sq] = m;
-    let variance = (mean_sq - mean * mean).max(0.0);
-    if map == AmbientMap::Variance {
-        return variance;
-    }
+// The maps, one function each, written with selects instead of early returns so that
+// loops over them vectorise. `m` is `(v_min, v_max, E[v], E[v²])`; a map ignores the
+// moments it does not read.
+
+/// CDF reconstruction (§3.2): `t^β`; 1 where the box is homogeneous.
+#[inline(always)]
+fn cdf(v_x: f32, [v_min, v_max, mean, _]: Moments) -> f32 {
     let delta = v_max - v_min;
-    if delta <= 0.0 {
-        return 1.0;
-    }
-    let mean = mean.clamp(v_min, v_max);
-    let var = variance.max(VARIANCE_FLOOR);
+    let mean = mean.max(v_min).min(v_max);
+    let t = (v_x - v_min) / delta;
+    let below = v_max - mean;
+    let power = exp2_approx((mean - v_min) / below * log2_approx(t));
+    let o = if below <= 0.0 { 0.0 } else { power };
+    let o = if t >= 1.0 { 1.0 } else { o };
+    let o = if t <= 0.0 { 0.0 } else { o };
+    if delta <= 0.0 { 1.0 } else { o }
+}
+
+/// `E[v²] − E[v]²`, never negative.
+#[inline(always)]
+fn variance([_, _, mean, mean_sq]: Moments) -> f32 {
+    (mean_sq - mean * mean).max(0.0)
+}
+
+/// Gaussian CDF (§3.3, Eq. 4); 1 where the box is homogeneous.
+#[inline(always)]
+fn gauss(v_x: f32, m: Moments) -> f32 {
+    let [v_min, v_max, mean, _] = m;
+    let mean = mean.max(v_min).min(v_max);
+    let var = variance(m).max(VARIANCE_FLOOR);
+    let x = (v_x - mean) / (var.sqrt() * std::f32::consts::SQRT_2);
+    let o = 0.5 * (1.0 + erf_approx(x));
+    if v_max - v_min <= 0.0 { 1.0 } else { o }
+}
+
+/// Penner's one-tailed Chebyshev bound; 1 where the box is homogeneous.
+#[inline(always)]
+fn penner(v_x: f32, m: Moments) -> f32 {
+    let [v_min, v_max, mean, _] = m;
+    let mean = mean.max(v_min).min(v_max);
+    let var = variance(m).max(VARIANCE_FLOOR);
+    // Below the mean only: at or above it the bound is var / var = 1 exactly.
+    let d = (mean - v_x).max(0.0);
+    let o = var / (var + d * d);
+    if v_max - v_min <= 0.0 { 1.0 } else { o }
+}
+
+/// One map value from the moments and the voxel's own value. Mirrors `ambient` in
+/// `ambient_maps.wgsl`, except that `pow` and `exp` are [`exp2_approx`] and
+/// [`log2_approx`] (within 1e-6 of the exact functions), which vectorise.
+pub fn ambient(map: AmbientMap, v_x: f32, m: Moments) -> f32 {
     match map {
-        AmbientMap::Cdf => {
-            let t = (v_x - v_min) / delta;
-            if t <= 0.0 {
-                0.0
-            } else if t >= 1.0 {
-                1.0
-            } else {
-                let below = v_max - mean;
-                if below <= 0.0 {
-                    return 0.0;
-                }
-                t.powf((mean - v_min) / below)
-            }
-        }
-        AmbientMap::Gauss => {
-            let x = (v_x - mean) / (var.sqrt() * std::f32::consts::SQRT_2);
-            0.5 * (1.0 + erf_approx(x))
-        }
-        AmbientMap::Penner => {
-            let d = mean - v_x;
-            if d <= 0.0 { 1.0 } else { var / (var + d * d) }
-        }
-        AmbientMap::Variance => variance,
+        AmbientMap::Penner => penner(v_x, m),
+        AmbientMap::Cdf => cdf(v_x, m),
+        AmbientMap::Gauss => gauss(v_x, m),
+        AmbientMap::Variance => variance(m),
     }
 }
 
-/// A map from statistics and source values on the CPU (rayon), x fastest.
-pub fn map_cpu(map: AmbientMap, stats: &BoxStats, values: &[f32]) -> Vec<f32> {
-    let [nx, ny, nz] = stats.dims;
-    let r = stats.radius.map(|r| r as usize);
-    let counts = |axis: usize, n: usize| -> Vec<usize> {
-        (0..n).map(|i| window_count(i, r[axis], n)).collect()
-    };
-    let (cx, cy, cz) = (counts(0, nx), counts(1, ny), counts(2, nz));
-    let mut out = vec![0.0; values.len()];
-    out.par_chunks_mut(nx).enumerate().for_each(|(line, row)| {
-        let (y, z) = (line % ny, line / ny);
-        let base = line * nx;
-        for (x, o) in row.iter_mut().enumerate() {
-            // As the shader: the count as an integer product, then one f32 division each.
-            let n = (cx[x] * cy[y] * cz[z]) as f32;
-            let i = base + x;
-            let m = [
-                stats.min[i],
-                stats.max[i],
-                stats.sum[i] / n,
-                stats.sum_sq[i] / n,
-            ];
-            *o = ambient(map, values[i], m);
-        }
-    });
-    out
+/// [`ambient`] over a run of voxels: `values` are the voxels' own values, `stats` the
+/// runs of `(v_min, v_max, Σv, Σv²)` (a map's unread statistics may be empty), and the
+/// box of voxel `i` holds `counts[i]` voxels (the integer rounded to f32 once, as the
+/// shader does).
+pub(crate) fn ambient_run(
+    map: AmbientMap,
+    values: &[f32],
+    stats: [&[f32]; 4],
+    counts: &[f32],
+    out: &mut [f32],
+) {
+    // An unread statistic's run is replaced by any run of the right length, so that one
+    // loop serves every map.
+    let stats = stats.map(|s| if s.is_empty() { values } else { s });
+    #[allow(
+        clippy::redundant_closure,
+        reason = "a closure is inlined into the loop, a function item passed as a value was not, and only then does the loop vectorise"
+    )]
+    match map {
+        AmbientMap::Penner => map_loop(|v, m| penner(v, m), values, stats, counts, out),
+        AmbientMap::Cdf => map_loop(|v, m| cdf(v, m), values, stats, counts, out),
+        AmbientMap::Gauss => map_loop(|v, m| gauss(v, m), values, stats, counts, out),
+        AmbientMap::Variance => map_loop(|_, m| variance(m), values, stats, counts, out),
+    }
 }
 
-/// Everything on the CPU: source values, statistics, then each of `maps`.
-pub fn compute_cpu(
-    texels: &VolumeTexels,
-    source: &Source,
-    radius: [u32; 3],
-    maps: &[AmbientMap],
-) -> Vec<Vec<f32>> {
-    let values = source.values(texels);
-    let stats = box_stats_cpu(&values, texels.dims, radius);
-    maps.iter().map(|&m| map_cpu(m, &stats, &values)).collect()
+/// The loop of [`ambient_run`], monomorphised per map so that it vectorises.
+#[inline(always)]
+fn map_loop(
+    f: impl Fn(f32, Moments) -> f32,
+    values: &[f32],
+    [min, max, sum, sum_sq]: [&[f32]; 4],
+    counts: &[f32],
+    out: &mut [f32],
+) {
+    let stats = min.iter().zip(max).zip(sum.iter().zip(sum_sq)).zip(counts);
+    for ((o, &v), (((&lo, &hi), (&s, &s2)), &n)) in out.iter_mut().zip(values).zip(stats) {
+        *o = f(v, [lo, hi, s / n, s2 / n]);
+    }
 }
 
 /// Opacity modulation factor (§4.2): `min(σ²/σ²_max, 1)` per voxel.
@@ -857,5 +779,75 @@ impl FilterGpu {
             sum: channel(2),
             sum_sq: channel(3),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The vectorisable `exp2` and `log2` against f64 over their whole useful range,
+    /// and `t^β` as the CDF map uses it against `powf` in f64.
+    #[test]
+    fn fast_exp2_log2_and_pow_match_f64() {
+        let mut worst = [0.0f64; 3];
+        for i in 0..=200_000 {
+            let y = (-127.0 + 254.0 * i as f64 / 200_000.0) as f32;
+            let want = (y as f64).exp2();
+            let got = exp2_approx(y) as f64;
+            // Below 2^−126 the result flushes to 0.
+            if want >= f32::MIN_POSITIVE as f64 {
+                worst[0] = worst[0].max((got - want).abs() / want);
+            } else {
+                assert!(got <= f32::MIN_POSITIVE as f64, "2^{y} = {got}");
+            }
+        }
+        for i in 1..=200_000u32 {
+            // Mantissas across [1, 2) and exponents from subnormal to large.
+            let x = f32::from_bits(i.wrapping_mul(2_654_435_761) % 0x7f00_0000 + 1);
+            let want = (x as f64).log2();
+            let got = log2_approx(x) as f64;
+            worst[1] = worst[1].max((got - want).abs() / want.abs().max(1.0));
+        }
+        for i in 1..1000 {
+            let t = i as f32 / 1000.0;
+            for beta in [0.0f32, 1e-3, 0.1, 0.5, 1.0, 2.0, 7.5, 40.0, 1e3] {
+                let got = exp2_approx(beta * log2_approx(t)) as f64;
+                let want = (t as f64).powf(beta as f64);
+                worst[2] = worst[2].max((got - want).abs());
+            }
+        }
+        eprintln!(
+            "exp2 rel {:.1e}, log2 {:.1e}, pow abs {:.1e}",
+            worst[0], worst[1], worst[2]
+        );
+        assert!(worst[0] < 2e-7, "exp2: {}", worst[0]);
+        assert!(worst[1] < 2e-7, "log2: {}", worst[1]);
+        assert!(worst[2] < 5e-7, "pow: {}", worst[2]);
+    }
+
+    /// The select-based maps keep the special cases of the equations exactly.
+    #[test]
+    fn map_special_cases_are_exact() {
+        // Homogeneous box: 1 for every map whatever the voxel.
+        for map in [AmbientMap::Cdf, AmbientMap::Gauss, AmbientMap::Penner] {
+            assert_eq!(ambient(map, 0.3, [0.3, 0.3, 0.3, 0.09]), 1.0, "{map:?}");
+        }
+        let m = [0.0, 1.0, 0.25, 0.25];
+        // CDF: 0 at the minimum, 1 at the maximum, t^β between.
+        assert_eq!(ambient(AmbientMap::Cdf, 0.0, m), 0.0);
+        assert_eq!(ambient(AmbientMap::Cdf, 1.0, m), 1.0);
+        let beta = 0.25f64 / 0.75;
+        let want = 0.5f64.powf(beta);
+        assert!((ambient(AmbientMap::Cdf, 0.5, m) as f64 - want).abs() < 1e-6);
+        // Penner: 1 at or above the mean, σ²/(σ² + d²) below it.
+        assert_eq!(ambient(AmbientMap::Penner, 0.25, m), 1.0);
+        assert_eq!(ambient(AmbientMap::Penner, 0.9, m), 1.0);
+        let var = 0.25f64 - 0.0625;
+        let want = var / (var + 0.25f64.powi(2));
+        assert!((ambient(AmbientMap::Penner, 0.0, m) as f64 - want).abs() < 1e-6);
+        // Gaussian: ½ at the mean.
+        assert!((ambient(AmbientMap::Gauss, 0.25, m) - 0.5).abs() < 1e-6);
+        assert_eq!(ambient(AmbientMap::Variance, 0.0, m), 0.1875);
     }
 }
