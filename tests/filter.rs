@@ -154,6 +154,34 @@ fn reused_cpu_buffers_give_the_same_maps_as_fresh_ones() {
     }
 }
 
+/// The twin's AVX2 build (chosen at run time where the CPU has it) gives the same bits
+/// as the baseline build: the same IEEE operations, only wider.
+#[test]
+fn wide_and_baseline_builds_of_the_cpu_twin_agree_bit_for_bit() {
+    let full = volume::load(&data("raw/cranium-ct.raw"), &LoadOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"))
+        .volume;
+    let v = crop(&full, [60, 70, 30], [70, 50, 40]);
+    let t = texels(&v);
+    let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
+    for kind in [StatisticSource::Density, StatisticSource::Opacity] {
+        let source = Source::new(&t, &tf, kind);
+        let values = source.values(&t);
+        for r in [[5u32; 3], [10, 10, 7], [2, 9, 1]] {
+            let wide = FilterCpu::default().compute(&t, &source, r, &MAPS);
+            let base = FilterCpu::baseline().compute(&t, &source, r, &MAPS);
+            for ((map, a), b) in MAPS.iter().zip(&wide).zip(&base) {
+                assert!(
+                    a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                    "{kind:?} r {r:?} {map:?}: the builds differ"
+                );
+            }
+            let wide = FilterCpu::default().box_stats(&values, t.dims, r);
+            assert_eq!(wide, FilterCpu::baseline().box_stats(&values, t.dims, r));
+        }
+    }
+}
+
 #[test]
 fn separable_statistics_equal_brute_force_gpu() {
     let gpu = device();

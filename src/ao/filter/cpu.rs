@@ -23,7 +23,7 @@ use super::{AmbientMap, BIG, BoxStats, Source, ambient_run, segment_len, window_
 use crate::render::texels::VolumeTexels;
 use rayon::prelude::*;
 
-/// Rows the x pass interleaves (16 floats: four SSE or one AVX-512 register per run).
+/// Rows the x pass interleaves (16 floats: four SSE or two AVX2 registers per step).
 const LANES: usize = 16;
 
 /// Voxels of a slice that one z-pass task owns (4 KiB per statistic and slice, so a
@@ -96,6 +96,7 @@ impl Op for AddOp {
 /// (`elem` floats each, contiguous). The same runs in the same order as `main` in
 /// `box_stats.wgsl`: suffixes `S = op(v, S)` backward from the pivot, prefixes
 /// `P = op(P, v)` forward, then `op(S, P)`.
+#[inline(always)]
 fn segment<'a, O: Op, const W: usize>(
     at: impl Fn(usize) -> &'a [f32],
     (n, elem, r): (usize, usize, usize),
@@ -158,6 +159,7 @@ fn segment<'a, O: Op, const W: usize>(
 
 /// [`segment`] with the statistic's operation (elements of `W` floats, or of the
 /// line's `elem` when `W` is 0).
+#[inline(always)]
 fn stat_segment<'a, const W: usize>(
     stat: Stat,
     at: impl Fn(usize) -> &'a [f32],
@@ -175,6 +177,7 @@ fn stat_segment<'a, const W: usize>(
 
 /// Every segment of a line whose `n` elements of `elem` floats lie contiguously in
 /// `input`; outputs contiguous in `out`. `W` as in [`stat_segment`].
+#[inline(always)]
 fn line_pass<const W: usize>(
     stat: Stat,
     input: &[f32],
@@ -213,6 +216,7 @@ impl Values<'_> {
     }
 
     /// Voxels `start..start + out.len()` (x fastest) into `out`.
+    #[inline(always)]
     fn decode(&self, start: usize, out: &mut [f32]) {
         match self {
             Values::Texels(t, source) => source.decode(t, start, out),
@@ -236,6 +240,7 @@ struct SliceScratch {
 }
 
 /// The x and y passes of every wanted statistic over slice `z`, into `outs`.
+#[inline(always)]
 fn slice_planes(
     input: Values,
     z: usize,
@@ -326,17 +331,38 @@ struct Scratch {
 /// The CPU twin with its buffers kept between calls: the ring of 2-D statistics planes
 /// and each worker thread's scratch, so that a map computed again (after a
 /// transfer-function edit, say) allocates nothing but its output, and nothing at all
-/// with [`FilterCpu::compute_into`].
-#[derive(Debug, Default)]
+/// with [`FilterCpu::compute_into`]. On x86-64 CPUs with AVX2 the hot stages run a
+/// build for it, eight floats wide.
+#[derive(Debug)]
 pub struct FilterCpu {
     /// Per wanted statistic, `slots` planes.
     ring: Vec<Vec<f32>>,
     /// One per rayon worker thread (by `rayon::current_thread_index`), plus one for
     /// calls from outside the pool.
     scratch: Vec<std::sync::Mutex<Scratch>>,
+    simd: Simd,
+}
+
+impl Default for FilterCpu {
+    fn default() -> Self {
+        FilterCpu {
+            ring: Vec::new(),
+            scratch: Vec::new(),
+            simd: Simd::detect(),
+        }
+    }
 }
 
 impl FilterCpu {
+    /// A twin that runs the target's baseline build even where the CPU has AVX2 (to
+    /// check that both give the same bits).
+    pub fn baseline() -> Self {
+        FilterCpu {
+            simd: Simd::Baseline,
+            ..Default::default()
+        }
+    }
+
     /// Box statistics of `values` (x fastest) over the cropped box of every voxel: the
     /// CPU twin of the three `box_stats.wgsl` passes.
     pub fn box_stats(&mut self, values: &[f32], dims: [usize; 3], radius: [u32; 3]) -> BoxStats {
@@ -420,7 +446,7 @@ impl FilterCpu {
         if self.scratch.len() != threads {
             self.scratch = (0..threads).map(|_| Default::default()).collect();
         }
-        let (ring, scratch) = (&mut self.ring, &self.scratch);
+        let (ring, scratch, simd) = (&mut self.ring, &self.scratch, self.simd);
         // Every voxel of every output is written below, so old contents may stay.
         results.resize_with(outputs.len(), Vec::new);
         for result in results.iter_mut() {
@@ -457,61 +483,180 @@ impl FilterCpu {
                 }
             }
             jobs.into_par_iter().for_each(|(z, outs)| {
-                Self::with_scratch(scratch, |s| slice_planes(input, z, r, outs, &mut s.slice))
+                Self::with_scratch(scratch, |s| {
+                    simd.slice_planes(input, z, r, outs, &mut s.slice)
+                })
             });
             planned = upto;
             // The z pass and the outputs of slices c .. c + L, in parallel over tiles.
             let ring = &*ring;
+            let pass = ZPass {
+                input,
+                outputs,
+                stats: &stats,
+                ring,
+                slots,
+                len,
+                r,
+                cz: &cz,
+                cxy: &cxy,
+                needs_values,
+            };
             tiles.par_iter_mut().enumerate().for_each(|(t, outs)| {
-                Self::with_scratch(scratch, |s| {
-                    let s = &mut s.tile;
-                    let t0 = t * TILE;
-                    let w = TILE.min(slice - t0);
-                    let outs_here = len.min(nz - c);
-                    s.acc.resize(w, 0.0);
-                    s.values.resize(w, 0.0);
-                    s.counts.resize(w, 0.0);
-                    s.stats.resize_with(stats.len(), Vec::new);
-                    for (k, &stat) in stats.iter().enumerate() {
-                        s.stats[k].resize(len * w, 0.0);
-                        let at = |a: usize| &ring[k][(a % slots) * slice + t0..][..w];
-                        let out = &mut s.stats[k][..outs_here * w];
-                        stat_segment::<0>(stat, at, (nz, w, r[2]), c, out, &mut s.acc);
-                    }
-                    for j in 0..outs_here {
-                        let z = c + j;
-                        if needs_values {
-                            input.decode(z * slice + t0, &mut s.values[..w]);
-                            if s.counts_for != Some((t, cz[z])) {
-                                s.counts_for = Some((t, cz[z]));
-                                for (n, &cxy) in s.counts.iter_mut().zip(&cxy[t0..t0 + w]) {
-                                    *n = (cxy * cz[z]) as f32;
-                                }
-                            }
-                        }
-                        let row = |stat: Stat| -> &[f32] {
-                            match stats.iter().position(|&s| s == stat) {
-                                Some(k) => &s.stats[k][j * w..(j + 1) * w],
-                                None => &[],
-                            }
-                        };
-                        for (output, parts) in outputs.iter().zip(outs.iter_mut()) {
-                            let dst = &mut *parts[z];
-                            match *output {
-                                Output::Stat(stat) => dst.copy_from_slice(row(stat)),
-                                Output::Map(map) => ambient_run(
-                                    map,
-                                    &s.values[..w],
-                                    Stat::ALL.map(row),
-                                    &s.counts[..w],
-                                    dst,
-                                ),
-                            }
-                        }
-                    }
-                })
+                Self::with_scratch(scratch, |s| simd.z_tile(&pass, t, c, outs, &mut s.tile))
             });
         }
+    }
+}
+
+/// What every tile of the z stage shares.
+struct ZPass<'a> {
+    input: Values<'a>,
+    outputs: &'a [Output],
+    /// The wanted statistics, in ring order.
+    stats: &'a [Stat],
+    ring: &'a [Vec<f32>],
+    slots: usize,
+    /// Segment length along z.
+    len: usize,
+    r: [usize; 3],
+    /// Window sizes: along z per slice, x · y per position in a slice.
+    cz: &'a [usize],
+    cxy: &'a [usize],
+    needs_values: bool,
+}
+
+/// The z pass of tile `t` for the segment starting at slice `c`, and the outputs of its
+/// voxels in those slices (`outs[output][z]` is the tile's part of slice z).
+#[inline(always)]
+fn z_tile(p: &ZPass, t: usize, c: usize, outs: &mut [Vec<&mut [f32]>], s: &mut TileScratch) {
+    let [nx, ny, nz] = p.input.dims();
+    let slice = nx * ny;
+    let t0 = t * TILE;
+    let w = TILE.min(slice - t0);
+    let outs_here = p.len.min(nz - c);
+    s.acc.resize(w, 0.0);
+    s.values.resize(w, 0.0);
+    s.counts.resize(w, 0.0);
+    s.stats.resize_with(p.stats.len(), Vec::new);
+    for (k, &stat) in p.stats.iter().enumerate() {
+        s.stats[k].resize(p.len * w, 0.0);
+        let at = |a: usize| &p.ring[k][(a % p.slots) * slice + t0..][..w];
+        let out = &mut s.stats[k][..outs_here * w];
+        stat_segment::<0>(stat, at, (nz, w, p.r[2]), c, out, &mut s.acc);
+    }
+    for j in 0..outs_here {
+        let z = c + j;
+        if p.needs_values {
+            p.input.decode(z * slice + t0, &mut s.values[..w]);
+            if s.counts_for != Some((t, p.cz[z])) {
+                s.counts_for = Some((t, p.cz[z]));
+                for (n, &cxy) in s.counts.iter_mut().zip(&p.cxy[t0..t0 + w]) {
+                    *n = (cxy * p.cz[z]) as f32;
+                }
+            }
+        }
+        let row = |stat: Stat| -> &[f32] {
+            match p.stats.iter().position(|&s| s == stat) {
+                Some(k) => &s.stats[k][j * w..(j + 1) * w],
+                None => &[],
+            }
+        };
+        for (output, parts) in p.outputs.iter().zip(outs.iter_mut()) {
+            let dst = &mut *parts[z];
+            match *output {
+                Output::Stat(stat) => dst.copy_from_slice(row(stat)),
+                Output::Map(map) => {
+                    ambient_run(map, &s.values[..w], Stat::ALL.map(row), &s.counts[..w], dst)
+                }
+            }
+        }
+    }
+}
+
+/// The instruction set the two hot stages are compiled for. Both give the same bits:
+/// the operations are the same IEEE ones, only wider (and never fused).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+enum Simd {
+    /// The target's baseline (SSE2 on x86-64): four floats per operation.
+    #[default]
+    Baseline,
+    /// AVX2, where the CPU has it: eight.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+}
+
+impl Simd {
+    /// The widest set this CPU runs.
+    fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return Simd::Avx2;
+        }
+        Simd::Baseline
+    }
+
+    fn slice_planes(
+        self,
+        input: Values,
+        z: usize,
+        r: [usize; 3],
+        outs: Vec<(Stat, &mut [f32])>,
+        s: &mut SliceScratch,
+    ) {
+        match self {
+            Simd::Baseline => slice_planes(input, z, r, outs, s),
+            #[cfg(target_arch = "x86_64")]
+            #[allow(unsafe_code, reason = "calls the AVX2 build of the stage")]
+            // SAFETY: `Simd::Avx2` exists only where `detect` saw the CPU report AVX2.
+            Simd::Avx2 => unsafe { avx2::slice_planes(input, z, r, outs, s) },
+        }
+    }
+
+    fn z_tile(
+        self,
+        p: &ZPass,
+        t: usize,
+        c: usize,
+        outs: &mut [Vec<&mut [f32]>],
+        s: &mut TileScratch,
+    ) {
+        match self {
+            Simd::Baseline => z_tile(p, t, c, outs, s),
+            #[cfg(target_arch = "x86_64")]
+            #[allow(unsafe_code, reason = "calls the AVX2 build of the stage")]
+            // SAFETY: as in `slice_planes`.
+            Simd::Avx2 => unsafe { avx2::z_tile(p, t, c, outs, s) },
+        }
+    }
+}
+
+/// The hot stages compiled for AVX2: the same source, inlined (every function they call
+/// is `#[inline(always)]`), so LLVM vectorises them eight floats wide.
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::*;
+
+    #[target_feature(enable = "avx2")]
+    pub(super) fn slice_planes(
+        input: Values,
+        z: usize,
+        r: [usize; 3],
+        outs: Vec<(Stat, &mut [f32])>,
+        s: &mut SliceScratch,
+    ) {
+        super::slice_planes(input, z, r, outs, s)
+    }
+
+    #[target_feature(enable = "avx2")]
+    pub(super) fn z_tile(
+        p: &ZPass,
+        t: usize,
+        c: usize,
+        outs: &mut [Vec<&mut [f32]>],
+        s: &mut TileScratch,
+    ) {
+        super::z_tile(p, t, c, outs, s)
     }
 }
 
