@@ -32,6 +32,14 @@ fn golden_dir() -> PathBuf {
 }
 
 /// A harness whose egui renderer and viewer share one device from `request_device`.
+/// The tests take turns: lavapipe already spreads one frame over every core, and frames
+/// of several tests at once (live positional AO is the heaviest) can outlast
+/// egui_kittest's 10 s wait for the GPU.
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    TURN.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn harness(open: OpenRequest, screenshot_dir: &Path) -> Harness<'static, Viewer> {
     harness_on(device(), open, screenshot_dir)
 }
@@ -191,6 +199,7 @@ fn snapshot(h: &mut Harness<'static, Viewer>, name: &str) {
 
 #[test]
 fn open_switch_preset_and_the_viewport_matches_volao_render() {
+    let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
@@ -241,6 +250,7 @@ fn open_switch_preset_and_the_viewport_matches_volao_render() {
 
 #[test]
 fn ao_method_from_the_panel_matches_volao_render_with_lao() {
+    let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
@@ -277,6 +287,7 @@ fn ao_method_from_the_panel_matches_volao_render_with_lao() {
 
 #[test]
 fn live_positional_ao_runs_in_the_ray_caster_and_matches_volao_render() {
+    let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
@@ -310,6 +321,7 @@ fn live_positional_ao_runs_in_the_ray_caster_and_matches_volao_render() {
 
 #[test]
 fn orbit_with_the_mouse_and_standard_views() {
+    let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
@@ -339,6 +351,7 @@ fn orbit_with_the_mouse_and_standard_views() {
 
 #[test]
 fn screenshots_write_png_and_scene_and_survive_a_failed_write() {
+    let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
@@ -412,6 +425,7 @@ fn screenshots_write_png_and_scene_and_survive_a_failed_write() {
 
 #[test]
 fn a_bad_file_is_an_error_and_the_volume_stays() {
+    let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
@@ -434,6 +448,7 @@ fn a_bad_file_is_an_error_and_the_volume_stays() {
 
 #[test]
 fn unsaved_changes_are_asked_about_before_opening_another_file() {
+    let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
@@ -465,6 +480,7 @@ fn unsaved_changes_are_asked_about_before_opening_another_file() {
 
 #[test]
 fn scenes_reopen_as_saved() {
+    let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
@@ -495,6 +511,7 @@ fn scenes_reopen_as_saved() {
 
 #[test]
 fn add_a_clip_shape_drag_it_and_cao_follows() {
+    let _gpu = one_at_a_time();
     use volao::clip::gpu::ClipMaps;
     use volao::render::gpu::{GpuVolume, RayCaster};
     let dir = tempfile::tempdir().expect("temp dir");
