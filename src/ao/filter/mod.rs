@@ -298,6 +298,19 @@ impl BoxStats {
     }
 }
 
+/// `max(a, b)` as one instruction (`f32::max` also orders NaNs, which costs two more;
+/// the maps never see a NaN).
+#[inline(always)]
+fn max_of(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// `min(a, b)`, as [`max_of`].
+#[inline(always)]
+fn min_of(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
 /// `2^y`, branch-free so that loops over it vectorise: `y = i + f` with `i` the nearest
 /// integer and `f ∈ [−½, ½]`, `2^f` by its degree-7 Taylor polynomial (relative error
 /// below 1e-7 before rounding) and `2^i` by the exponent bits. `y` is clamped to
@@ -307,7 +320,7 @@ pub fn exp2_approx(y: f32) -> f32 {
     // Adding 1.5 · 2^23 rounds to an integer, which then sits in the low mantissa bits.
     const ROUND: f32 = 12_582_912.0;
     let tiny = y < -125.0;
-    let y = y.clamp(-125.0, 127.0);
+    let y = min_of(max_of(y, -125.0), 127.0);
     let shifted = y + ROUND;
     let i = shifted.to_bits() as i32 - ROUND.to_bits() as i32;
     let l = (y - (shifted - ROUND)) * std::f32::consts::LN_2;
@@ -367,7 +380,7 @@ pub fn erf_approx(x: f32) -> f32 {
 #[inline(always)]
 fn cdf(v_x: f32, [v_min, v_max, mean, _]: Moments) -> f32 {
     let delta = v_max - v_min;
-    let mean = mean.max(v_min).min(v_max);
+    let mean = min_of(max_of(mean, v_min), v_max);
     let t = (v_x - v_min) / delta;
     let below = v_max - mean;
     let power = exp2_approx((mean - v_min) / below * log2_approx(t));
@@ -380,7 +393,7 @@ fn cdf(v_x: f32, [v_min, v_max, mean, _]: Moments) -> f32 {
 /// `E[v²] − E[v]²`, never negative.
 #[inline(always)]
 fn variance([_, _, mean, mean_sq]: Moments) -> f32 {
-    (mean_sq - mean * mean).max(0.0)
+    max_of(mean_sq - mean * mean, 0.0)
 }
 
 /// Gaussian CDF (§3.3, Eq. 4), `½(1 + erf(x))` with `x = d/(σ√2)`, `d = v_x − μ`, and
@@ -390,15 +403,13 @@ fn variance([_, _, mean, mean_sq]: Moments) -> f32 {
 #[inline(always)]
 fn gauss(v_x: f32, m: Moments) -> f32 {
     let [v_min, v_max, mean, _] = m;
-    let mean = mean.max(v_min).min(v_max);
-    let big_v = 2.0 * variance(m).max(VARIANCE_FLOOR);
+    let mean = min_of(max_of(mean, v_min), v_max);
+    let big_v = 2.0 * max_of(variance(m), VARIANCE_FLOOR);
     let d = v_x - mean;
     let big_d = d * d;
     let ad = ERF_A * big_d;
     let arg = -big_d * (4.0 / std::f32::consts::PI * big_v + ad) / (big_v * (big_v + ad));
-    let e = (1.0 - exp2_approx(arg * std::f32::consts::LOG2_E))
-        .max(0.0)
-        .sqrt();
+    let e = max_of(1.0 - exp2_approx(arg * std::f32::consts::LOG2_E), 0.0).sqrt();
     let o = 0.5 * (1.0 + if d < 0.0 { -e } else { e });
     if v_max - v_min <= 0.0 { 1.0 } else { o }
 }
@@ -407,10 +418,10 @@ fn gauss(v_x: f32, m: Moments) -> f32 {
 #[inline(always)]
 fn penner(v_x: f32, m: Moments) -> f32 {
     let [v_min, v_max, mean, _] = m;
-    let mean = mean.max(v_min).min(v_max);
-    let var = variance(m).max(VARIANCE_FLOOR);
+    let mean = min_of(max_of(mean, v_min), v_max);
+    let var = max_of(variance(m), VARIANCE_FLOOR);
     // Below the mean only: at or above it the bound is var / var = 1 exactly.
-    let d = (mean - v_x).max(0.0);
+    let d = max_of(mean - v_x, 0.0);
     let o = var / (var + d * d);
     if v_max - v_min <= 0.0 { 1.0 } else { o }
 }
