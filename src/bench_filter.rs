@@ -68,23 +68,8 @@ fn cpu_ms() -> f64 {
 }
 
 /// Median wall-clock ms of `runs` runs after a warm-up.
-fn median_ms(runs: usize, f: impl FnMut() -> Result<()>) -> Result<f64> {
-    Ok(timed(runs, f)?.0)
-}
-
-/// Median wall-clock ms and median CPU ms (all threads) of `runs` runs after a warm-up.
-fn timed(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<(f64, f64)> {
-    f()?;
-    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
-    for _ in 0..runs.max(1) {
-        let (start, c0) = (Instant::now(), cpu_ms());
-        f()?;
-        wall.push(start.elapsed().as_secs_f64() * 1e3);
-        cpu.push(cpu_ms() - c0);
-    }
-    wall.sort_by(f64::total_cmp);
-    cpu.sort_by(f64::total_cmp);
-    Ok((wall[wall.len() / 2], cpu[cpu.len() / 2]))
+fn median_ms(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    Ok(in_turns(runs, 1, |_| f())?[0].0)
 }
 
 /// Mean of `a` and Pearson correlation of `a` with `b` over the voxels in `mask`.
@@ -163,29 +148,66 @@ fn table_1(args: &FilterBenchArgs, gpu: &crate::gpu::Gpu, fg: &FilterGpu) -> Res
     println!("|---|---|---|---|---|---|---|");
     let threads = rayon::current_num_threads() as f64;
     for (r, paper) in PAPER_TABLE_1 {
+        // First call: fresh buffers and a fresh output, as `volao ao --cpu` runs it.
+        let first: Vec<f64> = MAPS
+            .iter()
+            .map(|(_, map)| {
+                let start = Instant::now();
+                filter::compute_cpu(texels, &source, [r; 3], &[*map]);
+                start.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        // Again: the buffers and the output kept, as after a transfer-function edit. The
+        // maps take turns, so that the machine's drift spreads over all of them.
+        let (mut cpu, mut out) = (FilterCpu::default(), Vec::new());
+        let again = in_turns(args.runs, MAPS.len(), |k| {
+            cpu.compute_into(texels, &source, [r; 3], &[MAPS[k].1], &mut out);
+            Ok(())
+        })?;
         for (k, (name, map)) in MAPS.iter().enumerate() {
-            // First call: fresh buffers and a fresh output, as `volao ao --cpu` runs it.
-            let start = Instant::now();
-            filter::compute_cpu(texels, &source, [r; 3], &[*map]);
-            let first = start.elapsed().as_secs_f64() * 1e3;
-            // Again: the buffers and the output kept, as after a transfer-function edit.
-            let (mut cpu, mut out) = (FilterCpu::default(), Vec::new());
-            let (again, cpu_time) = timed(args.runs, || {
-                cpu.compute_into(texels, &source, [r; 3], &[*map], &mut out);
-                Ok(())
-            })?;
             let gpu_ms = median_ms(args.runs, || {
                 fg.compute(gpu, &vol, &source, [r; 3], &[*map])?;
                 Ok(())
             })?;
+            let (wall, cpu_time) = again[k];
             println!(
-                "| {r} | {name} | {first:.1} ms | {again:.1} ms | {:.1} ms | {gpu_ms:.1} ms | {:.0} ms |",
+                "| {r} | {name} | {:.1} ms | {wall:.1} ms | {:.1} ms | {gpu_ms:.1} ms | {:.0} ms |",
+                first[k],
                 cpu_time / threads,
                 paper[k]
             );
         }
     }
     Ok(())
+}
+
+/// Median wall-clock ms and median CPU ms (all threads) of `runs` runs of each of
+/// `items`, taking turns (`f(0)`, `f(1)`, …, then again), after one warm-up each.
+fn in_turns(
+    runs: usize,
+    items: usize,
+    mut f: impl FnMut(usize) -> Result<()>,
+) -> Result<Vec<(f64, f64)>> {
+    for k in 0..items {
+        f(k)?;
+    }
+    let mut times = vec![(Vec::new(), Vec::new()); items];
+    for _ in 0..runs.max(1) {
+        for (k, (wall, cpu)) in times.iter_mut().enumerate() {
+            let (start, c0) = (Instant::now(), cpu_ms());
+            f(k)?;
+            wall.push(start.elapsed().as_secs_f64() * 1e3);
+            cpu.push(cpu_ms() - c0);
+        }
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    Ok(times
+        .into_iter()
+        .map(|(wall, cpu)| (median(wall), median(cpu)))
+        .collect())
 }
 
 /// Every cheap method's RMS against 512-ray LAO on a downsampled engine, with its time.
