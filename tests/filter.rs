@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{crop, device, texels};
+use common::{crop, device, texels, u8_volume};
 
 use common::{Rng, data};
 use volao::ao::filter::{
@@ -14,20 +14,6 @@ use volao::ao::filter::{
 use volao::render::gpu::GpuVolume;
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
-
-fn u8_volume(dims: [usize; 3], mut f: impl FnMut(usize, usize, usize) -> u8) -> Volume {
-    let n = dims.iter().product::<usize>();
-    let data = (0..n)
-        .map(|i| {
-            f(
-                i % dims[0],
-                (i / dims[0]) % dims[1],
-                i / (dims[0] * dims[1]),
-            )
-        })
-        .collect();
-    Volume::new(dims, [1.0; 3], VoxelData::U8(data)).expect("valid volume")
-}
 
 /// `(min, max, Σv, Σv², N)` of the cropped box by brute force, in f64.
 fn brute(values: &[f32], dims: [usize; 3], r: [u32; 3], at: [usize; 3]) -> [f64; 5] {

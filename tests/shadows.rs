@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{device, real_crops, texels};
+use common::{device, flat_tf, real_crops, texels, u8_volume};
 
 use glam::Vec3;
 use volao::gpu::Gpu;
@@ -13,32 +13,8 @@ use volao::render::shadow::{
     LightGpu, LightVolume, light_cpu, light_direction, light_lut, quantise, shadow_factor,
 };
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
-use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
-use volao::volume::{Volume, VoxelData};
-
-fn filled(n: [usize; 3], f: impl Fn(usize, usize, usize) -> u8) -> Volume {
-    let data = (0..n[0] * n[1] * n[2])
-        .map(|i| f(i % n[0], (i / n[0]) % n[1], i / (n[0] * n[1])))
-        .collect();
-    Volume::new(n, [1.0; 3], VoxelData::U8(data)).expect("valid volume")
-}
-
-fn flat_tf(alpha: f32) -> TransferFunction {
-    TransferFunction {
-        name: "flat".into(),
-        opacity: vec![
-            OpacityPoint { value: 0.0, alpha },
-            OpacityPoint {
-                value: 255.0,
-                alpha,
-            },
-        ],
-        color: vec![ColorStop {
-            value: 0.0,
-            rgb: [1.0; 3],
-        }],
-    }
-}
+use volao::tf::TransferFunction;
+use volao::volume::Volume;
 
 fn gpu_light(gpu: &Gpu, v: &Volume, tf: &TransferFunction, dir: Vec3) -> Vec<f32> {
     let t = texels(v);
@@ -50,7 +26,7 @@ fn gpu_light(gpu: &Gpu, v: &Volume, tf: &TransferFunction, dir: Vec3) -> Vec<f32
 
 #[test]
 fn empty_volume_casts_no_shadow() {
-    let v = filled([10, 12, 9], |_, _, _| 0);
+    let v = u8_volume([10, 12, 9], |_, _, _| 0);
     let tf = flat_tf(0.0);
     let dir = light_direction([1.0, -2.0, 0.5]).expect("valid");
     let t = texels(&v);
@@ -65,7 +41,7 @@ fn uniform_medium_attenuates_by_beers_law_over_the_jittered_samples() {
     // Constant opacity α per voxel step: T = (1 − α)^N with N the light samples
     // t_i = (i + j)·h (h = 1 mm) before the ray leaves the box.
     let n = [20, 16, 24];
-    let v = filled(n, |_, _, _| 77);
+    let v = u8_volume(n, |_, _, _| 77);
     let alpha = 0.05f32;
     let tf = flat_tf(alpha);
     let dir = light_direction([0.3, -0.5, 0.8]).expect("valid");
@@ -257,7 +233,7 @@ fn light_passes_through_clipped_space_on_gpu_and_cpu_alike() {
     // A uniform medium with the upper half carved away, light from above: voxels just
     // below the cut see the light through empty space.
     let n = [20, 18, 24];
-    let v = filled(n, |_, _, _| 90);
+    let v = u8_volume(n, |_, _, _| 90);
     let tf = flat_tf(0.08);
     let dir = light_direction([0.1, 0.2, 1.0]).expect("valid");
     let t = texels(&v);

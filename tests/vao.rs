@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{crop, device, real_crops, texels};
+use common::{crop, device, flat_tf, real_crops, texels, u8_volume};
 
 use common::data;
 use glam::Vec3;
@@ -37,31 +37,6 @@ fn ramp_tf(top: f32) -> TransferFunction {
     }
 }
 
-/// The same opacity `alpha` for every value.
-fn flat_tf(alpha: f32) -> TransferFunction {
-    TransferFunction {
-        name: "flat".into(),
-        opacity: vec![
-            OpacityPoint { value: 0.0, alpha },
-            OpacityPoint {
-                value: 255.0,
-                alpha,
-            },
-        ],
-        color: vec![ColorStop {
-            value: 0.0,
-            rgb: [1.0; 3],
-        }],
-    }
-}
-
-fn filled(n: [usize; 3], f: impl Fn(usize, usize, usize) -> u8) -> Volume {
-    let data = (0..n[0] * n[1] * n[2])
-        .map(|i| f(i % n[0], (i / n[0]) % n[1], i / (n[0] * n[1])))
-        .collect();
-    Volume::new(n, [1.0; 3], VoxelData::U8(data)).expect("valid volume")
-}
-
 /// Texture coordinates of the centre of voxel `v`.
 fn centre(v: [usize; 3], dims: [usize; 3]) -> Vec3 {
     (Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32) + 0.5)
@@ -79,7 +54,7 @@ fn gpu_vao(gpu: &Gpu, v: &Volume, tf: &TransferFunction, s: &VaoSettings) -> Vec
 
 #[test]
 fn empty_volume_is_unoccluded_on_cpu_and_gpu() {
-    let v = filled([12, 10, 8], |_, _, _| 0);
+    let v = u8_volume([12, 10, 8], |_, _, _| 0);
     let tf = ramp_tf(1.0);
     for samples in [8, 12] {
         let s = VaoSettings {
@@ -105,7 +80,7 @@ fn uniform_medium_gives_the_closed_form_of_eq_7() {
     // leaving the box: γ = 1 − [(1 − V)^N]^(r_max / (v_s N)) = 1 − (1 − V)^(r_max / v_s)
     // for every ray, hence A_P the same, whatever N (and mip level: 4 samples read level 1).
     let n = 40;
-    let v = filled([n, n, n], |_, _, _| 128);
+    let v = u8_volume([n, n, n], |_, _, _| 128);
     let alpha = 0.3f32;
     let r_max = 12.0f32;
     let expected = 1.0 - (1.0 - alpha).powf(r_max);
@@ -151,8 +126,8 @@ fn decreasing_density_along_a_ray_is_fully_rejected() {
     // component every sample is below the one before it: R = 0 throughout (Eq. 4), γ = 0.
     // The same rays through the mirrored field climb the slope and are occluded.
     let n = [64, 24, 24];
-    let falling = filled(n, |x, _, _| 255 - (4 * x) as u8);
-    let rising = filled(n, |x, _, _| (4 * (n[0] - 1 - x)) as u8);
+    let falling = u8_volume(n, |x, _, _| 255 - (4 * x) as u8);
+    let rising = u8_volume(n, |x, _, _| (4 * (n[0] - 1 - x)) as u8);
     let s = VaoSettings {
         directions: 64,
         samples: 8,
@@ -688,7 +663,7 @@ fn v_thres_and_near_full_obscurance_stop_a_ray() {
     // sample ends every ray: γ = 1 − (1 − V)^(Δ / v_s), one stratum's worth. With a dense
     // medium and V_thres = 1 the rays stop once γ ≥ 1 − 1/256 instead of running on.
     let n = 40;
-    let v = filled([n, n, n], |_, _, _| 128);
+    let v = u8_volume([n, n, n], |_, _, _| 128);
     let t = texels(&v);
     let at = centre([20, 20, 20], t.dims);
     let s = VaoSettings {

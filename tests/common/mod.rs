@@ -146,3 +146,34 @@ pub fn real_crops() -> Vec<(
     })
     .collect()
 }
+
+/// An 8-bit volume of unit spacing with `f(x, y, z)` at each voxel.
+pub fn u8_volume(
+    n: [usize; 3],
+    mut f: impl FnMut(usize, usize, usize) -> u8,
+) -> volao::volume::Volume {
+    let data = (0..n[0] * n[1] * n[2])
+        .map(|i| f(i % n[0], (i / n[0]) % n[1], i / (n[0] * n[1])))
+        .collect();
+    volao::volume::Volume::new(n, [1.0; 3], volao::volume::VoxelData::U8(data))
+        .expect("valid volume")
+}
+
+/// The same opacity `alpha` for every value of 8-bit data, in white.
+pub fn flat_tf(alpha: f32) -> volao::tf::TransferFunction {
+    use volao::tf::{ColorStop, OpacityPoint};
+    volao::tf::TransferFunction {
+        name: "flat".into(),
+        opacity: vec![
+            OpacityPoint { value: 0.0, alpha },
+            OpacityPoint {
+                value: 255.0,
+                alpha,
+            },
+        ],
+        color: vec![ColorStop {
+            value: 0.0,
+            rgb: [1.0; 3],
+        }],
+    }
+}
