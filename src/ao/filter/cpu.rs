@@ -12,7 +12,12 @@
 //!    a ring of `L + 2r` planes. The x pass runs on [`LANES`] rows at once, interleaved,
 //!    so that its runs are as wide as the y pass's.
 //! 2. **Per tile of the slice** (in parallel): the z pass over the ring, and straight
-//!    away the maps (or the raw statistics) of the segment's voxels.
+//!    away the maps (or the raw statistics) of the segment's voxels. The ring is stored
+//!    tile by tile, so a tile's planes lie together, and they are swept once in order
+//!    ([`warm`]) before the z runs read them.
+//!
+//! Every run keeps [`COLUMNS`] floats (the x pass: [`LANES`]) in registers from one
+//! element to the next, so a step of a run is a load, an operation and a store.
 //!
 //! So the 3-D statistics never exist as whole volumes, each plane is computed once, and
 //! only the statistics the requested maps read are computed ([`Stat::needed_by`]).
@@ -26,9 +31,12 @@ use rayon::prelude::*;
 /// Rows the x pass interleaves (16 floats: four SSE or two AVX2 registers per step).
 const LANES: usize = 16;
 
-/// Voxels of a slice that one z-pass task owns (4 KiB per statistic and slice, so a
-/// segment's outputs stay in L2).
-const TILE: usize = 1024;
+/// Voxels of a slice that one z-pass task owns (2 KiB per statistic and slice: a
+/// segment's planes of one statistic fit in L2, its z runs in L1).
+const TILE: usize = 512;
+
+/// Floats of a y or z run kept in registers at once (four AVX2 registers).
+const COLUMNS: usize = 32;
 
 /// One of the four box statistics.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -95,70 +103,92 @@ impl Op for AddOp {
 /// `at(a)`): writes the windows `[i − r, i + r]` of outputs `i ∈ [c, c + L)` into `out`
 /// (`elem` floats each, contiguous). The same runs in the same order as `main` in
 /// `box_stats.wgsl`: suffixes `S = op(v, S)` backward from the pivot, prefixes
-/// `P = op(P, v)` forward, then `op(S, P)`.
+/// `P = op(P, v)` forward, then `op(S, P)`. The elements are taken `W` floats at a
+/// time, whose runs stay in registers (then one float at a time for the rest).
 #[inline(always)]
 fn segment<'a, O: Op, const W: usize>(
     at: impl Fn(usize) -> &'a [f32],
-    (n, elem, r): (usize, usize, usize),
+    line: (usize, usize, usize),
     c: usize,
     out: &mut [f32],
-    acc: &mut [f32],
 ) {
-    // W > 0 fixes the element size at compile time (the x pass's interleaved rows).
-    let elem = if W > 0 { W } else { elem };
+    let elem = line.1;
+    let mut col = 0;
+    while col + W <= elem {
+        segment_columns::<O, W>(&at, line, c, col, out);
+        col += W;
+    }
+    while col < elem {
+        segment_columns::<O, 1>(&at, line, c, col, out);
+        col += 1;
+    }
+}
+
+/// [`segment`] for the `W` floats of every element starting at float `col`.
+#[inline(always)]
+fn segment_columns<'a, O: Op, const W: usize>(
+    at: &impl Fn(usize) -> &'a [f32],
+    (n, elem, r): (usize, usize, usize),
+    c: usize,
+    col: usize,
+    out: &mut [f32],
+) {
     let outs = segment_len(r).min(n - c);
     let (ci, ri, ni) = (c as i64, r as i64, n as i64);
     let (m, first) = (ci + ri, ci - ri);
-    let acc = &mut acc[..elem];
-    // S[j] for j = a − first, written straight into out[j]; the run reaches j ≤ 2r − 1,
-    // so S[2r] (when L = 2r + 1) is the empty suffix. Suffixes beyond the last output
-    // (a segment cut short by the line's end) gather in `acc`.
+    let load = |a: usize| -> &[f32; W] {
+        at(a)[col..col + W]
+            .try_into()
+            .unwrap_or_else(|_| unreachable!("W floats"))
+    };
+    // S[j] for j = a − first; the run reaches j ≤ 2r − 1, so S[2r] (when L = 2r + 1)
+    // is the empty suffix. Suffixes beyond the last output (a segment cut short by the
+    // line's end) are only accumulated.
+    let mut suffix = [O::IDENTITY; W];
     for j in (2 * r).min(outs)..outs {
-        out[j * elem..(j + 1) * elem].fill(O::IDENTITY);
+        *columns_mut(out, j * elem + col) = suffix;
     }
-    acc.fill(O::IDENTITY);
     let mut a = m - 1;
     while a >= first {
+        // Outside the line the run is cropped: a < 0 repeats S[j + 1], a ≥ n adds
+        // nothing (and lies beyond the last output).
+        if a >= 0 && a < ni {
+            for (s, &v) in suffix.iter_mut().zip(load(a as usize)) {
+                *s = O::op(v, *s);
+            }
+        }
         let j = (a - first) as usize;
-        // Outside the line the run is cropped: a < 0 repeats S[0], a ≥ n adds nothing
-        // (and lies beyond the last output).
-        let inside = a >= 0 && a < ni;
-        if j >= outs {
-            if inside {
-                for (x, &v) in acc.iter_mut().zip(&at(a as usize)[..elem]) {
-                    *x = O::op(v, *x);
-                }
-            }
-        } else {
-            let (head, tail) = out.split_at_mut((j + 1) * elem);
-            let next: &[f32] = if j + 1 < outs { &tail[..elem] } else { acc };
-            let dst = &mut head[j * elem..];
-            if inside {
-                for ((o, &v), &s) in dst.iter_mut().zip(&at(a as usize)[..elem]).zip(next) {
-                    *o = O::op(v, s);
-                }
-            } else {
-                dst.copy_from_slice(next);
-            }
+        if j < outs {
+            *columns_mut(out, j * elem + col) = suffix;
         }
         a -= 1;
     }
-    acc.fill(O::IDENTITY);
+    let mut prefix = [O::IDENTITY; W];
     for j in 0..outs {
         let b = m as usize + j;
         if b < n {
-            for (x, &v) in acc.iter_mut().zip(&at(b)[..elem]) {
-                *x = O::op(*x, v);
+            for (p, &v) in prefix.iter_mut().zip(load(b)) {
+                *p = O::op(*p, v);
             }
         }
-        for (o, &p) in out[j * elem..][..elem].iter_mut().zip(acc.iter()) {
+        for (o, &p) in columns_mut::<W>(out, j * elem + col)
+            .iter_mut()
+            .zip(&prefix)
+        {
             *o = O::op(*o, p);
         }
     }
 }
 
-/// [`segment`] with the statistic's operation (elements of `W` floats, or of the
-/// line's `elem` when `W` is 0).
+/// The `W` floats of `out` from `start`.
+#[inline(always)]
+fn columns_mut<const W: usize>(out: &mut [f32], start: usize) -> &mut [f32; W] {
+    (&mut out[start..start + W])
+        .try_into()
+        .unwrap_or_else(|_| unreachable!("W floats"))
+}
+
+/// [`segment`] with the statistic's operation.
 #[inline(always)]
 fn stat_segment<'a, const W: usize>(
     stat: Stat,
@@ -166,37 +196,28 @@ fn stat_segment<'a, const W: usize>(
     line: (usize, usize, usize),
     c: usize,
     out: &mut [f32],
-    acc: &mut [f32],
 ) {
     match stat {
-        Stat::Min => segment::<MinOp, W>(at, line, c, out, acc),
-        Stat::Max => segment::<MaxOp, W>(at, line, c, out, acc),
-        Stat::Sum | Stat::SumSq => segment::<AddOp, W>(at, line, c, out, acc),
+        Stat::Min => segment::<MinOp, W>(at, line, c, out),
+        Stat::Max => segment::<MaxOp, W>(at, line, c, out),
+        Stat::Sum | Stat::SumSq => segment::<AddOp, W>(at, line, c, out),
     }
 }
 
 /// Every segment of a line whose `n` elements of `elem` floats lie contiguously in
-/// `input`; outputs contiguous in `out`. `W` as in [`stat_segment`].
+/// `input`; outputs contiguous in `out`. `W` as in [`segment`].
 #[inline(always)]
 fn line_pass<const W: usize>(
     stat: Stat,
     input: &[f32],
     (n, elem, r): (usize, usize, usize),
     out: &mut [f32],
-    acc: &mut [f32],
 ) {
     let len = segment_len(r);
     for c in (0..n).step_by(len) {
         let end = (c + len).min(n);
         let at = |a: usize| &input[a * elem..(a + 1) * elem];
-        stat_segment::<W>(
-            stat,
-            at,
-            (n, elem, r),
-            c,
-            &mut out[c * elem..end * elem],
-            acc,
-        );
+        stat_segment::<W>(stat, at, (n, elem, r), c, &mut out[c * elem..end * elem]);
     }
 }
 
@@ -236,7 +257,8 @@ struct SliceScratch {
     packed_sq: Vec<f32>,
     packed_out: Vec<f32>,
     xs: Vec<f32>,
-    acc: Vec<f32>,
+    /// The y pass's output, before it is dealt out to the ring's tiles.
+    plane: Vec<f32>,
 }
 
 /// The x and y passes of every wanted statistic over slice `z`, into `outs`.
@@ -245,7 +267,7 @@ fn slice_planes(
     input: Values,
     z: usize,
     r: [usize; 3],
-    outs: Vec<(Stat, &mut [f32])>,
+    outs: Vec<(Stat, Vec<&mut [f32]>)>,
     s: &mut SliceScratch,
 ) {
     let [nx, ny, _] = input.dims();
@@ -254,7 +276,7 @@ fn slice_planes(
     s.packed.resize(groups * nx * LANES, 0.0);
     s.packed_out.resize(nx * LANES, 0.0);
     s.xs.resize(nx * ny, 0.0);
-    s.acc.resize(nx.max(LANES), 0.0);
+    s.plane.resize(nx * ny, 0.0);
     input.decode(z * nx * ny, &mut s.values);
     // Interleave once for all statistics, so that each step of an x run is one wide
     // operation.
@@ -278,13 +300,7 @@ fn slice_planes(
             &s.packed
         };
         for (g, group) in packed.chunks_exact(nx * LANES).enumerate() {
-            line_pass::<LANES>(
-                stat,
-                group,
-                (nx, LANES, r[0]),
-                &mut s.packed_out,
-                &mut s.acc,
-            );
+            line_pass::<LANES>(stat, group, (nx, LANES, r[0]), &mut s.packed_out);
             let rows = LANES.min(ny - g * LANES);
             for k in 0..rows {
                 let row = &mut s.xs[(g * LANES + k) * nx..][..nx];
@@ -294,7 +310,10 @@ fn slice_planes(
             }
         }
         // y: elements are whole rows.
-        line_pass::<0>(stat, &s.xs, (ny, nx, r[1]), out, &mut s.acc);
+        line_pass::<COLUMNS>(stat, &s.xs, (ny, nx, r[1]), &mut s.plane);
+        for (dst, src) in out.into_iter().zip(s.plane.chunks(TILE)) {
+            dst[..src.len()].copy_from_slice(src);
+        }
     }
 }
 
@@ -306,12 +325,13 @@ enum Output {
 }
 
 /// A slice and the planes (one per wanted statistic) its x and y passes fill.
-type SliceJob<'a> = (usize, Vec<(Stat, &'a mut [f32])>);
+type SliceJob<'a> = (usize, Vec<(Stat, Vec<&'a mut [f32]>)>);
 
 /// Per-thread buffers of the z stage.
 #[derive(Debug, Default)]
 struct TileScratch {
-    acc: Vec<f32>,
+    /// Where in the ring the tile's parts of the planes a z segment reads start.
+    rows: Vec<usize>,
     values: Vec<f32>,
     /// Per wanted statistic, one segment of z outputs of the tile.
     stats: Vec<Vec<f32>>,
@@ -335,7 +355,8 @@ struct Scratch {
 /// build for it, eight floats wide.
 #[derive(Debug)]
 pub struct FilterCpu {
-    /// Per wanted statistic, `slots` planes.
+    /// Per wanted statistic, `slots` planes, tile-major: the [`TILE`] voxels of tile `t`
+    /// in slot `slot` are chunk `t · slots + slot`.
     ring: Vec<Vec<f32>>,
     /// One per rayon worker thread (by `rayon::current_thread_index`), plus one for
     /// calls from outside the pool.
@@ -440,7 +461,7 @@ impl FilterCpu {
         let slots = (len + 2 * r[2]).min(nz);
         self.ring.resize_with(stats.len(), Vec::new);
         for plane in &mut self.ring {
-            plane.resize(slots * slice, 0.0);
+            plane.resize(slots * slice.div_ceil(TILE) * TILE, 0.0);
         }
         let threads = rayon::current_num_threads() + 1;
         if self.scratch.len() != threads {
@@ -474,11 +495,19 @@ impl FilterCpu {
             // The planes this segment still lacks, in parallel over slices.
             let upto = (c + len + r[2]).min(nz);
             let mut jobs: Vec<SliceJob> = (planned..upto).map(|z| (z, Vec::new())).collect();
+            let mut job_of_slot = vec![None; slots];
+            for (k, (z, _)) in jobs.iter().enumerate() {
+                job_of_slot[z % slots] = Some(k);
+            }
             for (&stat, plane) in stats.iter().zip(ring.iter_mut()) {
-                for (slot, part) in plane.chunks_mut(slice).enumerate() {
-                    // Slot `slot` holds the slices ≡ slot (mod slots); at most one is new.
-                    if let Some(job) = jobs.iter_mut().find(|(z, _)| z % slots == slot) {
-                        job.1.push((stat, part));
+                for job in &mut jobs {
+                    job.1.push((stat, Vec::with_capacity(tiles.len())));
+                }
+                // Tile-major: the TILE voxels of tile t in slot `slot` (which holds the
+                // slices ≡ slot mod slots; at most one is new) are chunk t · slots + slot.
+                for (i, part) in plane.chunks_mut(TILE).enumerate() {
+                    if let Some(job) = job_of_slot[i % slots] {
+                        jobs[job].1.last_mut().expect("pushed above").1.push(part);
                     }
                 }
             }
@@ -535,15 +564,21 @@ fn z_tile(p: &ZPass, t: usize, c: usize, outs: &mut [Vec<&mut [f32]>], s: &mut T
     let t0 = t * TILE;
     let w = TILE.min(slice - t0);
     let outs_here = p.len.min(nz - c);
-    s.acc.resize(w, 0.0);
     s.values.resize(w, 0.0);
     s.counts.resize(w, 0.0);
     s.stats.resize_with(p.stats.len(), Vec::new);
+    // Where the tile's part of each plane the segment reads starts in the ring.
+    let lo = c.saturating_sub(p.r[2]);
+    s.rows.clear();
+    s.rows
+        .extend((lo..(c + p.len + p.r[2]).min(nz)).map(|a| (t * p.slots + a % p.slots) * TILE));
     for (k, &stat) in p.stats.iter().enumerate() {
         s.stats[k].resize(p.len * w, 0.0);
-        let at = |a: usize| &p.ring[k][(a % p.slots) * slice + t0..][..w];
+        let (rows, ring) = (&s.rows, &p.ring[k]);
+        let at = |a: usize| &ring[rows[a - lo]..][..w];
+        warm(ring, rows, w);
         let out = &mut s.stats[k][..outs_here * w];
-        stat_segment::<0>(stat, at, (nz, w, p.r[2]), c, out, &mut s.acc);
+        stat_segment::<COLUMNS>(stat, at, (nz, w, p.r[2]), c, out);
     }
     for j in 0..outs_here {
         let z = c + j;
@@ -574,6 +609,23 @@ fn z_tile(p: &ZPass, t: usize, c: usize, outs: &mut [Vec<&mut [f32]>], s: &mut T
     }
 }
 
+/// Reads one float per cache line of each of `rows` (`w` floats from each offset into
+/// `ring`), in order. The column runs of the z pass stride from plane to plane, which
+/// the hardware prefetcher does not follow, so without this sequential sweep first they
+/// wait on memory for most of their time (about three quarters of the z pass on the
+/// development VM).
+#[inline(always)]
+fn warm(ring: &[f32], rows: &[usize], w: usize) {
+    const FLOATS_PER_LINE: usize = 16;
+    let mut seen = 0;
+    for &start in rows {
+        for v in ring[start..start + w].iter().step_by(FLOATS_PER_LINE) {
+            seen ^= v.to_bits();
+        }
+    }
+    std::hint::black_box(seen);
+}
+
 /// The instruction set the two hot stages are compiled for. Both give the same bits:
 /// the operations are the same IEEE ones, only wider (and never fused).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -601,7 +653,7 @@ impl Simd {
         input: Values,
         z: usize,
         r: [usize; 3],
-        outs: Vec<(Stat, &mut [f32])>,
+        outs: Vec<(Stat, Vec<&mut [f32]>)>,
         s: &mut SliceScratch,
     ) {
         match self {
@@ -642,7 +694,7 @@ mod avx2 {
         input: Values,
         z: usize,
         r: [usize; 3],
-        outs: Vec<(Stat, &mut [f32])>,
+        outs: Vec<(Stat, Vec<&mut [f32]>)>,
         s: &mut SliceScratch,
     ) {
         super::slice_planes(input, z, r, outs, s)
