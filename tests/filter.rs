@@ -533,6 +533,9 @@ fn volao_ao_writes_the_map_the_cpu_twin_computes() {
         .volume;
     let t = texels(&src);
     let tf = TransferFunction::preset(Preset::default_for(&src.stats()), &src.stats());
+    let gpu = volao::gpu::request_device().unwrap_or_else(|e| {
+        panic!("{e}\n(GPU tests run on Mesa's lavapipe in CI; they are not skipped.)")
+    });
     for (flag, map) in [
         ("cdf", AmbientMap::Cdf),
         ("gauss", AmbientMap::Gauss),
@@ -551,6 +554,17 @@ fn volao_ao_writes_the_map_the_cpu_twin_computes() {
         ]);
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(out.status.success(), "{stderr}");
+        // A CPU adapter leaves the statistics to the twin, and says so.
+        let said = format!("{}{stderr}", String::from_utf8_lossy(&out.stdout));
+        let device = if volao::ao::fast::twin_is_faster(&gpu) {
+            format!("faster than the CPU adapter {}", gpu.info.name)
+        } else {
+            gpu.info.name.clone()
+        };
+        assert!(
+            said.contains(&device),
+            "{flag}: {said:?} does not name {device:?}"
+        );
         let ao = volume::load(&out_path, &LoadOptions::default())
             .unwrap_or_else(|e| panic!("{e}"))
             .volume;

@@ -62,6 +62,55 @@ pub fn describe(settings: &AoSettings) -> String {
     }
 }
 
+/// True when the box statistics (filter maps, opacity modulation) are better left to the
+/// CPU twin than given to this adapter: a CPU adapter such as llvmpipe runs the same
+/// work on the same cores, ~20× slower than the twin (docs/benchmarks.md, Table 1).
+/// Cone tracing stays on any adapter (llvmpipe runs it 2–3× faster than its twin).
+pub fn twin_is_faster(gpu: &Gpu) -> bool {
+    gpu.info.device_type == wgpu::DeviceType::Cpu
+}
+
+/// What ran the box statistics of [`compute`] and [`modulation`] on `gpu`.
+pub fn statistics_device(gpu: &Gpu) -> String {
+    if twin_is_faster(gpu) {
+        format!(
+            "CPU twin ({} threads; faster than the CPU adapter {})",
+            rayon::current_num_threads(),
+            gpu.info.name
+        )
+    } else {
+        gpu.describe()
+    }
+}
+
+/// `A(x)` for a method of this module with `gpu` at hand: [`compute_gpu`], or the CPU
+/// twin on the uploaded texels where [`twin_is_faster`] for a filter map.
+pub fn compute(
+    gpu: &Gpu,
+    vol: &GpuVolume,
+    tf: &TransferFunction,
+    settings: &AoSettings,
+) -> Result<Option<Vec<f32>>, GpuError> {
+    if map_of(settings.method).is_some() && twin_is_faster(gpu) {
+        return Ok(compute_cpu(&vol.texels, tf, settings));
+    }
+    compute_gpu(gpu, vol, tf, settings)
+}
+
+/// Opacity modulation factors with `gpu` at hand: [`modulation_gpu`], or the CPU twin
+/// on the uploaded texels where [`twin_is_faster`].
+pub fn modulation(
+    gpu: &Gpu,
+    vol: &GpuVolume,
+    tf: &TransferFunction,
+    m: &OpacityModulation,
+) -> Result<Vec<f32>, GpuError> {
+    if twin_is_faster(gpu) {
+        return Ok(modulation_cpu(&vol.texels, tf, m));
+    }
+    modulation_gpu(gpu, vol, tf, m)
+}
+
 /// `A(x)` on the GPU for a method of this module (`None` for any other method).
 pub fn compute_gpu(
     gpu: &Gpu,

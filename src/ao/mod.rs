@@ -157,8 +157,13 @@ pub fn compute_volume_clipped(
         return Ok((out, device, Some(stats)));
     }
     let mut computed = None;
+    // Set where the adapter is a CPU and the twin does the filter map faster.
+    let mut twin_device = None;
     if use_gpu {
         match crate::gpu::request_device() {
+            Ok(g) if fast::map_of(settings.method).is_some() && fast::twin_is_faster(&g) => {
+                twin_device = Some(fast::statistics_device(&g));
+            }
             Ok(g) => {
                 let vol = crate::render::gpu::GpuVolume::new(&g, volume, tf, 0.5)?;
                 if vol.texels.downsampled == 0 && fast::handles(settings.method) {
@@ -205,10 +210,9 @@ pub fn compute_volume_clipped(
                     progress,
                 )
             };
-            (
-                a,
-                format!("CPU twin ({} threads)", rayon::current_num_threads()),
-            )
+            let device = twin_device
+                .unwrap_or_else(|| format!("CPU twin ({} threads)", rayon::current_num_threads()));
+            (a, device)
         }
     };
     Ok((ao_volume(volume, values, settings, tf), device, None))

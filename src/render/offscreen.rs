@@ -181,13 +181,13 @@ pub fn render_with(
                     }
                     AoMethod::VaoLive => vol.set_live_vao(&g, tf, Some(&ao.vao))?,
                     _ => {
-                        if let Some(a) = crate::ao::fast::compute_gpu(&g, &vol, tf, ao)? {
+                        if let Some(a) = crate::ao::fast::compute(&g, &vol, tf, ao)? {
                             vol.set_ambient_occlusion(&g, &a);
                         }
                     }
                 }
                 if let Some(m) = &frame.settings.opacity_modulation {
-                    let f = crate::ao::fast::modulation_gpu(&g, &vol, tf, m)?;
+                    let f = crate::ao::fast::modulation(&g, &vol, tf, m)?;
                     vol.set_opacity_modulation(&g, &f);
                 }
                 if cao_state.is_none() && !clip.is_empty() {
