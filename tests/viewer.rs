@@ -319,6 +319,102 @@ fn live_positional_ao_runs_in_the_ray_caster_and_matches_volao_render() {
     assert_ne!(off.pixels, viewport.pixels, "live AO changed the picture");
 }
 
+/// Clicks the widget labelled `label` (scrolled into view first, as a user does).
+fn click(h: &mut Harness<'static, Viewer>, label: &str) {
+    h.run_steps(2);
+    h.get_by_label(label).scroll_to_me();
+    h.run_steps(8);
+    h.get_by_label(label).click();
+}
+
+#[test]
+fn filter_ao_and_opacity_modulation_from_the_panels_match_volao_render() {
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    choose(&mut h, "Preset", "cao-single-color");
+    choose(&mut h, "Method", "gauss");
+    click(&mut h, "opacity");
+    click(&mut h, "Opacity modulation by local variance");
+    h.run_steps(2);
+    // The default σ²_max (1e-3) is below Bucky's variance wherever it is visible: a
+    // larger one over a smaller box fades part of it.
+    let m = h
+        .state_mut()
+        .document_mut()
+        .and_then(|d| d.render.opacity_modulation.as_mut())
+        .expect("the checkbox turned modulation on");
+    (m.sigma2_max, m.radius) = (0.05, 3.0);
+    settle(&mut h);
+    assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
+    assert!(
+        h.state().modulation_ready(),
+        "modulation error: {:?}",
+        h.state().modulation_error()
+    );
+    let doc = h.state().document().expect("doc");
+    assert_eq!(doc.ao.method, volao::ao::AoMethod::Gauss);
+    assert_eq!(
+        doc.ao.statistic,
+        volao::ao::filter::StatisticSource::Opacity
+    );
+    let modulation = doc.render.opacity_modulation.expect("modulation on");
+    assert_eq!(modulation.sigma2_max, 0.05);
+    let scene = dir.path().join("gauss.json");
+    h.state_mut().save_scene(&scene).expect("scene saved");
+    let modulated = viewport_pixels(&mut h);
+    let rendered = volao_render(&scene, &dir.path().join("gauss.png"));
+    check(
+        "viewport_gauss_modulated_vs_render",
+        &modulated,
+        &rendered,
+        SAME_RENDERER,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+
+    // Off again: the viewport is the unmodulated rendering of the same scene.
+    click(&mut h, "Opacity modulation by local variance");
+    settle(&mut h);
+    assert!(
+        h.state()
+            .document()
+            .expect("doc")
+            .render
+            .opacity_modulation
+            .is_none()
+    );
+    let mut plain = volao::scene::Scene::load(&scene).expect("scene");
+    plain.render.opacity_modulation = None;
+    plain.save(&scene).expect("save");
+    let unmodulated = volao_render(&scene, &dir.path().join("plain.png"));
+    // The "Saved scene" note would cover part of the view.
+    while let Some(close) = h.query_by_label("×") {
+        close.click();
+        h.run_steps(2);
+    }
+    // And the pointer left there would be drawn over it.
+    h.get_by_label("Camera").hover();
+    h.run_steps(2);
+    let off = viewport_pixels(&mut h);
+    check(
+        "viewport_gauss_unmodulated_vs_render",
+        &off,
+        &unmodulated,
+        SAME_RENDERER,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let changed = off
+        .pixels
+        .iter()
+        .zip(&modulated.pixels)
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(changed > 100, "modulation changed only {changed} pixels");
+}
+
 #[test]
 fn orbit_with_the_mouse_and_standard_views() {
     let _gpu = one_at_a_time();

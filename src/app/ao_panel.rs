@@ -4,6 +4,8 @@
 //! Methods are listed from [`AoMethod`] itself (the names its parser accepts, written as
 //! scene files write them), so methods appear here as they land in `ao`.
 
+use crate::ao::cone::{ConePreset, ConeSet};
+use crate::ao::filter::{RadiusUnit, StatisticSource};
 use crate::ao::rays::RaySet;
 use crate::ao::{AoMethod, AoSettings};
 
@@ -86,39 +88,84 @@ pub fn show(
             }
         });
     ui.add_enabled_ui(settings.method != AoMethod::None, |ui| {
-        ui.horizontal(|ui| {
-            egui::ComboBox::from_label("Rays K")
-                .selected_text(settings.rays.name())
-                .show_ui(ui, |ui| {
-                    for r in RAY_SETS {
-                        ui.selectable_value(&mut settings.rays, r, r.name());
-                    }
-                    if ui
-                        .selectable_label(
-                            matches!(settings.rays, RaySet::Fibonacci(_)),
-                            "Fibonacci",
-                        )
-                        .clicked()
-                    {
-                        settings.rays = RaySet::Fibonacci(128);
-                    }
-                });
-            if let RaySet::Fibonacci(n) = &mut settings.rays {
-                ui.label("N");
-                ui.add(egui::DragValue::new(n).range(1..=65536))
-                    .accessible_name("N");
-            }
-        });
-        ui.add(egui::Slider::new(&mut settings.samples, 1..=64).text("Samples M"));
-        ui.weak(format!(
-            "Radius R = {} mm (samples 1 mm apart)",
-            settings.samples
-        ));
+        if crate::ao::fast::map_of(settings.method).is_some() {
+            filter_parameters(ui, settings);
+        } else if settings.method == AoMethod::Cone {
+            cone_parameters(ui, settings);
+        } else {
+            ray_parameters(ui, settings);
+        }
     });
     ui.add(egui::Slider::new(ambient, 0.0..=1.0).text("Strength k"));
     ui.checkbox(ao_only, "AO only (white, ambient term alone)");
     egui::CollapsingHeader::new("Statistics").show(ui, |ui| statistics(ui, stats));
     (*settings != before, (*ambient, *ao_only) != view_before)
+}
+
+/// LAO, CAO and positional AO: K rays of M samples.
+fn ray_parameters(ui: &mut egui::Ui, settings: &mut AoSettings) {
+    ui.horizontal(|ui| {
+        egui::ComboBox::from_label("Rays K")
+            .selected_text(settings.rays.name())
+            .show_ui(ui, |ui| {
+                for r in RAY_SETS {
+                    ui.selectable_value(&mut settings.rays, r, r.name());
+                }
+                if ui
+                    .selectable_label(matches!(settings.rays, RaySet::Fibonacci(_)), "Fibonacci")
+                    .clicked()
+                {
+                    settings.rays = RaySet::Fibonacci(128);
+                }
+            });
+        if let RaySet::Fibonacci(n) = &mut settings.rays {
+            ui.label("N");
+            ui.add(egui::DragValue::new(n).range(1..=65536))
+                .accessible_name("N");
+        }
+    });
+    ui.add(egui::Slider::new(&mut settings.samples, 1..=64).text("Samples M"));
+    ui.weak(format!(
+        "Radius R = {} mm (samples 1 mm apart)",
+        settings.samples
+    ));
+}
+
+/// The filter maps (Ruiz et al.): the box radius and what the statistics are of.
+fn filter_parameters(ui: &mut egui::Ui, settings: &mut AoSettings) {
+    ui.horizontal(|ui| {
+        ui.add(
+            egui::Slider::new(&mut settings.radius, 1.0..=30.0)
+                .step_by(1.0)
+                .text("Box radius r"),
+        );
+        ui.selectable_value(&mut settings.radius_unit, RadiusUnit::Voxels, "voxels");
+        ui.selectable_value(&mut settings.radius_unit, RadiusUnit::Mm, "mm");
+    });
+    ui.horizontal(|ui| {
+        ui.label("Statistics of");
+        ui.selectable_value(&mut settings.statistic, StatisticSource::Density, "density");
+        ui.selectable_value(&mut settings.statistic, StatisticSource::Opacity, "opacity");
+    });
+    ui.weak("Box of side 2r + 1 around each voxel");
+}
+
+/// Cone tracing: cones over the sphere, spheres per cone and their reach.
+fn cone_parameters(ui: &mut egui::Ui, settings: &mut AoSettings) {
+    ui.horizontal(|ui| {
+        ui.label("Cones");
+        for c in [ConeSet::Six, ConeSet::Fourteen, ConeSet::TwentySix] {
+            ui.selectable_value(&mut settings.cones, c, c.count().to_string());
+        }
+    });
+    ui.horizontal(|ui| {
+        ui.label("Spheres per cone");
+        for p in [ConePreset::Low, ConePreset::Medium, ConePreset::High] {
+            let label = format!("{} ({})", p.name(), p.spheres());
+            ui.selectable_value(&mut settings.cone_preset, p, label);
+        }
+    });
+    ui.add(egui::Slider::new(&mut settings.samples, 1..=64).text("Reach (mm)"));
 }
 
 /// Frame time, AO time and share of voxels recomputed (collapsed by default: the numbers

@@ -18,6 +18,7 @@ pub mod screenshot;
 pub mod tf_editor;
 pub mod viewport;
 
+use crate::ao::filter::{OpacityModulation, StatisticSource};
 use crate::ao::{AoMethod, AoSettings};
 use crate::gpu::Gpu;
 use crate::render::gpu::GpuVolume;
@@ -410,6 +411,26 @@ enum AoState {
     },
 }
 
+/// What the opacity modulation factors on the GPU were computed for.
+#[derive(Debug, Clone, PartialEq)]
+struct ModulationKey {
+    settings: OpacityModulation,
+    /// The opacity points, when the variance is that of the opacity.
+    opacity: Option<Vec<crate::tf::OpacityPoint>>,
+    doc_generation: u64,
+}
+
+/// Opacity modulation (Ruiz et al. §4.2) in the viewport: the factors on the GPU, the
+/// job computing the next ones, and settings whose computation failed.
+#[derive(Debug, Default)]
+struct ModulationState {
+    /// `None`: factor 1 everywhere.
+    on_gpu: Option<ModulationKey>,
+    job: Option<(ModulationKey, Job<Vec<f32>>)>,
+    /// Not retried until the settings change.
+    failed: Option<(ModulationKey, String)>,
+}
+
 /// A message in the corner: where a screenshot went, what failed.
 #[derive(Debug, Clone)]
 pub struct Toast {
@@ -445,6 +466,7 @@ pub struct Viewer {
     saved: Option<Scene>,
     load_job: Option<Job<LoadedDocument>>,
     ao_state: AoState,
+    modulation: ModulationState,
     /// When the transfer function last changed (AO waits for it to rest).
     tf_changed_at: Instant,
     /// What the viewport's GPU volume has: view TF and step.
@@ -601,6 +623,7 @@ impl Viewer {
             saved: None,
             load_job: None,
             ao_state: AoState::Off,
+            modulation: ModulationState::default(),
             tf_changed_at: Instant::now(),
             uploaded_tf: None,
             ao_seconds: None,
@@ -665,6 +688,7 @@ impl Viewer {
         self.load_job.is_some()
             || matches!(self.ao_state, AoState::Computing { .. })
             || self.ao_wanted_but_waiting()
+            || !self.modulation_ready() && self.modulation_error().is_none()
             || self.shot_request.is_some()
             || self.pending_shot.is_some()
             || self.write_job.is_some()
@@ -677,6 +701,19 @@ impl Viewer {
             (AoState::Ready { key }, Some(want)) => *key == want,
             _ => false,
         }
+    }
+
+    /// Whether the opacity modulation for the current settings is on the GPU (or none is
+    /// wanted).
+    pub fn modulation_ready(&self) -> bool {
+        self.modulation.on_gpu == self.modulation_key()
+    }
+
+    /// Why the opacity modulation for the current settings failed, if it did.
+    pub fn modulation_error(&self) -> Option<&str> {
+        let want = self.modulation_key()?;
+        let (key, message) = self.modulation.failed.as_ref()?;
+        (*key == want).then_some(message.as_str())
     }
 
     /// The last AO error, if the current settings failed.
@@ -1011,10 +1048,13 @@ impl Viewer {
                 })
             })
         } else {
+            // A filter map on a CPU adapter goes straight to the twin (no second device).
+            let use_gpu = !(crate::ao::fast::map_of(settings.method).is_some()
+                && crate::ao::fast::twin_is_faster(&self.gpu));
             Job::spawn(label, self.repaint_fn(), move |p| {
                 let start = Instant::now();
                 let (ao, device) =
-                    crate::ao::compute_volume(&volume, &tf, &settings, true, &|d, t| {
+                    crate::ao::compute_volume(&volume, &tf, &settings, use_gpu, &|d, t| {
                         p.set(d as u64, t as u64)
                     })
                     .map_err(|e| e.to_string())?;
@@ -1029,6 +1069,103 @@ impl Viewer {
             })
         };
         self.ao_state = AoState::Computing { key, job };
+    }
+
+    fn modulation_key(&self) -> Option<ModulationKey> {
+        let doc = self.doc.as_ref()?;
+        let settings = doc.render.opacity_modulation?;
+        Some(ModulationKey {
+            settings,
+            opacity: (settings.source == StatisticSource::Opacity).then(|| doc.tf.opacity.clone()),
+            doc_generation: self.doc_generation,
+        })
+    }
+
+    /// Keeps the opacity modulation on the GPU in step with its settings (and with the
+    /// transfer function when the variance is the opacity's), as [`Self::update_ao`] does
+    /// for AO: a stale modulation is dropped at once, the new one computed off the UI
+    /// thread on the uploaded texels.
+    fn update_modulation(&mut self) {
+        let want = self.modulation_key();
+        if let Some((key, job)) = &mut self.modulation.job
+            && let Some(result) = job.poll()
+        {
+            let key = key.clone();
+            self.modulation.job = None;
+            match result {
+                // Computed for settings or a document since left: dropped.
+                Ok(_) if want.as_ref() != Some(&key) => {}
+                Ok(values) => {
+                    let gpu = Arc::clone(&self.gpu);
+                    let applied = self.with_viewport(|v| {
+                        let g = v.volume.as_mut()?;
+                        if values.len() != g.texels.dims.iter().product::<usize>() {
+                            return None;
+                        }
+                        g.set_opacity_modulation(&gpu, &values);
+                        v.touch();
+                        Some(())
+                    });
+                    if applied.flatten().is_some() {
+                        self.modulation.on_gpu = Some(key);
+                    }
+                }
+                Err(JobError::Cancelled) => {}
+                Err(JobError::Failed(message)) => {
+                    self.toast(format!("Opacity modulation failed: {message}"), true);
+                    self.modulation.failed = Some((key, message));
+                }
+            }
+        }
+        let settled = [
+            self.modulation.job.as_ref().map(|(k, _)| k),
+            self.modulation.failed.as_ref().map(|(k, _)| k),
+        ];
+        if self.modulation.on_gpu == want
+            || settled.iter().flatten().any(|k| Some(*k) == want.as_ref())
+        {
+            return;
+        }
+        if let Some((_, job)) = self.modulation.job.take() {
+            job.cancel();
+        }
+        if self.modulation.on_gpu.take().is_some() {
+            let gpu = Arc::clone(&self.gpu);
+            self.with_viewport(|v| {
+                if let Some(g) = &mut v.volume {
+                    g.clear_opacity_modulation(&gpu);
+                    v.touch();
+                }
+            });
+        }
+        let Some(key) = want else {
+            return;
+        };
+        if self.tf_changed_at.elapsed() < AO_DEBOUNCE || self.tf_editor_dragging() {
+            self.ctx.request_repaint_after(AO_DEBOUNCE);
+            return;
+        }
+        let (Some(doc), Some(texels)) = (
+            &self.doc,
+            self.with_viewport(|v| v.volume.as_ref().map(|g| g.texels.clone()))
+                .flatten(),
+        ) else {
+            return;
+        };
+        let (gpu, tf, step, m) = (
+            Arc::clone(&self.gpu),
+            doc.tf.clone(),
+            doc.render.step_voxels,
+            key.settings,
+        );
+        let job = Job::spawn("Opacity modulation", self.repaint_fn(), move |_| {
+            if crate::ao::fast::twin_is_faster(&gpu) {
+                return Ok(crate::ao::fast::modulation_cpu(&texels, &tf, &m));
+            }
+            let vol = GpuVolume::from_texels(&gpu, texels, &tf, step).map_err(|e| e.to_string())?;
+            crate::ao::fast::modulation_gpu(&gpu, &vol, &tf, &m).map_err(|e| e.to_string())
+        });
+        self.modulation.job = Some((key, job));
     }
 
     fn tf_editor_dragging(&self) -> bool {
@@ -1162,6 +1299,7 @@ impl Viewer {
         if self.pending_shot.is_none()
             && self.load_job.is_none()
             && self.ao_ready()
+            && self.modulation_ready()
             && self.doc.is_some()
             && let Some((path, size)) = self.shot_request.take()
             && let Some(doc) = &self.doc
@@ -1283,6 +1421,7 @@ impl Viewer {
         self.poll_load();
         self.handle_input(ui);
         self.update_ao();
+        self.update_modulation();
         self.sync_transfer_function();
         self.sync_clip();
         self.update_screenshots();
@@ -1466,6 +1605,11 @@ impl Viewer {
     fn side_panel(&mut self, ui: &mut egui::Ui) {
         let viewport_px = self.viewport_px;
         let ao_stats = self.ao_stats();
+        let modulation_status = match (self.modulation_error(), &self.modulation.job) {
+            (Some(e), _) => format!("failed: {e}"),
+            (None, Some(_)) => "computing…".to_owned(),
+            (None, None) => String::new(),
+        };
         let Some(doc) = &mut self.doc else {
             ui.spinner();
             return;
@@ -1500,6 +1644,11 @@ impl Viewer {
                 {
                     self.tf_changed_at = Instant::now();
                 }
+                tf_editor::modulation_controls(
+                    ui,
+                    &mut doc.render.opacity_modulation,
+                    &modulation_status,
+                );
             });
         egui::CollapsingHeader::new("Ambient occlusion")
             .default_open(true)
@@ -1779,7 +1928,7 @@ impl Viewer {
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             return;
         }
-        if self.load_job.is_some() || !self.ao_ready() {
+        if self.load_job.is_some() || !self.ao_ready() || !self.modulation_ready() {
             return;
         }
         let now = Instant::now();
@@ -1946,7 +2095,11 @@ impl Viewer {
             self.fail_exit(message);
             return;
         }
-        if self.doc.is_some() && self.load_job.is_none() && self.ao_ready() {
+        if self.doc.is_some()
+            && self.load_job.is_none()
+            && self.ao_ready()
+            && self.modulation_ready()
+        {
             self.ready_frames += 1;
         }
         if self.ready_frames < n {

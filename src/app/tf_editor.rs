@@ -7,6 +7,7 @@
 //! right or middle button on the curve changes window (horizontal) and level
 //! (vertical). Edits keep both lists sorted, so the function always validates.
 
+use crate::ao::filter::{OpacityModulation, StatisticSource};
 use crate::tf::{ColorStop, OpacityPoint, Preset, TransferFunction};
 use crate::volume::{Histogram, Stats};
 use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2, pos2, vec2};
@@ -33,6 +34,48 @@ enum Drag {
         window: f64,
         level: f64,
     },
+}
+
+/// Opacity modulation by local variance (Ruiz et al. §4.2), the transfer function's
+/// companion: a checkbox, then `σ²_max`, the box radius and what the variance is of.
+/// `status` (computing, an error) is shown under them. Returns whether `m` changed.
+pub fn modulation_controls(
+    ui: &mut egui::Ui,
+    m: &mut Option<OpacityModulation>,
+    status: &str,
+) -> bool {
+    let before = *m;
+    let mut on = m.is_some();
+    ui.checkbox(&mut on, "Opacity modulation by local variance")
+        .on_hover_text(
+            "α · min(σ²/σ²_max, 1) (Ruiz et al. §4.2): homogeneous regions fade, boundaries stay",
+        );
+    match (on, m.is_some()) {
+        (true, false) => *m = Some(OpacityModulation::default()),
+        (false, true) => *m = None,
+        _ => {}
+    }
+    if let Some(m) = m {
+        ui.add(
+            egui::Slider::new(&mut m.sigma2_max, 1e-6..=1.0)
+                .logarithmic(true)
+                .text("σ²_max"),
+        );
+        ui.add(
+            egui::Slider::new(&mut m.radius, 1.0..=20.0)
+                .step_by(1.0)
+                .text("Box radius (voxels)"),
+        );
+        ui.horizontal(|ui| {
+            ui.label("Variance of");
+            ui.selectable_value(&mut m.source, StatisticSource::Density, "density");
+            ui.selectable_value(&mut m.source, StatisticSource::Opacity, "opacity");
+        });
+        if !status.is_empty() {
+            ui.weak(status);
+        }
+    }
+    *m != before
 }
 
 /// Inserts `item` after every element whose key is ≤ its key; returns its index.

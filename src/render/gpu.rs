@@ -171,14 +171,6 @@ impl GpuVolume {
                 wgpu::TextureFormat::R32Float,
             );
             write_3d(queue, &ao, [1, 1, 1], 4, bytemuck::bytes_of(&1.0f32));
-            // No opacity modulation: a single texel of 1.
-            let modulation = texture_3d(
-                device,
-                "GpuVolume::opacity_modulation",
-                [1, 1, 1],
-                wgpu::TextureFormat::R8Unorm,
-            );
-            write_3d(queue, &modulation, [1, 1, 1], 1, &[255]);
             let occupancy = texture_3d(
                 device,
                 "GpuVolume::occupancy",
@@ -196,7 +188,7 @@ impl GpuVolume {
             GpuVolume {
                 volume_view: volume.create_view(&Default::default()),
                 ao_view: ao.create_view(&Default::default()),
-                modulation_view: modulation.create_view(&Default::default()),
+                modulation_view: no_modulation(device, queue),
                 occupancy_view: occupancy.create_view(&Default::default()),
                 occupancy,
                 lut_buffer,
@@ -273,6 +265,11 @@ impl GpuVolume {
         self.ao_view = ao.create_view(&Default::default());
     }
 
+    /// Drops the opacity modulation (factor 1 everywhere).
+    pub fn clear_opacity_modulation(&mut self, gpu: &Gpu) {
+        self.modulation_view = no_modulation(&gpu.device, &gpu.queue);
+    }
+
     /// Uses `values` (one per voxel, x fastest, in [0, 1]) as the opacity factor of
     /// variance modulation. Stored as R16Unorm like the AO volume; returns the values as
     /// the GPU will sample them (for the CPU twin).
@@ -303,6 +300,18 @@ impl GpuVolume {
     pub fn occupancy(&self) -> Vec<u8> {
         self.ranges.occupancy(&self.texels, &self.lut)
     }
+}
+
+/// No opacity modulation: a single texel of 1.
+fn no_modulation(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::TextureView {
+    let texture = texture_3d(
+        device,
+        "GpuVolume::opacity_modulation",
+        [1, 1, 1],
+        wgpu::TextureFormat::R8Unorm,
+    );
+    write_3d(queue, &texture, [1, 1, 1], 1, &[255]);
+    texture.create_view(&Default::default())
 }
 
 impl RayCaster {
