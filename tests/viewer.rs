@@ -606,6 +606,79 @@ fn scenes_reopen_as_saved() {
 }
 
 #[test]
+fn a_scene_with_a_light_shadows_and_meshes_keeps_them_when_saved_from_the_viewer() {
+    use volao::scene::{Light, MeshSource, Scene};
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mesh = dir.path().join("tri.obj");
+    // A closed tetrahedron, drawn as a mesh and also used as a clip shape.
+    std::fs::write(
+        &mesh,
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+    )
+    .expect("obj written");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    let (w, ht) = h.state().viewport_size();
+    let mut scene = h.state().document().expect("doc").scene(w, ht, false);
+    scene.light = Light::Directional {
+        direction: [0.0, 0.6, 0.8],
+    };
+    scene.render.shadows = true;
+    scene.meshes = vec![MeshSource {
+        path: mesh.clone(),
+        rgba: [1.0, 0.5, 0.0, 0.5],
+    }];
+    scene.clip_shapes = vec![volao::clip::ClipShape {
+        shape: volao::clip::Shape::Mesh { path: mesh.clone() },
+        translation: [0.0; 3],
+        rotation_deg: [0.0; 3],
+        scale: [5.0; 3],
+        mode: Default::default(),
+    }];
+    let original = dir.path().join("original.json");
+    scene.save(&original).expect("scene saved");
+    let mut h = harness(OpenRequest::Scene(original.clone()), dir.path());
+    settle(&mut h);
+    // Said once, on opening: the viewport draws neither.
+    assert!(
+        h.state()
+            .toasts()
+            .iter()
+            .any(|t| t.text.contains("shadows and meshes are kept")),
+        "no warning among {:?}",
+        h.state()
+            .toasts()
+            .iter()
+            .map(|t| &t.text)
+            .collect::<Vec<_>>()
+    );
+    // The clip mesh was found beside the scene, whatever the working folder.
+    let errors: Vec<&String> = h
+        .state()
+        .toasts()
+        .iter()
+        .filter(|t| t.error)
+        .map(|t| &t.text)
+        .collect();
+    assert!(errors.is_empty(), "{errors:?}");
+    let again = dir.path().join("again.json");
+    h.state_mut()
+        .save_scene(&again)
+        .expect("saved from the viewer");
+    let (before, after) = (
+        Scene::load(&original).expect("original"),
+        Scene::load(&again).expect("saved again"),
+    );
+    assert_eq!(after.light, before.light);
+    assert!(after.render.shadows);
+    // Paths stay relative to the scene (both files lie in the same folder).
+    assert_eq!(before.meshes[0].path, Path::new("tri.obj"));
+    assert_eq!(after.meshes, before.meshes);
+    assert_eq!(after.clip_shapes, before.clip_shapes);
+}
+
+#[test]
 fn add_a_clip_shape_drag_it_and_cao_follows() {
     let _gpu = one_at_a_time();
     use volao::clip::gpu::ClipMaps;

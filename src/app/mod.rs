@@ -24,7 +24,7 @@ use crate::gpu::Gpu;
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::{UploadLimits, VolumeTexels};
 use crate::render::{Camera, Frame, RenderSettings, Shading};
-use crate::scene::{Light, RawLayout, SCENE_VERSION, Scene, VolumeSource};
+use crate::scene::{Light, MeshSource, RawLayout, SCENE_VERSION, Scene, VolumeSource};
 use crate::tf::{Preset, TransferFunction};
 use crate::volume::{self, Histogram, LoadOptions, RawOverrides, Stats, Volume};
 use jobs::{Job, JobError, Progress};
@@ -177,6 +177,10 @@ pub struct Document {
     pub ao_only: bool,
     /// Clip shapes with their poses and modes.
     pub clip_shapes: Vec<crate::clip::ClipShape>,
+    /// The scene's light and meshes: kept and saved again (`volao render` draws the
+    /// shadows and meshes; the viewport does not yet).
+    pub light: Light,
+    pub meshes: Vec<MeshSource>,
     /// Bounding-sphere radius of the volume in mm (camera pan speed).
     pub radius: f32,
     /// How many times the volume was halved to fit the GPU.
@@ -219,13 +223,13 @@ impl Document {
             volume: self.source.clone(),
             transfer_function: tf,
             camera: self.camera,
-            light: Light::Headlight,
+            light: self.light,
             render,
             width: width.max(1),
             height: height.max(1),
             ambient_occlusion: self.ao,
             clip_shapes: self.clip_shapes.clone(),
-            meshes: Vec::new(),
+            meshes: self.meshes.clone(),
         }
     }
 }
@@ -299,10 +303,21 @@ pub fn load_document(
         None => TransferFunction::preset(Preset::default_for(&stats), &stats),
     };
     let render = scene.as_ref().map(|s| s.render).unwrap_or_default();
-    let clip_shapes = scene
-        .as_ref()
-        .map(|s| s.clip_shapes.clone())
-        .unwrap_or_default();
+    // Mesh paths in a scene are relative to it; the document keeps them resolved.
+    let (light, meshes, clip_shapes) = match (&scene, &scene_path) {
+        (Some(s), Some(sp)) => (s.light, s.meshes_resolved(sp), s.clip_shapes_resolved(sp)),
+        _ => Default::default(),
+    };
+    let undrawn: Vec<&str> = [(render.shadows, "shadows"), (!meshes.is_empty(), "meshes")]
+        .into_iter()
+        .filter_map(|(there, what)| there.then_some(what))
+        .collect();
+    if !undrawn.is_empty() {
+        warnings.push(format!(
+            "this scene's {} are kept and saved with it, but only `volao render` draws them; the viewer does not yet",
+            undrawn.join(" and ")
+        ));
+    }
     let info = format!(
         "{info}, {} {}, {} × {} × {} mm",
         volume::fmt_dims(volume.dims),
@@ -358,6 +373,8 @@ pub fn load_document(
             .unwrap_or_default(),
         ao_only: false,
         clip_shapes,
+        light,
+        meshes,
         radius,
         downsampled,
     };
