@@ -606,7 +606,8 @@ fn scenes_reopen_as_saved() {
 }
 
 #[test]
-fn a_scene_with_a_light_shadows_and_meshes_keeps_them_when_saved_from_the_viewer() {
+fn a_scene_keeps_its_light_shadows_meshes_and_values_outside_the_sliders_when_saved_from_the_viewer()
+ {
     use volao::scene::{Light, MeshSource, Scene};
     let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
@@ -625,6 +626,9 @@ fn a_scene_with_a_light_shadows_and_meshes_keeps_them_when_saved_from_the_viewer
         direction: [0.0, 0.6, 0.8],
     };
     scene.render.shadows = true;
+    // Outside the sliders' ranges: shown, not clamped.
+    scene.ambient_occlusion.samples = 100;
+    scene.render.step_voxels = 2.5;
     scene.meshes = vec![MeshSource {
         path: mesh.clone(),
         rgba: [1.0, 0.5, 0.0, 0.5],
@@ -676,6 +680,8 @@ fn a_scene_with_a_light_shadows_and_meshes_keeps_them_when_saved_from_the_viewer
     assert_eq!(before.meshes[0].path, Path::new("tri.obj"));
     assert_eq!(after.meshes, before.meshes);
     assert_eq!(after.clip_shapes, before.clip_shapes);
+    assert_eq!(after.ambient_occlusion.samples, 100);
+    assert_eq!(after.render.step_voxels, 2.5);
 }
 
 #[test]

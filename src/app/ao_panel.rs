@@ -7,6 +7,7 @@
 use crate::ao::cone::{ConePreset, ConeSet};
 use crate::ao::filter::{RadiusUnit, StatisticSource};
 use crate::ao::rays::RaySet;
+use crate::ao::vao::VaoSettings;
 use crate::ao::{AoMethod, AoSettings};
 
 /// Names the issue gives the AO methods; those `AoMethod::parse` accepts are offered,
@@ -92,6 +93,8 @@ pub fn show(
             filter_parameters(ui, settings);
         } else if settings.method == AoMethod::Cone {
             cone_parameters(ui, settings);
+        } else if matches!(settings.method, AoMethod::Vao | AoMethod::VaoLive) {
+            vao_parameters(ui, &mut settings.vao);
         } else {
             ray_parameters(ui, settings);
         }
@@ -102,7 +105,16 @@ pub fn show(
     (*settings != before, (*ambient, *ao_only) != view_before)
 }
 
-/// LAO, CAO and positional AO: K rays of M samples.
+/// A slider over the usual range that leaves a value outside it (from a scene file)
+/// intact until the user moves it; egui's default clamps even values it only shows.
+pub fn slider<N: egui::emath::Numeric>(
+    value: &mut N,
+    range: std::ops::RangeInclusive<N>,
+) -> egui::Slider<'_> {
+    egui::Slider::new(value, range).clamping(egui::SliderClamping::Edits)
+}
+
+/// LAO and CAO: K rays of M samples.
 fn ray_parameters(ui: &mut egui::Ui, settings: &mut AoSettings) {
     ui.horizontal(|ui| {
         egui::ComboBox::from_label("Rays K")
@@ -124,7 +136,7 @@ fn ray_parameters(ui: &mut egui::Ui, settings: &mut AoSettings) {
                 .accessible_name("N");
         }
     });
-    ui.add(egui::Slider::new(&mut settings.samples, 1..=64).text("Samples M"));
+    ui.add(slider(&mut settings.samples, 1..=64).text("Samples M"));
     ui.weak(format!(
         "Radius R = {} mm (samples 1 mm apart)",
         settings.samples
@@ -135,7 +147,7 @@ fn ray_parameters(ui: &mut egui::Ui, settings: &mut AoSettings) {
 fn filter_parameters(ui: &mut egui::Ui, settings: &mut AoSettings) {
     ui.horizontal(|ui| {
         ui.add(
-            egui::Slider::new(&mut settings.radius, 1.0..=30.0)
+            slider(&mut settings.radius, 1.0..=30.0)
                 .step_by(1.0)
                 .text("Box radius r"),
         );
@@ -165,7 +177,30 @@ fn cone_parameters(ui: &mut egui::Ui, settings: &mut AoSettings) {
             ui.selectable_value(&mut settings.cone_preset, p, label);
         }
     });
-    ui.add(egui::Slider::new(&mut settings.samples, 1..=64).text("Reach (mm)"));
+    ui.add(slider(&mut settings.samples, 1..=64).text("Reach (mm)"));
+}
+
+/// Positional AO (Papaioannou et al.): rays, samples, reach and the opacity that stops
+/// a ray; the isosurface variant's value and tolerance when the scene uses it.
+fn vao_parameters(ui: &mut egui::Ui, vao: &mut VaoSettings) {
+    ui.add(slider(&mut vao.directions, 1..=256).text("Rays N_dir"));
+    ui.add(slider(&mut vao.samples, 1..=64).text("Samples per ray"));
+    ui.add(slider(&mut vao.r_max_mm, 1.0..=100.0).text("Reach r_max (mm)"));
+    ui.add(slider(&mut vao.v_thres, 0.01..=1.0).text("Stop at opacity V_thres"));
+    if let Some(i) = &mut vao.isosurface {
+        ui.horizontal(|ui| {
+            ui.label("Isosurface");
+            ui.add(egui::DragValue::new(&mut i.value))
+                .accessible_name("Isovalue");
+            ui.label("± tolerance");
+            ui.add(egui::DragValue::new(&mut i.tolerance).range(0.0..=f64::MAX))
+                .accessible_name("Isovalue tolerance");
+        });
+    }
+    // The isosurface variant comes from the scene or `--vao-iso`; it can be left here.
+    if vao.isosurface.is_some() && ui.button("Beer's law instead of the isosurface").clicked() {
+        vao.isosurface = None;
+    }
 }
 
 /// Frame time, AO time and share of voxels recomputed (collapsed by default: the numbers

@@ -1680,7 +1680,7 @@ impl Viewer {
             });
         egui::CollapsingHeader::new("Rendering").show(ui, |ui| {
             let r = &mut doc.render;
-            ui.add(egui::Slider::new(&mut r.step_voxels, 0.1..=2.0).text("Step (voxels)"));
+            ui.add(ao_panel::slider(&mut r.step_voxels, 0.1..=2.0).text("Step (voxels)"));
             ui.horizontal(|ui| {
                 ui.label("Shading");
                 ui.selectable_value(&mut r.shading, Shading::Phong, "Phong");

@@ -57,12 +57,12 @@ pub fn modulation_controls(
     }
     if let Some(m) = m {
         ui.add(
-            egui::Slider::new(&mut m.sigma2_max, 1e-6..=1.0)
+            super::ao_panel::slider(&mut m.sigma2_max, 1e-6..=1.0)
                 .logarithmic(true)
                 .text("σ²_max"),
         );
         ui.add(
-            egui::Slider::new(&mut m.radius, 1.0..=20.0)
+            super::ao_panel::slider(&mut m.radius, 1.0..=20.0)
                 .step_by(1.0)
                 .text("Box radius (voxels)"),
         );
