@@ -319,6 +319,56 @@ fn live_positional_ao_runs_in_the_ray_caster_and_matches_volao_render() {
     assert_ne!(off.pixels, viewport.pixels, "live AO changed the picture");
 }
 
+#[test]
+fn shadows_from_the_rendering_panel_match_volao_render() {
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    choose(&mut h, "Preset", "cao-single-color");
+    click(&mut h, "Rendering");
+    click(&mut h, "Shadows");
+    click(&mut h, "Fixed light");
+    settle(&mut h);
+    assert!(
+        h.state().light_ready(),
+        "shadows: {:?}",
+        h.state().light_error()
+    );
+    let doc = h.state().document().expect("doc");
+    assert!(doc.render.shadows);
+    // The fixed light starts where the eye is.
+    let volao::scene::Light::Directional { direction } = doc.light else {
+        panic!("a fixed light was chosen, not {:?}", doc.light);
+    };
+    let eye = doc.camera.backward().to_array();
+    assert!(direction.iter().zip(eye).all(|(a, b)| (a - b).abs() < 1e-6));
+    let scene = dir.path().join("shadows.json");
+    h.state_mut().save_scene(&scene).expect("scene saved");
+    let shadowed = viewport_pixels(&mut h);
+    let rendered = volao_render(&scene, &dir.path().join("shadows.png"));
+    check(
+        "viewport_shadows_vs_render",
+        &shadowed,
+        &rendered,
+        SAME_RENDERER,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    // Shadows changed the picture: the same scene without them is brighter somewhere.
+    let mut plain = volao::scene::Scene::load(&scene).expect("scene");
+    plain.render.shadows = false;
+    plain.save(&scene).expect("save");
+    let unshadowed = volao_render(&scene, &dir.path().join("plain.png"));
+    let darker = shadowed
+        .pixels
+        .iter()
+        .zip(&unshadowed.pixels)
+        .filter(|(a, b)| a[0] + 2 < b[0])
+        .count();
+    assert!(darker > 100, "shadows darkened only {darker} pixels");
+}
+
 /// Clicks the widget labelled `label` (scrolled into view first, as a user does).
 fn click(h: &mut Harness<'static, Viewer>, label: &str) {
     h.run_steps(2);
@@ -644,12 +694,12 @@ fn a_scene_keeps_its_light_shadows_meshes_and_values_outside_the_sliders_when_sa
     scene.save(&original).expect("scene saved");
     let mut h = harness(OpenRequest::Scene(original.clone()), dir.path());
     settle(&mut h);
-    // Said once, on opening: the viewport draws neither.
+    // Said once, on opening: the viewport does not draw the mesh.
     assert!(
         h.state()
             .toasts()
             .iter()
-            .any(|t| t.text.contains("shadows and meshes are kept")),
+            .any(|t| t.text.contains("meshes are kept and saved")),
         "no warning among {:?}",
         h.state()
             .toasts()

@@ -13,6 +13,7 @@
 pub mod ao_panel;
 pub mod camera_input;
 pub mod clip_panel;
+mod derived;
 pub mod jobs;
 pub mod screenshot;
 pub mod tf_editor;
@@ -27,6 +28,7 @@ use crate::render::{Camera, Frame, RenderSettings, Shading};
 use crate::scene::{Light, MeshSource, RawLayout, SCENE_VERSION, Scene, VolumeSource};
 use crate::tf::{Preset, TransferFunction};
 use crate::volume::{self, Histogram, LoadOptions, RawOverrides, Stats, Volume};
+use derived::{Derived, Polled};
 use jobs::{Job, JobError, Progress};
 use screenshot::{PendingShot, Shot};
 use std::path::{Path, PathBuf};
@@ -202,6 +204,11 @@ impl Document {
     /// The render settings the viewport uses.
     pub fn view_settings(&self) -> RenderSettings {
         let mut s = self.render;
+        // As `volao render` does: a headlight's shadows fall from the eye's direction.
+        s.light_direction = match self.light {
+            Light::Directional { direction } => direction,
+            Light::Headlight => self.camera.backward().to_array(),
+        };
         if self.ao_only {
             s.ambient = 1.0;
             s.shading = Shading::None;
@@ -308,15 +315,17 @@ pub fn load_document(
         (Some(s), Some(sp)) => (s.light, s.meshes_resolved(sp), s.clip_shapes_resolved(sp)),
         _ => Default::default(),
     };
-    let undrawn: Vec<&str> = [(render.shadows, "shadows"), (!meshes.is_empty(), "meshes")]
-        .into_iter()
-        .filter_map(|(there, what)| there.then_some(what))
-        .collect();
-    if !undrawn.is_empty() {
-        warnings.push(format!(
-            "this scene's {} are kept and saved with it, but only `volao render` draws them; the viewer does not yet",
-            undrawn.join(" and ")
-        ));
+    if !meshes.is_empty() {
+        warnings.push(
+            "this scene's meshes are kept and saved with it, but only `volao render` draws them; the viewer does not yet"
+                .to_owned(),
+        );
+    }
+    if render.shadows && !clip_shapes.is_empty() {
+        warnings.push(
+            "the viewer's shadows ignore the clip shapes (`volao render` lets light through what they carve away)"
+                .to_owned(),
+        );
     }
     let info = format!(
         "{info}, {} {}, {} × {} × {} mm",
@@ -437,15 +446,13 @@ struct ModulationKey {
     doc_generation: u64,
 }
 
-/// Opacity modulation (Ruiz et al. §4.2) in the viewport: the factors on the GPU, the
-/// job computing the next ones, and settings whose computation failed.
-#[derive(Debug, Default)]
-struct ModulationState {
-    /// `None`: factor 1 everywhere.
-    on_gpu: Option<ModulationKey>,
-    job: Option<(ModulationKey, Job<Vec<f32>>)>,
-    /// Not retried until the settings change.
-    failed: Option<(ModulationKey, String)>,
+/// What the light volume of shadows on the GPU was computed for.
+#[derive(Debug, Clone, PartialEq)]
+struct LightKey {
+    /// Towards the light, volume RAS (a headlight's follows the camera).
+    direction: [f32; 3],
+    opacity: Vec<crate::tf::OpacityPoint>,
+    doc_generation: u64,
 }
 
 /// A message in the corner: where a screenshot went, what failed.
@@ -483,7 +490,12 @@ pub struct Viewer {
     saved: Option<Scene>,
     load_job: Option<Job<LoadedDocument>>,
     ao_state: AoState,
-    modulation: ModulationState,
+    /// Opacity modulation (Ruiz et al. §4.2) and the light volume of shadows.
+    modulation: Derived<ModulationKey>,
+    light: Derived<LightKey>,
+    /// The light volume last wanted, since when (a headlight's waits for the view to
+    /// rest).
+    light_wanted: Option<(LightKey, Instant)>,
     /// When the transfer function last changed (AO waits for it to rest).
     tf_changed_at: Instant,
     /// What the viewport's GPU volume has: view TF and step.
@@ -640,7 +652,9 @@ impl Viewer {
             saved: None,
             load_job: None,
             ao_state: AoState::Off,
-            modulation: ModulationState::default(),
+            modulation: Derived::default(),
+            light: Derived::default(),
+            light_wanted: None,
             tf_changed_at: Instant::now(),
             uploaded_tf: None,
             ao_seconds: None,
@@ -706,6 +720,7 @@ impl Viewer {
             || matches!(self.ao_state, AoState::Computing { .. })
             || self.ao_wanted_but_waiting()
             || !self.modulation_ready() && self.modulation_error().is_none()
+            || !self.light_ready() && self.light_error().is_none()
             || self.shot_request.is_some()
             || self.pending_shot.is_some()
             || self.write_job.is_some()
@@ -723,14 +738,28 @@ impl Viewer {
     /// Whether the opacity modulation for the current settings is on the GPU (or none is
     /// wanted).
     pub fn modulation_ready(&self) -> bool {
-        self.modulation.on_gpu == self.modulation_key()
+        self.modulation.ready(self.modulation_key().as_ref())
     }
 
     /// Why the opacity modulation for the current settings failed, if it did.
     pub fn modulation_error(&self) -> Option<&str> {
-        let want = self.modulation_key()?;
-        let (key, message) = self.modulation.failed.as_ref()?;
-        (*key == want).then_some(message.as_str())
+        self.modulation.error(self.modulation_key().as_ref())
+    }
+
+    /// Whether the light volume for the current shadows is on the GPU (or none is
+    /// wanted).
+    pub fn light_ready(&self) -> bool {
+        self.light.ready(self.light_key().as_ref())
+    }
+
+    /// Why the light volume for the current shadows failed, if it did.
+    pub fn light_error(&self) -> Option<&str> {
+        self.light.error(self.light_key().as_ref())
+    }
+
+    /// AO, modulation and shadows all computed for what the document says.
+    fn derived_ready(&self) -> bool {
+        self.ao_ready() && self.modulation_ready() && self.light_ready()
     }
 
     /// The last AO error, if the current settings failed.
@@ -1104,69 +1133,36 @@ impl Viewer {
     /// thread on the uploaded texels.
     fn update_modulation(&mut self) {
         let want = self.modulation_key();
-        if let Some((key, job)) = &mut self.modulation.job
-            && let Some(result) = job.poll()
-        {
-            let key = key.clone();
-            self.modulation.job = None;
-            match result {
-                // Computed for settings or a document since left: dropped.
-                Ok(_) if want.as_ref() != Some(&key) => {}
-                Ok(values) => {
-                    let gpu = Arc::clone(&self.gpu);
-                    let applied = self.with_viewport(|v| {
-                        let g = v.volume.as_mut()?;
-                        if values.len() != g.texels.dims.iter().product::<usize>() {
-                            return None;
-                        }
-                        g.set_opacity_modulation(&gpu, &values);
-                        v.touch();
-                        Some(())
-                    });
-                    if applied.flatten().is_some() {
-                        self.modulation.on_gpu = Some(key);
-                    }
-                }
-                Err(JobError::Cancelled) => {}
-                Err(JobError::Failed(message)) => {
-                    self.toast(format!("Opacity modulation failed: {message}"), true);
-                    self.modulation.failed = Some((key, message));
+        match self.modulation.poll(want.as_ref()) {
+            Polled::Nothing => {}
+            Polled::Ready(key, values) => {
+                let gpu = Arc::clone(&self.gpu);
+                let fits = |g: &GpuVolume| values.len() == g.texels.dims.iter().product::<usize>();
+                if self.upload(|g| fits(g) && !g.set_opacity_modulation(&gpu, &values).is_empty()) {
+                    self.modulation.uploaded(key);
                 }
             }
+            Polled::Failed(message) => {
+                self.toast(format!("Opacity modulation failed: {message}"), true)
+            }
         }
-        let settled = [
-            self.modulation.job.as_ref().map(|(k, _)| k),
-            self.modulation.failed.as_ref().map(|(k, _)| k),
-        ];
-        if self.modulation.on_gpu == want
-            || settled.iter().flatten().any(|k| Some(*k) == want.as_ref())
-        {
+        if self.modulation.settled(want.as_ref()) {
             return;
         }
-        if let Some((_, job)) = self.modulation.job.take() {
-            job.cancel();
-        }
-        if self.modulation.on_gpu.take().is_some() {
+        if self.modulation.reset() {
             let gpu = Arc::clone(&self.gpu);
-            self.with_viewport(|v| {
-                if let Some(g) = &mut v.volume {
-                    g.clear_opacity_modulation(&gpu);
-                    v.touch();
-                }
+            self.upload(|g| {
+                g.clear_opacity_modulation(&gpu);
+                true
             });
         }
         let Some(key) = want else {
             return;
         };
-        if self.tf_changed_at.elapsed() < AO_DEBOUNCE || self.tf_editor_dragging() {
-            self.ctx.request_repaint_after(AO_DEBOUNCE);
+        if !self.resting() {
             return;
         }
-        let (Some(doc), Some(texels)) = (
-            &self.doc,
-            self.with_viewport(|v| v.volume.as_ref().map(|g| g.texels.clone()))
-                .flatten(),
-        ) else {
+        let (Some(doc), Some(texels)) = (&self.doc, self.uploaded_texels()) else {
             return;
         };
         let (gpu, tf, step, m) = (
@@ -1182,7 +1178,113 @@ impl Viewer {
             let vol = GpuVolume::from_texels(&gpu, texels, &tf, step).map_err(|e| e.to_string())?;
             crate::ao::fast::modulation_gpu(&gpu, &vol, &tf, &m).map_err(|e| e.to_string())
         });
-        self.modulation.job = Some((key, job));
+        self.modulation.start(key, job);
+    }
+
+    /// What the light volume of shadows must be computed for, if shadows are on.
+    fn light_key(&self) -> Option<LightKey> {
+        let doc = self.doc.as_ref()?;
+        doc.render.shadows.then(|| LightKey {
+            direction: doc.view_settings().light_direction,
+            opacity: doc.tf.opacity.clone(),
+            doc_generation: self.doc_generation,
+        })
+    }
+
+    /// Keeps the light volume of shadows in step with the light (a headlight follows the
+    /// camera: recomputed once the view rests) and the transfer function's opacity.
+    fn update_light(&mut self) {
+        let want = self.light_key();
+        match self.light.poll(want.as_ref()) {
+            Polled::Nothing => {}
+            Polled::Ready(key, values) => {
+                let gpu = Arc::clone(&self.gpu);
+                let dir = glam::Vec3::from(key.direction);
+                let mut error = None;
+                let uploaded =
+                    self.upload(|g| match g.set_light_volume(&gpu, Some((&values, dir))) {
+                        Ok(_) => true,
+                        Err(e) => {
+                            error = Some(e.to_string());
+                            false
+                        }
+                    });
+                if uploaded {
+                    self.light.uploaded(key);
+                } else if let Some(e) = error {
+                    self.toast(format!("Shadows failed: {e}"), true);
+                }
+            }
+            Polled::Failed(message) => self.toast(format!("Shadows failed: {message}"), true),
+        }
+        if want != self.light_wanted.as_ref().map(|(k, _)| k.clone()) {
+            self.light_wanted = want.clone().map(|k| (k, Instant::now()));
+        }
+        if self.light.settled(want.as_ref()) {
+            return;
+        }
+        if self.light.reset() {
+            let gpu = Arc::clone(&self.gpu);
+            self.upload(|g| g.set_light_volume(&gpu, None).is_ok());
+        }
+        let Some(key) = want else {
+            return;
+        };
+        let still = self
+            .light_wanted
+            .as_ref()
+            .is_some_and(|(_, since)| since.elapsed() >= AO_DEBOUNCE);
+        if !self.resting() || !still {
+            self.ctx.request_repaint_after(AO_DEBOUNCE);
+            return;
+        }
+        let (Some(doc), Some(texels)) = (&self.doc, self.uploaded_texels()) else {
+            return;
+        };
+        let (gpu, tf) = (Arc::clone(&self.gpu), doc.tf.clone());
+        let dir = match crate::render::shadow::light_direction(key.direction) {
+            Ok(d) => d,
+            Err(message) => {
+                self.toast(format!("Shadows: {message}"), true);
+                return;
+            }
+        };
+        let job = Job::spawn("Shadows", self.repaint_fn(), move |p| {
+            let lut = crate::render::shadow::light_lut(&tf, &texels);
+            crate::render::shadow::LightGpu::new(&gpu.device)
+                .and_then(|l| {
+                    l.compute(&gpu, &texels, &lut, dir, &|d, t| p.set(d as u64, t as u64))
+                })
+                .map_err(|e| e.to_string())
+        });
+        self.light.start(key, job);
+    }
+
+    /// Whether the transfer function has rested long enough to recompute what depends on
+    /// it (asks for a repaint when it has not).
+    fn resting(&self) -> bool {
+        let resting = self.tf_changed_at.elapsed() >= AO_DEBOUNCE && !self.tf_editor_dragging();
+        if !resting {
+            self.ctx.request_repaint_after(AO_DEBOUNCE);
+        }
+        resting
+    }
+
+    /// A copy of the texels the viewport's volume was made from.
+    fn uploaded_texels(&self) -> Option<VolumeTexels> {
+        self.with_viewport(|v| v.volume.as_ref().map(|g| g.texels.clone()))
+            .flatten()
+    }
+
+    /// Runs `f` on the viewport's volume and redraws; false when there is none or `f`
+    /// says the values did not fit.
+    fn upload(&self, f: impl FnOnce(&mut GpuVolume) -> bool) -> bool {
+        self.with_viewport(|v| {
+            let done = v.volume.as_mut().is_some_and(f);
+            v.touch();
+            done
+        })
+        .unwrap_or(false)
     }
 
     fn tf_editor_dragging(&self) -> bool {
@@ -1315,8 +1417,7 @@ impl Viewer {
         }
         if self.pending_shot.is_none()
             && self.load_job.is_none()
-            && self.ao_ready()
-            && self.modulation_ready()
+            && self.derived_ready()
             && self.doc.is_some()
             && let Some((path, size)) = self.shot_request.take()
             && let Some(doc) = &self.doc
@@ -1439,6 +1540,7 @@ impl Viewer {
         self.handle_input(ui);
         self.update_ao();
         self.update_modulation();
+        self.update_light();
         self.sync_transfer_function();
         self.sync_clip();
         self.update_screenshots();
@@ -1622,10 +1724,15 @@ impl Viewer {
     fn side_panel(&mut self, ui: &mut egui::Ui) {
         let viewport_px = self.viewport_px;
         let ao_stats = self.ao_stats();
-        let modulation_status = match (self.modulation_error(), &self.modulation.job) {
-            (Some(e), _) => format!("failed: {e}"),
-            (None, Some(_)) => "computing…".to_owned(),
-            (None, None) => String::new(),
+        let light_status = match self.light_error() {
+            Some(e) => format!("failed: {e}"),
+            None if self.light.computing() => "computing the light volume…".to_owned(),
+            None => String::new(),
+        };
+        let modulation_status = match self.modulation_error() {
+            Some(e) => format!("failed: {e}"),
+            None if self.modulation.computing() => "computing…".to_owned(),
+            None => String::new(),
         };
         let Some(doc) = &mut self.doc else {
             ui.spinner();
@@ -1703,6 +1810,7 @@ impl Viewer {
                     ];
                 }
             });
+            shadow_controls(ui, doc, &light_status);
         });
         let radius = doc.radius;
         egui::CollapsingHeader::new("Clipping")
@@ -1945,7 +2053,7 @@ impl Viewer {
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             return;
         }
-        if self.load_job.is_some() || !self.ao_ready() || !self.modulation_ready() {
+        if self.load_job.is_some() || !self.derived_ready() {
             return;
         }
         let now = Instant::now();
@@ -2112,11 +2220,7 @@ impl Viewer {
             self.fail_exit(message);
             return;
         }
-        if self.doc.is_some()
-            && self.load_job.is_none()
-            && self.ao_ready()
-            && self.modulation_ready()
-        {
+        if self.doc.is_some() && self.load_job.is_none() && self.derived_ready() {
             self.ready_frames += 1;
         }
         if self.ready_frames < n {
@@ -2130,6 +2234,53 @@ impl Viewer {
             }
         }
         ctx.request_repaint();
+    }
+}
+
+/// Shadows on or off, and where the light comes from: the eye (a headlight, as `volao
+/// render` without `--light`) or a fixed direction by azimuth and elevation (as the
+/// camera's, volume RAS).
+fn shadow_controls(ui: &mut egui::Ui, doc: &mut Document, status: &str) {
+    ui.checkbox(&mut doc.render.shadows, "Shadows");
+    if !doc.render.shadows {
+        return;
+    }
+    let mut fixed = matches!(doc.light, Light::Directional { .. });
+    ui.horizontal(|ui| {
+        ui.selectable_value(&mut fixed, false, "Headlight");
+        ui.selectable_value(&mut fixed, true, "Fixed light");
+    });
+    match (fixed, doc.light) {
+        (true, Light::Headlight) => {
+            doc.light = Light::Directional {
+                direction: doc.camera.backward().to_array(),
+            }
+        }
+        (false, Light::Directional { .. }) => doc.light = Light::Headlight,
+        _ => {}
+    }
+    if let Light::Directional { direction } = &mut doc.light {
+        let d = glam::Vec3::from(*direction).normalize_or(glam::Vec3::Z);
+        let (mut az, mut el) = (
+            d.x.atan2(d.y).to_degrees(),
+            d.z.clamp(-1.0, 1.0).asin().to_degrees(),
+        );
+        let moved = ui
+            .add(ao_panel::slider(&mut az, -180.0..=180.0).text("Light azimuth (°)"))
+            .changed()
+            | ui.add(ao_panel::slider(&mut el, -90.0..=90.0).text("Light elevation (°)"))
+                .changed();
+        if moved {
+            let towards = Camera {
+                azimuth_deg: az,
+                elevation_deg: el,
+                ..Default::default()
+            };
+            *direction = towards.backward().to_array();
+        }
+    }
+    if !status.is_empty() {
+        ui.weak(status);
     }
 }
 
