@@ -369,6 +369,49 @@ fn shadows_from_the_rendering_panel_match_volao_render() {
     assert!(darker > 100, "shadows darkened only {darker} pixels");
 }
 
+#[test]
+fn a_scene_with_a_mesh_shows_it_as_volao_render_does() {
+    use volao::scene::{MeshSource, Scene};
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mesh = dir.path().join("plane.obj");
+    // Facing the default camera (from anterior, +y), in front of the buckyball.
+    std::fs::write(&mesh, "v -12 14 -12\nv 12 14 -12\nv 0 14 12\nf 1 2 3\n").expect("obj written");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    let (w, ht) = h.state().viewport_size();
+    let mut scene = h.state().document().expect("doc").scene(w, ht, false);
+    scene.meshes = vec![MeshSource {
+        path: mesh,
+        rgba: [1.0, 0.5, 0.0, 1.0],
+    }];
+    let path = dir.path().join("mesh.json");
+    scene.save(&path).expect("scene saved");
+    let mut h = harness(OpenRequest::Scene(path.clone()), dir.path());
+    settle(&mut h);
+    let viewport = viewport_pixels(&mut h);
+    let rendered = volao_render(&path, &dir.path().join("mesh.png"));
+    check(
+        "viewport_mesh_vs_render",
+        &viewport,
+        &rendered,
+        SAME_RENDERER,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let mut plain = Scene::load(&path).expect("scene");
+    plain.meshes.clear();
+    plain.save(&path).expect("save");
+    let without = volao_render(&path, &dir.path().join("plain.png"));
+    let orange = |p: &[u8; 4]| p[0] > p[2] + 60;
+    let drawn = viewport.pixels.iter().filter(|p| orange(p)).count();
+    let before = without.pixels.iter().filter(|p| orange(p)).count();
+    assert!(
+        drawn > before + 500,
+        "the mesh covers {drawn} orange pixels, {before} without it"
+    );
+}
+
 /// Clicks the widget labelled `label` (scrolled into view first, as a user does).
 fn click(h: &mut Harness<'static, Viewer>, label: &str) {
     h.run_steps(2);
@@ -694,12 +737,12 @@ fn a_scene_keeps_its_light_shadows_meshes_and_values_outside_the_sliders_when_sa
     scene.save(&original).expect("scene saved");
     let mut h = harness(OpenRequest::Scene(original.clone()), dir.path());
     settle(&mut h);
-    // Said once, on opening: the viewport does not draw the mesh.
+    // Said once, on opening: the viewer's shadows do not follow the clip shapes.
     assert!(
         h.state()
             .toasts()
             .iter()
-            .any(|t| t.text.contains("meshes are kept and saved")),
+            .any(|t| t.text.contains("shadows ignore the clip shapes")),
         "no warning among {:?}",
         h.state()
             .toasts()

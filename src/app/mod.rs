@@ -179,8 +179,7 @@ pub struct Document {
     pub ao_only: bool,
     /// Clip shapes with their poses and modes.
     pub clip_shapes: Vec<crate::clip::ClipShape>,
-    /// The scene's light and meshes: kept and saved again (`volao render` draws the
-    /// shadows and meshes; the viewport does not yet).
+    /// The scene's light and meshes (paths resolved), saved again with it.
     pub light: Light,
     pub meshes: Vec<MeshSource>,
     /// Bounding-sphere radius of the volume in mm (camera pan speed).
@@ -315,12 +314,6 @@ pub fn load_document(
         (Some(s), Some(sp)) => (s.light, s.meshes_resolved(sp), s.clip_shapes_resolved(sp)),
         _ => Default::default(),
     };
-    if !meshes.is_empty() {
-        warnings.push(
-            "this scene's meshes are kept and saved with it, but only `volao render` draws them; the viewer does not yet"
-                .to_owned(),
-        );
-    }
     if render.shadows && !clip_shapes.is_empty() {
         warnings.push(
             "the viewer's shadows ignore the clip shapes (`volao render` lets light through what they carve away)"
@@ -355,7 +348,14 @@ pub fn load_document(
             "the GPU has too little memory for this volume: {e}"
         ));
     }
-    let gpu_volume = uploaded.map_err(|e| e.to_string())?;
+    let mut gpu_volume = uploaded.map_err(|e| e.to_string())?;
+    // A mesh that cannot be read is left out (and kept in the scene), with a warning.
+    for m in &meshes {
+        match crate::render::surface::load_obj(&m.path, m.rgba) {
+            Ok(surface) => gpu_volume.extras.surfaces.push(surface),
+            Err(e) => warnings.push(format!("mesh left out: {e}")),
+        }
+    }
     let title = match &path {
         Some(p) => file_name(p),
         None => "demo head phantom".into(),

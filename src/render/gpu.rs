@@ -424,6 +424,17 @@ impl RayCaster {
         let clip_group = clip.map(|c| c.bind_group(device, &self.clip_layout));
         let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
         let (tw, th) = (target.width(), target.height());
+        // The surfaces, rasterised for the whole frame (submitted before the caller's
+        // encoder, so they are ready when the ray cast reads them).
+        let layer = match vol.extras.surfaces.is_empty() {
+            true => None,
+            false => Some(self.surfaces.rasterise(
+                (device, queue),
+                &vol.extras.surfaces,
+                frame,
+                &vol.texels,
+            )?),
+        };
         validated(device, "RayCaster::encode_tile", || {
             let uniforms = uniform_buffer(
                 device,
@@ -447,13 +458,12 @@ impl RayCaster {
                     wgpu::BindingResource::TextureView(&vol.modulation_view),
                 ],
             );
-            // Surfaces rasterised into the volume are not drawn in this path yet.
             let group_2 = super::shadow::bind_group_2(
                 device,
                 queue,
                 &self.layout_2,
                 &vol.extras,
-                None,
+                layer.as_ref(),
                 &self.placeholders,
                 &self.sampler,
             );
@@ -492,12 +502,12 @@ impl RayCaster {
         };
         let layer = match vol.extras.surfaces.is_empty() {
             true => None,
-            false => {
-                Some(
-                    self.surfaces
-                        .rasterise(gpu, &vol.extras.surfaces, frame, &vol.texels)?,
-                )
-            }
+            false => Some(self.surfaces.rasterise(
+                (&gpu.device, &gpu.queue),
+                &vol.extras.surfaces,
+                frame,
+                &vol.texels,
+            )?),
         };
         let mut y0 = 0;
         while y0 < h {

@@ -6,7 +6,7 @@
 //! for a translucent one — goes on behind it. CPU twin: [`nearest_hit`] (ray–triangle
 //! intersection) with the same shading.
 
-use crate::gpu::{Gpu, GpuError, bind_group, shaders, uniform_buffer, validated};
+use crate::gpu::{GpuError, bind_group, shaders, uniform_buffer, validated};
 use crate::render::Frame;
 use crate::render::texels::VolumeTexels;
 use glam::{Mat4, Vec3, Vec4};
@@ -270,12 +270,11 @@ impl SurfaceRenderer {
     /// Rasterises `surfaces` for the whole of `frame` (one texel per pixel).
     pub fn rasterise(
         &self,
-        gpu: &Gpu,
+        (device, queue): (&wgpu::Device, &wgpu::Queue),
         surfaces: &[Surface],
         frame: &Frame,
         texels: &VolumeTexels,
     ) -> Result<SurfaceLayer, GpuError> {
-        let device = &gpu.device;
         let (w, h) = (frame.width.max(1), frame.height.max(1));
         let max = device.limits().max_texture_dimension_2d;
         if w > max || h > max {
@@ -335,11 +334,10 @@ impl SurfaceRenderer {
                 usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            gpu.queue
-                .write_buffer(&vertex_buffer, 0, bytemuck::cast_slice(&vertices));
+            queue.write_buffer(&vertex_buffer, 0, bytemuck::cast_slice(&vertices));
             let uniforms = uniform_buffer(
                 device,
-                &gpu.queue,
+                queue,
                 "Surface::params",
                 bytemuck::bytes_of(&params),
             );
@@ -384,7 +382,7 @@ impl SurfaceRenderer {
                 pass.set_vertex_buffer(0, vertex_buffer.slice(..));
                 pass.draw(0..vertices.len() as u32, 0..1);
             }
-            gpu.queue.submit([encoder.finish()]);
+            queue.submit([encoder.finish()]);
             SurfaceLayer { position, color }
         })
     }
