@@ -276,12 +276,7 @@ fn ao_method_from_the_panel_matches_volao_render_with_lao() {
     none.ambient_occlusion.method = volao::ao::AoMethod::None;
     none.save(&scene).expect("save");
     let plain = volao_render(&scene, &dir.path().join("plain.png"));
-    let darker = viewport
-        .pixels
-        .iter()
-        .zip(&plain.pixels)
-        .filter(|(a, b)| a[0] + 2 < b[0])
-        .count();
+    let darker = darker_pixels(&viewport, &plain);
     assert!(darker > 100, "AO darkened only {darker} pixels");
 }
 
@@ -360,12 +355,7 @@ fn shadows_from_the_rendering_panel_match_volao_render() {
     plain.render.shadows = false;
     plain.save(&scene).expect("save");
     let unshadowed = volao_render(&scene, &dir.path().join("plain.png"));
-    let darker = shadowed
-        .pixels
-        .iter()
-        .zip(&unshadowed.pixels)
-        .filter(|(a, b)| a[0] + 2 < b[0])
-        .count();
+    let darker = darker_pixels(&shadowed, &unshadowed);
     assert!(darker > 100, "shadows darkened only {darker} pixels");
 }
 
@@ -403,13 +393,22 @@ fn a_scene_with_a_mesh_shows_it_as_volao_render_does() {
     plain.meshes.clear();
     plain.save(&path).expect("save");
     let without = volao_render(&path, &dir.path().join("plain.png"));
-    let orange = |p: &[u8; 4]| p[0] > p[2] + 60;
+    let orange = |p: &[u8; 4]| u16::from(p[0]) > u16::from(p[2]) + 60;
     let drawn = viewport.pixels.iter().filter(|p| orange(p)).count();
     let before = without.pixels.iter().filter(|p| orange(p)).count();
     assert!(
         drawn > before + 500,
         "the mesh covers {drawn} orange pixels, {before} without it"
     );
+}
+
+/// Pixels of `a` clearly darker (red channel, more than two levels) than in `b`.
+fn darker_pixels(a: &Image, b: &Image) -> usize {
+    a.pixels
+        .iter()
+        .zip(&b.pixels)
+        .filter(|(p, q)| u16::from(p[0]) + 2 < u16::from(q[0]))
+        .count()
 }
 
 /// Clicks the widget labelled `label` (scrolled into view first, as a user does).
