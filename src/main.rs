@@ -726,7 +726,7 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
         &tf,
         &settings,
         &clip,
-        !args.cpu,
+        &volao::gpu::GpuUse::from_flag(!args.cpu),
         &|done, total| {
             bar.set_length(total as u64);
             bar.set_position(done as u64);

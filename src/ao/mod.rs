@@ -121,17 +121,16 @@ mod ray_set_name {
 }
 
 /// Computes the AO volume of `volume` in its own geometry (same dims, spacing and
-/// orientation), as f32 values in [0, 1]. Uses the GPU when `use_gpu` and an adapter can
-/// hold the volume at full resolution, else the CPU twin. Returns the volume and what
-/// computed it.
+/// orientation), as f32 values in [0, 1]. Uses the GPU `gpu` names when it can hold the
+/// volume at full resolution, else the CPU twin. Returns the volume and what computed it.
 pub fn compute_volume(
     volume: &crate::volume::Volume,
     tf: &crate::tf::TransferFunction,
     settings: &AoSettings,
-    use_gpu: bool,
+    gpu: &crate::gpu::GpuUse,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(crate::volume::Volume, String), crate::gpu::GpuError> {
-    compute_volume_clipped(volume, tf, settings, &[], use_gpu, progress).map(|(v, d, _)| (v, d))
+    compute_volume_clipped(volume, tf, settings, &[], gpu, progress).map(|(v, d, _)| (v, d))
 }
 
 /// [`compute_volume`] with clip shapes (in mm from the volume's centre, along its voxel
@@ -141,26 +140,25 @@ pub fn compute_volume_clipped(
     tf: &crate::tf::TransferFunction,
     settings: &AoSettings,
     clip: &[crate::clip::ClipShape],
-    use_gpu: bool,
+    gpu: &crate::gpu::GpuUse,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(crate::volume::Volume, String, Option<cao::CaoStats>), crate::gpu::GpuError> {
     use crate::render::texels::{UploadLimits, VolumeTexels};
     if matches!(settings.method, AoMethod::Vao | AoMethod::VaoLive) {
-        return vao::compute_volume(volume, tf, &settings.vao, use_gpu, progress)
+        return vao::compute_volume(volume, tf, &settings.vao, gpu, progress)
             .map(|(v, d)| (v, d, None));
     }
     let rays = lao::Rays::uniform(settings.rays.directions());
     if matches!(settings.method, AoMethod::Cao | AoMethod::LaoFull) {
-        let (values, device, stats) =
-            clipped_on_gpu(volume, tf, settings, clip, use_gpu, progress)?;
+        let (values, device, stats) = clipped_on_gpu(volume, tf, settings, clip, gpu, progress)?;
         let out = ao_volume(volume, values, settings, tf);
         return Ok((out, device, Some(stats)));
     }
     let mut computed = None;
     // Set where the adapter is a CPU and the twin does the filter map faster.
     let mut twin_device = None;
-    if use_gpu {
-        match crate::gpu::request_device() {
+    if let Some(device) = gpu.device() {
+        match device {
             Ok(g) if fast::map_of(settings.method).is_some() && fast::twin_is_faster(&g) => {
                 twin_device = Some(fast::statistics_device(&g));
             }
@@ -224,16 +222,16 @@ fn clipped_on_gpu(
     tf: &crate::tf::TransferFunction,
     settings: &AoSettings,
     clip: &[crate::clip::ClipShape],
-    use_gpu: bool,
+    gpu: &crate::gpu::GpuUse,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(Vec<f32>, String, cao::CaoStats), crate::gpu::GpuError> {
     use crate::gpu::GpuError;
-    if !use_gpu {
+    let Some(g) = gpu.device() else {
         return Err(GpuError::Unsupported {
             what: "CAO and lao-full need a GPU adapter: the clip shapes' depth maps are rasterised (drop --cpu)".into(),
         });
-    }
-    let g = crate::gpu::request_device()?;
+    };
+    let g = g?;
     let vol = crate::render::gpu::GpuVolume::new(&g, volume, tf, 0.5)?;
     if vol.texels.downsampled > 0 {
         return Err(GpuError::Unsupported {

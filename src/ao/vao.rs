@@ -799,13 +799,13 @@ impl VaoGpu {
 }
 
 /// The precomputed ambient factor `1 − A_P` of `volume` in its own geometry, as
-/// [`crate::ao::compute_volume`] returns it: GPU when `use_gpu` and the volume fits at
-/// full resolution, else the CPU twin.
+/// [`crate::ao::compute_volume`] returns it: on the GPU `gpu` names when the volume fits
+/// at full resolution, else the CPU twin.
 pub fn compute_volume(
     volume: &crate::volume::Volume,
     tf: &TransferFunction,
     s: &VaoSettings,
-    use_gpu: bool,
+    gpu: &crate::gpu::GpuUse,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(crate::volume::Volume, String), GpuError> {
     use crate::render::texels::UploadLimits;
@@ -814,8 +814,8 @@ pub fn compute_volume(
         message: e.to_string(),
     })?;
     let mut computed = None;
-    if use_gpu {
-        match crate::gpu::request_device() {
+    if let Some(device) = gpu.device() {
+        match device {
             Ok(g) => {
                 let limits = g.device.limits();
                 let texels = VolumeTexels::new(

@@ -1094,13 +1094,18 @@ impl Viewer {
                 })
             })
         } else {
-            // A filter map on a CPU adapter goes straight to the twin (no second device).
-            let use_gpu = !(crate::ao::fast::map_of(settings.method).is_some()
-                && crate::ao::fast::twin_is_faster(&self.gpu));
+            // The viewer's own device; a filter map on a CPU adapter goes to the twin.
+            let gpu = if crate::ao::fast::map_of(settings.method).is_some()
+                && crate::ao::fast::twin_is_faster(&self.gpu)
+            {
+                crate::gpu::GpuUse::Cpu
+            } else {
+                crate::gpu::GpuUse::Shared(Arc::clone(&self.gpu))
+            };
             Job::spawn(label, self.repaint_fn(), move |p| {
                 let start = Instant::now();
                 let (ao, device) =
-                    crate::ao::compute_volume(&volume, &tf, &settings, use_gpu, &|d, t| {
+                    crate::ao::compute_volume(&volume, &tf, &settings, &gpu, &|d, t| {
                         p.set(d as u64, t as u64)
                     })
                     .map_err(|e| e.to_string())?;

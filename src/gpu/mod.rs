@@ -91,6 +91,36 @@ pub fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'sta
     }
 }
 
+/// Which device a computation may use: none (the CPU twins), a fresh one, or one already
+/// open (the viewer's, so that each recomputation does not open another).
+#[derive(Debug, Clone, Default)]
+pub enum GpuUse {
+    Cpu,
+    #[default]
+    Request,
+    Shared(std::sync::Arc<Gpu>),
+}
+
+impl GpuUse {
+    /// A fresh device when `use_gpu`, else the CPU.
+    pub fn from_flag(use_gpu: bool) -> Self {
+        if use_gpu {
+            GpuUse::Request
+        } else {
+            GpuUse::Cpu
+        }
+    }
+
+    /// The device, opened if need be; `None` for the CPU.
+    pub fn device(&self) -> Option<Result<std::sync::Arc<Gpu>, GpuError>> {
+        match self {
+            GpuUse::Cpu => None,
+            GpuUse::Request => Some(request_device().map(std::sync::Arc::new)),
+            GpuUse::Shared(g) => Some(Ok(std::sync::Arc::clone(g))),
+        }
+    }
+}
+
 /// Picks an adapter (high performance first) and creates the device. Blocks.
 pub fn request_device() -> Result<Gpu, GpuError> {
     pollster::block_on(request_device_async())
