@@ -354,10 +354,26 @@ fn gpu_mask_and_opacity_match_the_cpu_twin() {
             let (v_o, v_m) = clip_volume_cpu(&s.vol.texels, &lut, &maps, 32);
             let g_o = s.cao.read(&s.gpu, 0).unwrap_or_else(|e| panic!("{e}"));
             let g_m = s.cao.read(&s.gpu, 1).unwrap_or_else(|e| panic!("{e}"));
-            assert_eq!(differing(&v_m, &g_m), 0, "mask, {shapes:?}");
-            // V_o: the CPU's f32 arithmetic may round a sample lying on a map boundary the
-            // other way than the GPU's (fused multiply-adds); such a voxel differs by one
-            // MSAA sample (TF_o / 41). Allow that for 0.1 % of voxels, nothing else.
+            // The CPU's f32 arithmetic may round a sample lying on a map boundary the
+            // other way than the GPU's (fused multiply-adds). In V_m such a voxel moves to
+            // the neighbouring class (partly clipped ↔ not or wholly); in V_o it differs by
+            // one MSAA sample (TF_o / 41). Allow that for 0.1 % of voxels, nothing else.
+            let mask_flips = v_m
+                .iter()
+                .zip(&g_m)
+                .filter(|(a, b)| a != b)
+                .inspect(|(a, b)| {
+                    assert_eq!(
+                        (*a - *b).abs(),
+                        0.5,
+                        "V_m jumps a class: {a} vs {b}, {shapes:?}"
+                    )
+                })
+                .count();
+            assert!(
+                mask_flips * 1000 <= v_m.len(),
+                "{mask_flips} voxels of V_m differ: {shapes:?}"
+            );
             let flips = v_o
                 .iter()
                 .zip(&g_o)

@@ -357,6 +357,39 @@ fn shadows_from_the_rendering_panel_match_volao_render() {
     let unshadowed = volao_render(&scene, &dir.path().join("plain.png"));
     let darker = darker_pixels(&shadowed, &unshadowed);
     assert!(darker > 100, "shadows darkened only {darker} pixels");
+
+    // Carve away the half towards the light: light passes through the carved space as
+    // in `volao render` (both make their clip maps at the same resolution).
+    {
+        let doc = h.state_mut().document_mut().expect("doc");
+        doc.clip_shapes.push(volao::clip::ClipShape {
+            shape: volao::clip::Shape::Plane,
+            translation: [0.0, 5.0, 0.0],
+            rotation_deg: [-90.0, 0.0, 0.0],
+            scale: [1.0; 3],
+            mode: Default::default(),
+        });
+        doc.ao.clip_resolution = CLIP_MAPS;
+    }
+    h.state_mut().show_outlines = false;
+    settle(&mut h);
+    assert!(
+        h.state().light_ready(),
+        "shadows: {:?}",
+        h.state().light_error()
+    );
+    h.state_mut().save_scene(&scene).expect("scene saved");
+    dismiss_toasts(&mut h);
+    let clipped = viewport_pixels(&mut h);
+    let rendered = volao_render(&scene, &dir.path().join("clipped.png"));
+    check(
+        "viewport_clipped_shadows_vs_render",
+        &clipped,
+        &rendered,
+        SAME_RENDERER,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
 }
 
 #[test]
@@ -400,6 +433,17 @@ fn a_scene_with_a_mesh_shows_it_as_volao_render_does() {
         drawn > before + 500,
         "the mesh covers {drawn} orange pixels, {before} without it"
     );
+}
+
+/// Closes the notes in the corner (a "Saved scene" note would cover part of the view)
+/// and moves the pointer off the viewport (where it would be drawn).
+fn dismiss_toasts(h: &mut Harness<'static, Viewer>) {
+    while let Some(close) = h.query_by_label("×") {
+        close.click();
+        h.run_steps(2);
+    }
+    h.get_by_label("Camera").hover();
+    h.run_steps(2);
 }
 
 /// Pixels of `a` clearly darker (red channel, more than two levels) than in `b`.
@@ -481,14 +525,7 @@ fn filter_ao_and_opacity_modulation_from_the_panels_match_volao_render() {
     plain.render.opacity_modulation = None;
     plain.save(&scene).expect("save");
     let unmodulated = volao_render(&scene, &dir.path().join("plain.png"));
-    // The "Saved scene" note would cover part of the view.
-    while let Some(close) = h.query_by_label("×") {
-        close.click();
-        h.run_steps(2);
-    }
-    // And the pointer left there would be drawn over it.
-    h.get_by_label("Camera").hover();
-    h.run_steps(2);
+    dismiss_toasts(&mut h);
     let off = viewport_pixels(&mut h);
     check(
         "viewport_gauss_unmodulated_vs_render",
@@ -736,19 +773,6 @@ fn a_scene_keeps_its_light_shadows_meshes_and_values_outside_the_sliders_when_sa
     scene.save(&original).expect("scene saved");
     let mut h = harness(OpenRequest::Scene(original.clone()), dir.path());
     settle(&mut h);
-    // Said once, on opening: the viewer's shadows do not follow the clip shapes.
-    assert!(
-        h.state()
-            .toasts()
-            .iter()
-            .any(|t| t.text.contains("shadows ignore the clip shapes")),
-        "no warning among {:?}",
-        h.state()
-            .toasts()
-            .iter()
-            .map(|t| &t.text)
-            .collect::<Vec<_>>()
-    );
     // The clip mesh was found beside the scene, whatever the working folder.
     let errors: Vec<&String> = h
         .state()

@@ -314,12 +314,6 @@ pub fn load_document(
         (Some(s), Some(sp)) => (s.light, s.meshes_resolved(sp), s.clip_shapes_resolved(sp)),
         _ => Default::default(),
     };
-    if render.shadows && !clip_shapes.is_empty() {
-        warnings.push(
-            "the viewer's shadows ignore the clip shapes (`volao render` lets light through what they carve away)"
-                .to_owned(),
-        );
-    }
     let info = format!(
         "{info}, {} {}, {} × {} × {} mm",
         volume::fmt_dims(volume.dims),
@@ -452,6 +446,8 @@ struct LightKey {
     /// Towards the light, volume RAS (a headlight's follows the camera).
     direction: [f32; 3],
     opacity: Vec<crate::tf::OpacityPoint>,
+    /// Light passes through what the shapes carve away.
+    clip: Vec<crate::clip::ClipShape>,
     doc_generation: u64,
 }
 
@@ -1192,12 +1188,15 @@ impl Viewer {
         doc.render.shadows.then(|| LightKey {
             direction: doc.view_settings().light_direction,
             opacity: doc.tf.opacity.clone(),
+            clip: doc.clip_shapes.clone(),
             doc_generation: self.doc_generation,
         })
     }
 
     /// Keeps the light volume of shadows in step with the light (a headlight follows the
-    /// camera: recomputed once the view rests) and the transfer function's opacity.
+    /// camera), the transfer function's opacity and the clip shapes, recomputed once they
+    /// rest. Unlike AO, the previous light volume stays on screen meanwhile: shadows that
+    /// lag a moving camera or shape read better than shadows that blink off.
     fn update_light(&mut self) {
         let want = self.light_key();
         match self.light.poll(want.as_ref()) {
@@ -1228,7 +1227,7 @@ impl Viewer {
         if self.light.settled(want.as_ref()) {
             return;
         }
-        if self.light.reset() {
+        if self.light.reset() && want.is_none() {
             let gpu = Arc::clone(&self.gpu);
             self.upload(|g| g.set_light_volume(&gpu, None).is_ok());
         }
@@ -1247,6 +1246,8 @@ impl Viewer {
             return;
         };
         let (gpu, tf) = (Arc::clone(&self.gpu), doc.tf.clone());
+        let (shapes, radius, resolution) =
+            (key.clip.clone(), doc.radius, self.options.clip_resolution);
         let dir = match crate::render::shadow::light_direction(key.direction) {
             Ok(d) => d,
             Err(message) => {
@@ -1256,9 +1257,20 @@ impl Viewer {
         };
         let job = Job::spawn("Shadows", self.repaint_fn(), move |p| {
             let lut = crate::render::shadow::light_lut(&tf, &texels);
+            // Its own clip maps, as `volao render` makes them (the margin is unused).
+            let maps = match shapes.is_empty() {
+                true => None,
+                false => {
+                    let mut m = crate::clip::gpu::ClipMaps::new(&gpu).map_err(|e| e.to_string())?;
+                    m.update(&gpu, &shapes, radius, 1.0, resolution)
+                        .map_err(|e| e.to_string())?;
+                    Some(m)
+                }
+            };
             crate::render::shadow::LightGpu::new(&gpu.device)
                 .and_then(|l| {
-                    l.compute(&gpu, &texels, &lut, dir, &|d, t| p.set(d as u64, t as u64))
+                    let progress = |d: usize, t: usize| p.set(d as u64, t as u64);
+                    l.compute_clipped(&gpu, &texels, &lut, dir, maps.as_ref(), &progress)
                 })
                 .map_err(|e| e.to_string())
         });

@@ -37,10 +37,17 @@ impl ClipCamera {
         let (lo, hi) = mesh.bounds();
         let centre = (lo + hi) * 0.5;
         let half_xy = ((hi.x - lo.x).max(hi.y - lo.y) * 0.5).max(1e-3);
-        // An upper bound on the final pixel size gives a safe dilation radius first.
-        let generous = (half_xy + 2.0 * reach_mm + 1.0) * (1.0 + 16.0 / res as f32);
-        let margin = dilation_margin(reach_mm, 2.0 * generous / res as f32);
-        let half = (half_xy + margin) * (1.0 + 16.0 / res as f32);
+        // The margin depends on the pixel size, which depends on the margin: with
+        // half = (half_xy + margin)·k and pixel = 2·half/res, `dilation_margin` is
+        // c + a·(half_xy + margin), so the fixed point is margin = (c + a·half_xy)/(1 − a)
+        // (a < 1 for res ≥ 16), taken 0.1 % larger against rounding. (A bound from the
+        // shape's size alone fell short for shapes much larger than the reach, such as a
+        // plane's slab at a low resolution.)
+        let k = 1.0 + 16.0 / res as f32;
+        let c = dilation_margin(reach_mm, 0.0);
+        let a = dilation_margin(0.0, 2.0 * k / res as f32) - dilation_margin(0.0, 0.0);
+        let margin = (c + a * half_xy) / (1.0 - a) * 1.001;
+        let half = (half_xy + margin) * k;
         let pixel = 2.0 * half / res as f32;
         debug_assert!(margin >= dilation_margin(reach_mm, pixel));
         let pad = margin * 1.1 + 1.0;
@@ -95,4 +102,44 @@ impl ClipCamera {
 /// absorb f32 rounding.
 pub fn dilation_margin(reach_mm: f32, pixel_mm: f32) -> f32 {
     (reach_mm + std::f32::consts::SQRT_2 * pixel_mm) * 1.01 + 0.01
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::clip::mesh::TriMesh;
+
+    /// A flat square of half side `h` (all the framing looks at is the bounds).
+    fn square(h: f32) -> TriMesh {
+        TriMesh {
+            vertices: vec![
+                Vec3::new(-h, -h, 0.0),
+                Vec3::new(h, -h, 0.0),
+                Vec3::new(h, h, 0.0),
+                Vec3::new(-h, h, 0.0),
+            ],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+        }
+    }
+
+    #[test]
+    fn the_margin_covers_the_dilation_for_any_size_reach_and_resolution() {
+        for h in [0.01, 1.0, 50.0, 1e3, 1e5] {
+            for reach in [0.0, 1.0, 20.0, 200.0] {
+                for res in [16, 128, 1024, 8192] {
+                    let c = ClipCamera::frame(&square(h), reach, res);
+                    let pixel = 1.0 / c.pixels_per_mm;
+                    let need = dilation_margin(reach, pixel);
+                    assert!(
+                        c.margin_mm >= need,
+                        "h {h}, reach {reach}, res {res}: margin {} < {need}",
+                        c.margin_mm
+                    );
+                    // And the shape with its margin lies inside the image.
+                    let corner = c.project(Vec3::splat(h + c.margin_mm).with_z(0.0));
+                    assert!(corner.x <= res as f32 && corner.y >= 0.0, "{corner}");
+                }
+            }
+        }
+    }
 }
