@@ -235,16 +235,8 @@ impl CaoGpu {
                 gpu.queue.write_buffer(&b, 0, bytes);
                 b
             };
-            let pipeline = |label, module| {
-                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(label),
-                    layout: None,
-                    module,
-                    entry_point: Some("main"),
-                    compilation_options: Default::default(),
-                    cache: None,
-                })
-            };
+            let pipeline =
+                |label, module| crate::gpu::compute_pipeline(device, label, module, "main", None);
             let v_o = volume_texture(device, "Cao::v_o", dims);
             let v_m = volume_texture(device, "Cao::v_m", dims);
             let v_pao = volume_texture(device, "Cao::v_pao", dims);
@@ -253,12 +245,7 @@ impl CaoGpu {
             CaoGpu {
                 clip_pipeline: pipeline("Cao::clip", &clip_module),
                 lao_pipeline: pipeline("Cao::lao", &lao_module),
-                sampler: device.create_sampler(&wgpu::SamplerDescriptor {
-                    label: Some("Cao::linear_clamp"),
-                    mag_filter: wgpu::FilterMode::Linear,
-                    min_filter: wgpu::FilterMode::Linear,
-                    ..Default::default()
-                }),
+                sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
                 clip,
                 v_o,
                 v_m,

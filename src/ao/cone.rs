@@ -268,23 +268,10 @@ impl ConeGpu {
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
         let module = shaders::module(device, "cone.wgsl")?;
         validated(device, "Cone::new", || ConeGpu {
-            pipeline: device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("Cone::pipeline"),
-                layout: None,
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            }),
+            pipeline: crate::gpu::compute_pipeline(device, "Cone::pipeline", &module, "main", None),
             // Linear within a level; levels are picked exactly (integer LOD) and blended
             // in the shader, so the CPU twin can follow.
-            sampler: device.create_sampler(&wgpu::SamplerDescriptor {
-                label: Some("Cone::linear_clamp"),
-                mag_filter: wgpu::FilterMode::Linear,
-                min_filter: wgpu::FilterMode::Linear,
-                mipmap_filter: wgpu::MipmapFilterMode::Nearest,
-                ..Default::default()
-            }),
+            sampler: crate::gpu::linear_sampler(device, "Cone::linear_clamp"),
         })
     }
 

@@ -175,20 +175,8 @@ impl LaoGpu {
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
         let module = shaders::module(device, "lao.wgsl")?;
         validated(device, "Lao::new", || LaoGpu {
-            pipeline: device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("Lao::pipeline"),
-                layout: None,
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            }),
-            sampler: device.create_sampler(&wgpu::SamplerDescriptor {
-                label: Some("Lao::linear_clamp"),
-                mag_filter: wgpu::FilterMode::Linear,
-                min_filter: wgpu::FilterMode::Linear,
-                ..Default::default()
-            }),
+            pipeline: crate::gpu::compute_pipeline(device, "Lao::pipeline", &module, "main", None),
+            sampler: crate::gpu::linear_sampler(device, "Lao::linear_clamp"),
         })
     }
 

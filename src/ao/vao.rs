@@ -587,13 +587,7 @@ impl VaoInputs {
                 levels: texture.create_view(&Default::default()),
                 alpha: storage("Vao::alpha", bytemuck::cast_slice(&alpha)),
                 rays: storage("Vao::rays", bytemuck::cast_slice(&rays)),
-                sampler: device.create_sampler(&wgpu::SamplerDescriptor {
-                    label: Some("Vao::linear_clamp"),
-                    mag_filter: wgpu::FilterMode::Linear,
-                    min_filter: wgpu::FilterMode::Linear,
-                    mipmap_filter: wgpu::MipmapFilterMode::Nearest,
-                    ..Default::default()
-                }),
+                sampler: crate::gpu::linear_sampler(device, "Vao::linear_clamp"),
             }
         })
     }
@@ -706,14 +700,13 @@ impl VaoGpu {
                 immediate_size: 0,
             });
             VaoGpu {
-                pipeline: device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some("Vao::pipeline"),
-                    layout: Some(&pipeline_layout),
-                    module: &module,
-                    entry_point: Some("main"),
-                    compilation_options: Default::default(),
-                    cache: None,
-                }),
+                pipeline: crate::gpu::compute_pipeline(
+                    device,
+                    "Vao::pipeline",
+                    &module,
+                    "main",
+                    Some(&pipeline_layout),
+                ),
                 no_clip: crate::clip::gpu::empty_bind_group(device, &clip_layout),
                 slab_layout,
                 vao_layout,

@@ -264,14 +264,7 @@ impl ClipMaps {
                 })
             };
             let passes = ["resolve", "reduce", "dilate", "expand"].map(|entry| {
-                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(entry),
-                    layout: None,
-                    module: &maps_module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    cache: None,
-                })
+                crate::gpu::compute_pipeline(device, entry, &maps_module, entry, None)
             });
             let maps = maps_texture(device, 1, LAYERS_PER_SHAPE);
             let dummy = depth_texture(device, "ClipMaps::no_previous_layer", 1);

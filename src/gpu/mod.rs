@@ -121,6 +121,37 @@ impl GpuUse {
     }
 }
 
+/// The compute pipeline of entry point `entry` in `module`; without `layout`, the layout
+/// is derived from the shader.
+pub fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+    layout: Option<&wgpu::PipelineLayout>,
+) -> wgpu::ComputePipeline {
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout,
+        module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// Trilinear filtering within a mip level, the nearest level, clamped at the edges (the
+/// sampler every volume pass uses).
+pub fn linear_sampler(device: &wgpu::Device, label: &str) -> wgpu::Sampler {
+    device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some(label),
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        mipmap_filter: wgpu::MipmapFilterMode::Nearest,
+        ..Default::default()
+    })
+}
+
 /// Picks an adapter (high performance first) and creates the device. Blocks.
 pub fn request_device() -> Result<Gpu, GpuError> {
     pollster::block_on(request_device_async())

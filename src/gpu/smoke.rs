@@ -46,14 +46,8 @@ pub fn run(gpu: &Gpu, dims: [u32; 3]) -> Result<SmokeOutput, GpuError> {
 
     let (pipeline, texture, linear, tex_readback, lin_readback) =
         validated(device, "Smoke::setup", || {
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("Smoke::pipeline"),
-                layout: None,
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
+            let pipeline =
+                super::compute_pipeline(device, "Smoke::pipeline", &module, "main", None);
             let texture = device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("Smoke::volume"),
                 size,

@@ -377,20 +377,14 @@ impl RayCaster {
                 bind_group_layouts: &[Some(&layout), Some(&clip_layout), Some(&layout_2)],
                 immediate_size: 0,
             });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("RayCaster::pipeline"),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
-            let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-                label: Some("RayCaster::linear_clamp"),
-                mag_filter: wgpu::FilterMode::Linear,
-                min_filter: wgpu::FilterMode::Linear,
-                ..Default::default()
-            });
+            let pipeline = crate::gpu::compute_pipeline(
+                device,
+                "RayCaster::pipeline",
+                &module,
+                "main",
+                Some(&pipeline_layout),
+            );
+            let sampler = crate::gpu::linear_sampler(device, "RayCaster::linear_clamp");
             let no_clip = crate::clip::gpu::empty_bind_group(device, &clip_layout);
             RayCaster {
                 pipeline,

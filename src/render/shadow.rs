@@ -182,20 +182,14 @@ impl LightGpu {
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
         let module = shaders::module(device, "light.wgsl")?;
         validated(device, "Light::new", || LightGpu {
-            pipeline: device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("Light::pipeline"),
-                layout: None,
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            }),
-            sampler: device.create_sampler(&wgpu::SamplerDescriptor {
-                label: Some("Light::linear_clamp"),
-                mag_filter: wgpu::FilterMode::Linear,
-                min_filter: wgpu::FilterMode::Linear,
-                ..Default::default()
-            }),
+            pipeline: crate::gpu::compute_pipeline(
+                device,
+                "Light::pipeline",
+                &module,
+                "main",
+                None,
+            ),
+            sampler: crate::gpu::linear_sampler(device, "Light::linear_clamp"),
         })
     }
 

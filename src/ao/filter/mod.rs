@@ -527,14 +527,7 @@ fn pipeline(
     module: &wgpu::ShaderModule,
     label: &str,
 ) -> wgpu::ComputePipeline {
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout: None,
-        module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    })
+    crate::gpu::compute_pipeline(device, label, module, "main", None)
 }
 
 fn stats_texture(device: &wgpu::Device, label: &str, dims: [u32; 3]) -> wgpu::Texture {
