@@ -260,17 +260,7 @@ fn ao_method_from_the_panel_matches_volao_render_with_lao() {
     let doc = h.state().document().expect("doc");
     assert_eq!(doc.ao.method, volao::ao::AoMethod::Lao);
     let scene = dir.path().join("lao.json");
-    h.state_mut().save_scene(&scene).expect("scene saved");
-    let viewport = viewport_pixels(&mut h);
-    let rendered = volao_render(&scene, &dir.path().join("lao.png"));
-    check(
-        "viewport_lao_vs_render",
-        &viewport,
-        &rendered,
-        SAME_RENDERER,
-        &out_dir(),
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let viewport = viewport_is_volao_render(&mut h, &scene, "viewport_lao_vs_render");
     // And AO changed the picture: without it the same view is brighter somewhere.
     let mut none = volao::scene::Scene::load(&scene).expect("scene");
     none.ambient_occlusion.method = volao::ao::AoMethod::None;
@@ -290,17 +280,7 @@ fn live_positional_ao_runs_in_the_ray_caster_and_matches_volao_render() {
     settle(&mut h);
     assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
     let scene = dir.path().join("live.json");
-    h.state_mut().save_scene(&scene).expect("scene saved");
-    let viewport = viewport_pixels(&mut h);
-    let rendered = volao_render(&scene, &dir.path().join("live.png"));
-    check(
-        "viewport_vao_live_vs_render",
-        &viewport,
-        &rendered,
-        SAME_RENDERER,
-        &out_dir(),
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let viewport = viewport_is_volao_render(&mut h, &scene, "viewport_vao_live_vs_render");
     // Back to none: the live AO is switched off again.
     choose(&mut h, "Method", "none");
     settle(&mut h);
@@ -339,17 +319,7 @@ fn shadows_from_the_rendering_panel_match_volao_render() {
     let eye = doc.camera.backward().to_array();
     assert!(direction.iter().zip(eye).all(|(a, b)| (a - b).abs() < 1e-6));
     let scene = dir.path().join("shadows.json");
-    h.state_mut().save_scene(&scene).expect("scene saved");
-    let shadowed = viewport_pixels(&mut h);
-    let rendered = volao_render(&scene, &dir.path().join("shadows.png"));
-    check(
-        "viewport_shadows_vs_render",
-        &shadowed,
-        &rendered,
-        SAME_RENDERER,
-        &out_dir(),
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let shadowed = viewport_is_volao_render(&mut h, &scene, "viewport_shadows_vs_render");
     // Shadows changed the picture: the same scene without them is brighter somewhere.
     let mut plain = volao::scene::Scene::load(&scene).expect("scene");
     plain.render.shadows = false;
@@ -378,18 +348,7 @@ fn shadows_from_the_rendering_panel_match_volao_render() {
         "shadows: {:?}",
         h.state().light_error()
     );
-    h.state_mut().save_scene(&scene).expect("scene saved");
-    dismiss_toasts(&mut h);
-    let clipped = viewport_pixels(&mut h);
-    let rendered = volao_render(&scene, &dir.path().join("clipped.png"));
-    check(
-        "viewport_clipped_shadows_vs_render",
-        &clipped,
-        &rendered,
-        SAME_RENDERER,
-        &out_dir(),
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    viewport_is_volao_render(&mut h, &scene, "viewport_clipped_shadows_vs_render");
 }
 
 #[test]
@@ -433,6 +392,17 @@ fn a_scene_with_a_mesh_shows_it_as_volao_render_does() {
         drawn > before + 500,
         "the mesh covers {drawn} orange pixels, {before} without it"
     );
+}
+
+/// Saves the viewer's scene to `scene`, renders it with the real `volao render` and checks
+/// the viewport against that rendering (`SAME_RENDERER`); returns the viewport's pixels.
+fn viewport_is_volao_render(h: &mut Harness<'static, Viewer>, scene: &Path, name: &str) -> Image {
+    h.state_mut().save_scene(scene).expect("scene saved");
+    dismiss_toasts(h);
+    let viewport = viewport_pixels(h);
+    let rendered = volao_render(scene, &scene.with_extension("png"));
+    check(name, &viewport, &rendered, SAME_RENDERER, &out_dir()).unwrap_or_else(|e| panic!("{e}"));
+    viewport
 }
 
 /// Closes the notes in the corner (a "Saved scene" note would cover part of the view)
@@ -498,17 +468,7 @@ fn filter_ao_and_opacity_modulation_from_the_panels_match_volao_render() {
     let modulation = doc.render.opacity_modulation.expect("modulation on");
     assert_eq!(modulation.sigma2_max, 0.05);
     let scene = dir.path().join("gauss.json");
-    h.state_mut().save_scene(&scene).expect("scene saved");
-    let modulated = viewport_pixels(&mut h);
-    let rendered = volao_render(&scene, &dir.path().join("gauss.png"));
-    check(
-        "viewport_gauss_modulated_vs_render",
-        &modulated,
-        &rendered,
-        SAME_RENDERER,
-        &out_dir(),
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let modulated = viewport_is_volao_render(&mut h, &scene, "viewport_gauss_modulated_vs_render");
 
     // Off again: the viewport is the unmodulated rendering of the same scene.
     click(&mut h, "Opacity modulation by local variance");
