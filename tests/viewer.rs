@@ -408,6 +408,8 @@ fn viewport_is_volao_render(h: &mut Harness<'static, Viewer>, scene: &Path, name
 /// Closes the notes in the corner (a "Saved scene" note would cover part of the view)
 /// and moves the pointer off the viewport (where it would be drawn).
 fn dismiss_toasts(h: &mut Harness<'static, Viewer>) {
+    // A note added since the last frame shows from the next one.
+    h.run_steps(2);
     while let Some(close) = h.query_by_label("×") {
         close.click();
         h.run_steps(2);
