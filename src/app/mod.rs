@@ -1044,9 +1044,7 @@ impl Viewer {
             };
             return;
         }
-        let resting = self.tf_changed_at.elapsed() >= AO_DEBOUNCE && !self.tf_editor_dragging();
-        if !resting {
-            self.ctx.request_repaint_after(AO_DEBOUNCE);
+        if !self.resting() {
             return;
         }
         let Some(doc) = &self.doc else {
@@ -1139,7 +1137,13 @@ impl Viewer {
             Polled::Ready(key, values) => {
                 let gpu = Arc::clone(&self.gpu);
                 let fits = |g: &GpuVolume| values.len() == g.texels.dims.iter().product::<usize>();
-                if self.upload(|g| fits(g) && !g.set_opacity_modulation(&gpu, &values).is_empty()) {
+                if self.upload(|g| {
+                    let fit = fits(g);
+                    if fit {
+                        g.set_opacity_modulation(&gpu, &values);
+                    }
+                    fit
+                }) {
                     self.modulation.uploaded(key);
                 }
             }
