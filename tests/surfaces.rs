@@ -14,7 +14,7 @@ use volao::render::image::{Tolerance, check};
 use volao::render::surface::Surface;
 use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading};
-use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
+use volao::tf::TransferFunction;
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
 
 /// A square in the plane y = `y`, half side `r`, as two triangles.
@@ -65,20 +65,7 @@ fn a_surface_halfway_through_a_step_composites_like_a_step_landing_on_it() {
     let n = 16;
     let v = Volume::new([n; 3], [1.0; 3], VoxelData::U8(vec![100; n * n * n])).expect("valid");
     let alpha = 0.15f32;
-    let tf = TransferFunction {
-        name: "flat".into(),
-        opacity: vec![
-            OpacityPoint { value: 0.0, alpha },
-            OpacityPoint {
-                value: 255.0,
-                alpha,
-            },
-        ],
-        color: vec![ColorStop {
-            value: 0.0,
-            rgb: [1.0; 3],
-        }],
-    };
+    let tf = common::flat_tf(alpha);
     let t = texels(&v);
     let surfaces = [square_y(4.0, 50.0, [1.0, 0.0, 0.0, 1.0])];
     let a = 1.0 - (1.0 - alpha).powi(4);

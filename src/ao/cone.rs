@@ -341,16 +341,7 @@ impl ConeGpu {
             };
             let dir_buf = storage("Cone::directions", bytemuck::cast_slice(&packed_dirs));
             let sphere_buf = storage("Cone::spheres", bytemuck::cast_slice(&packed_spheres));
-            let out = device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("Cone::ambient"),
-                size: size(dims),
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format: wgpu::TextureFormat::R32Float,
-                usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-                view_formats: &[],
-            });
+            let out = crate::gpu::output_volume(device, "Cone::ambient", dims);
             let readback =
                 readback_buffer(device, "Cone::readback", row as u64 * ny as u64 * nz as u64);
             let uniforms =

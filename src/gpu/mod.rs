@@ -140,6 +140,25 @@ pub fn compute_pipeline(
     })
 }
 
+/// An R32Float 3-D texture of `dims` that a compute pass writes (storage) and the host
+/// reads back (copy source).
+pub fn output_volume(device: &wgpu::Device, label: &str, dims: [u32; 3]) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: dims[0],
+            height: dims[1],
+            depth_or_array_layers: dims[2],
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D3,
+        format: wgpu::TextureFormat::R32Float,
+        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    })
+}
+
 /// Trilinear filtering within a mip level, the nearest level, clamped at the edges (the
 /// sampler every volume pass uses).
 pub fn linear_sampler(device: &wgpu::Device, label: &str) -> wgpu::Sampler {

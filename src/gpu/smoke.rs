@@ -48,16 +48,7 @@ pub fn run(gpu: &Gpu, dims: [u32; 3]) -> Result<SmokeOutput, GpuError> {
         validated(device, "Smoke::setup", || {
             let pipeline =
                 super::compute_pipeline(device, "Smoke::pipeline", &module, "main", None);
-            let texture = device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("Smoke::volume"),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format: wgpu::TextureFormat::R32Float,
-                usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-                view_formats: &[],
-            });
+            let texture = super::output_volume(device, "Smoke::volume", dims);
             let linear = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("Smoke::linear"),
                 size: n * 4,

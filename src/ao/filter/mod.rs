@@ -702,16 +702,7 @@ impl FilterGpu {
         let st = self.stats(gpu, vol, source, radius)?;
         let stats_view = st.stats.create_view(&Default::default());
         let (out, readback) = validated(device, "Filter::map_buffers", || {
-            let out = device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("Filter::map"),
-                size: extent(dims),
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format: wgpu::TextureFormat::R32Float,
-                usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-                view_formats: &[],
-            });
+            let out = crate::gpu::output_volume(device, "Filter::map", dims);
             let size = row as u64 * ny as u64 * nz as u64;
             (out, readback_buffer(device, "Filter::readback", size))
         })?;
