@@ -237,11 +237,11 @@ pub fn render_bench(args: &RenderBenchArgs) -> Result<()> {
                         width: size,
                         height: size,
                     };
-                    rc.render(&gpu, &vol, &frame)?;
+                    rc.render(&gpu, &vol, &frame, None)?;
                     let mut times = Vec::new();
                     for _ in 0..args.runs.max(1) {
                         let start = Instant::now();
-                        rc.render(&gpu, &vol, &frame)?;
+                        rc.render(&gpu, &vol, &frame, None)?;
                         times.push(start.elapsed().as_secs_f64());
                     }
                     let t = median(times);
@@ -314,7 +314,7 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     use crate::tf::{Preset, TransferFunction};
 
     let gpu = crate::gpu::request_device()?;
-    let lao = LaoGpu::new(&gpu.device)?;
+    let lao = gpu.stage::<LaoGpu>()?;
     let rc = RayCaster::new(&gpu.device)?;
     println!("adapter: {}", gpu.describe());
     let path = args.data.join("raw/engine.raw");
@@ -356,7 +356,7 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     eprintln!("computing the 512-ray ground truth…");
     let (truth, t_truth) = run(&vol, RaySet::GROUND_TRUTH)?;
     vol.set_ambient_occlusion(&gpu, &truth);
-    let truth_image = rc.render(&gpu, &vol, &frame)?;
+    let truth_image = rc.render(&gpu, &vol, &frame, None)?;
     println!(
         "Engine {:?}, TF {}, M = {m}, image {}², ground truth fib:512 in {:.1} s",
         vol.texels.dims, tf.name, args.size, t_truth
@@ -379,7 +379,7 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     for (set, paper) in sets {
         let (a, t) = run(&vol, set)?;
         vol.set_ambient_occlusion(&gpu, &a);
-        let image = rc.render(&gpu, &vol, &frame)?;
+        let image = rc.render(&gpu, &vol, &frame, None)?;
         let (pv, pp) = match paper {
             Some(i) => (
                 format!("{}", PAPER_VOXEL_RMS[i]),

@@ -131,7 +131,7 @@ impl Bench {
         self.vol.set_ambient_occlusion_view(cao.ao_view());
         let start = Instant::now();
         self.rc
-            .render_clipped(&self.gpu, &self.vol, &self.frame, Some(&cao.clip))?;
+            .render(&self.gpu, &self.vol, &self.frame, Some(&cao.clip))?;
         Ok(Timed {
             stats,
             render_seconds: start.elapsed().as_secs_f64(),

@@ -105,8 +105,8 @@ fn rms(a: &[f32], b: &[f32], mask: Option<&[bool]>) -> f64 {
 /// `volao bench filter`.
 pub fn filter_bench(args: &FilterBenchArgs) -> Result<()> {
     let gpu = crate::gpu::request_device()?;
-    let fg = FilterGpu::new(&gpu.device)?;
-    let cg = ConeGpu::new(&gpu.device)?;
+    let fg = gpu.stage::<FilterGpu>()?;
+    let cg = gpu.stage::<ConeGpu>()?;
     println!("adapter: {}", gpu.describe());
     println!("CPU twin: {} rayon threads", rayon::current_num_threads());
 
@@ -229,7 +229,7 @@ fn quality(
         },
     );
     let evol = GpuVolume::from_texels(gpu, et.clone(), &etf, 0.5)?;
-    let lao = LaoGpu::new(&gpu.device)?;
+    let lao = gpu.stage::<LaoGpu>()?;
     let lut = lao_lut(&etf, &et);
     let m = args.samples.max(1);
     let start = Instant::now();

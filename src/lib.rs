@@ -1,27 +1,47 @@
 //! volao: direct volume rendering with physically based, clip-aware ambient occlusion.
 //!
-//! How data flows from a file to a pixel:
+//! How data flows from a file to a pixel (modules in that order):
 //!
 //! 1. [`volume`] loads a file (NIfTI, PVM/DDS, raw) into a [`volume::Volume`]: voxels in
 //!    their stored type and units, spacing in mm, orientation in RAS.
-//! 2. `tf` maps values to colour and opacity (transfer function, in the data's units).
-//! 3. `ao` computes ambient occlusion volumes (LAO, CAO, filter-based, cone-traced,
-//!    Beer's-law positional AO) — each on the GPU with a CPU twin.
-//! 4. `clip` turns clip meshes into depth and dilation maps for exact CAO.
-//! 5. [`gpu`] owns the device; `render` ray-casts the volume with the AO term.
-//! 6. `app` is the eframe viewer; `scene` files reproduce any view headlessly.
+//! 2. [`tf`] maps values to colour and opacity (the transfer function, in the data's
+//!    units); [`scene`] files hold a volume, its transfer function, camera, light, AO
+//!    settings, clip shapes and meshes, so any view can be reproduced headlessly.
+//! 3. [`render::texels`] turns the volume into texels for the GPU (halved until it fits);
+//!    [`sample`] is the CPU twins' vocabulary for reading them (trilinear, LUT lookup,
+//!    f16 mip chains) exactly as the shaders do.
+//! 4. [`gpu`] owns the device (one path for viewer, CLI and tests), the shaders, the
+//!    resource helpers and [`gpu::dispatch::SlabDispatch`], the one z-slab loop of every
+//!    per-voxel compute stage. Each stage's pipelines are built once per device
+//!    ([`gpu::Gpu::stage`]).
+//! 5. [`ao`] computes the ambient factor `A(x)`: [`ao::AoEngine`] picks the method's stage
+//!    (LAO, CAO, positional AO, filter maps, cone tracing; each a GPU pass with its CPU
+//!    twin beside it) and the GPU or the twin. [`clip`] turns clip shapes into the depth
+//!    and dilation maps CAO and the ray caster clip with.
+//! 6. [`render`] ray-casts the volume with the AO term, shadows (`render::shadow`, the
+//!    light volume) and surfaces into an image; [`render::offscreen`] does one frame for
+//!    the CLI and tests on the device it is given.
+//! 7. [`app`] is the eframe viewer: the same texels, stages and ray caster behind a UI
+//!    whose background jobs compute AO, modulation and light volumes.
 //!
-//! Steps 2–6 land with their issues; today the crate has the volume model, loaders,
-//! writers, the demo volume and the GPU device path.
+//! The command-line interface and the benchmarks live in the binary (`src/bin/volao`).
+
+pub mod volume;
+
+pub mod scene;
+pub mod tf;
+
+pub mod sample;
+
+pub mod gpu;
 
 pub mod ao;
+pub mod clip;
+
+pub mod render;
+
 pub mod app;
+
 pub mod bench;
 pub mod bench_cao;
 pub mod bench_filter;
-pub mod clip;
-pub mod gpu;
-pub mod render;
-pub mod scene;
-pub mod tf;
-pub mod volume;

@@ -721,17 +721,45 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
     args.fast_ao.apply(&mut settings)?;
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", true);
-    let (ao, device, cao) = volao::ao::compute_volume_clipped(
+    // The volume at full resolution: the engine says when it cannot go to the GPU.
+    let texels = volao::render::texels::VolumeTexels::new(
         &volume,
-        &tf,
-        &settings,
-        &clip,
-        &volao::gpu::GpuUse::from_flag(!args.cpu),
+        volao::render::texels::UploadLimits::NONE,
+    );
+    let engine = volao::ao::AoEngine::new(&volao::gpu::GpuUse::from_flag(!args.cpu));
+    // Live positional AO exported as a volume is the precomputed one.
+    let mut precomputed = settings;
+    if precomputed.method == AoMethod::VaoLive {
+        precomputed.method = AoMethod::Vao;
+    }
+    let request = volao::ao::AoRequest {
+        tf: &tf,
+        settings: &precomputed,
+        clip: Some(&clip),
+    };
+    let computed = engine.compute(
+        volao::ao::AoInput::Texels(&texels),
+        &request,
         &|done, total| {
             bar.set_length(total as u64);
             bar.set_position(done as u64);
         },
     )?;
+    for note in &computed.notes {
+        eprintln!("warning: {note}");
+    }
+    let values = match computed.ambient {
+        volao::ao::Ambient::Values(values) => values,
+        volao::ao::Ambient::Cao(c) => {
+            let gpu = engine.gpu().context("CAO ran without a GPU")?;
+            c.read(gpu, volao::ao::cao::CaoVolume::Ambient)?
+        }
+        volao::ao::Ambient::One | volao::ao::Ambient::Live => {
+            vec![1.0; texels.dims.iter().product()]
+        }
+    };
+    let (device, cao) = (computed.device, computed.cao);
+    let ao = ao_volume(&volume, values, &settings, &tf);
     bar.finish_and_clear();
     if let Some(stats) = &cao {
         for e in &stats.clip_errors {
@@ -775,6 +803,53 @@ fn ambient_occlusion(args: &AoArgs) -> Result<()> {
         s.mean
     );
     Ok(())
+}
+
+/// The AO volume `volao ao` writes: `values` in the input's geometry, described.
+fn ao_volume(
+    volume: &Volume,
+    values: Vec<f32>,
+    settings: &volao::ao::AoSettings,
+    tf: &volao::tf::TransferFunction,
+) -> Volume {
+    use volao::ao::AoMethod;
+    let description = if volao::ao::fast::handles(settings.method) {
+        format!(
+            "ambient factor: {}, TF {}",
+            volao::ao::fast::describe(settings),
+            tf.name
+        )
+    } else if matches!(settings.method, AoMethod::Vao | AoMethod::VaoLive) {
+        let s = &settings.vao;
+        let iso = match s.isosurface {
+            Some(i) => format!(", isosurface {} ± {}", i.value, i.tolerance),
+            None => String::new(),
+        };
+        format!(
+            "positional AO ambient factor 1 - A_P, {} directions x {} samples, r_max {} mm{iso}, TF {}",
+            s.directions, s.samples, s.r_max_mm, tf.name
+        )
+    } else {
+        let method = match settings.method {
+            AoMethod::Cao => "CAO",
+            AoMethod::LaoFull => "LAO (every frame, clipped)",
+            _ => "LAO",
+        };
+        format!(
+            "{method} ambient factor, {} rays x {} samples, TF {}",
+            settings.rays.name(),
+            settings.samples,
+            tf.name
+        )
+    };
+    Volume {
+        dims: volume.dims,
+        spacing: volume.spacing,
+        data: volao::volume::VoxelData::F32(values),
+        scaling: volao::volume::Scaling::IDENTITY,
+        orientation: volume.orientation,
+        descriptions: vec![("description".into(), description)],
+    }
 }
 
 fn render(args: &RenderArgs) -> Result<()> {
@@ -944,21 +1019,33 @@ fn render(args: &RenderArgs) -> Result<()> {
 
     let start = std::time::Instant::now();
     let bar = slice_bar("ambient occlusion", ao.method != volao::ao::AoMethod::None);
-    let out = volao::render::offscreen::render_with(
-        &volume,
-        &tf,
-        &frame,
-        &ao,
-        volao::render::offscreen::Extras {
-            clip: &clip,
-            surfaces: &meshes,
+    let needs_gpu = !clip.is_empty() || ao.method.is_clipped();
+    let gpu = match args.cpu {
+        true => None,
+        false => match volao::gpu::request_device() {
+            Ok(g) => Some(std::sync::Arc::new(g)),
+            Err(e) if needs_gpu => return Err(e.into()),
+            Err(e) => {
+                eprintln!("warning: {e}\nwarning: rendering on the CPU instead (slow)");
+                None
+            }
         },
-        !args.cpu,
-        &|done, total| {
-            bar.set_length(total as u64);
-            bar.set_position(done as u64);
-        },
-    )?;
+    };
+    let job = volao::render::offscreen::RenderJob {
+        volume: &volume,
+        tf: &tf,
+        frame: &frame,
+        ao: &ao,
+        clip: &clip,
+        surfaces: &meshes,
+    };
+    let out = volao::render::offscreen::render(gpu.as_ref(), &job, &|done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    for note in &out.notes {
+        eprintln!("warning: {note}");
+    }
     bar.finish_and_clear();
     for e in &out.clip_errors {
         eprintln!("warning: {e} (rendered without it)");

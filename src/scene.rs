@@ -1,7 +1,7 @@
 //! Scene files: versioned JSON holding everything needed to reproduce a rendering —
 //! the volume (path relative to the scene file where possible), transfer function,
-//! camera, light, render settings, image size and the ambient-occlusion method. Clip
-//! shapes are reserved for the issue that adds them and are carried through unchanged.
+//! camera, light, render settings, image size, the ambient-occlusion method and its
+//! parameters, the clip shapes with their poses and modes, and meshes drawn inside.
 
 use crate::ao::AoSettings;
 use crate::render::{Camera, RenderSettings};

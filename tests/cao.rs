@@ -9,7 +9,7 @@ use common::{crop, device, texels};
 
 use common::{Rng, data};
 use glam::Vec3;
-use volao::ao::cao::{CaoGpu, CaoMode, clip_volume_cpu, lao_on_opacity_cpu, reach_mm};
+use volao::ao::cao::{CaoGpu, CaoMode, CaoVolume, clip_volume_cpu, lao_on_opacity_cpu, reach_mm};
 use volao::ao::lao::{Rays, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::clip::camera::EMPTY;
@@ -119,12 +119,12 @@ impl Scene {
         assert!(stats.clip_errors.is_empty(), "{:?}", stats.clip_errors);
         let ao = self
             .cao
-            .read(&self.gpu, 3)
+            .read(&self.gpu, CaoVolume::Ambient)
             .unwrap_or_else(|e| panic!("{e}"));
         self.vol.set_ambient_occlusion_view(self.cao.ao_view());
         let image = self
             .rc
-            .render_clipped(&self.gpu, &self.vol, &self.frame, Some(&self.cao.clip))
+            .render(&self.gpu, &self.vol, &self.frame, Some(&self.cao.clip))
             .unwrap_or_else(|e| panic!("{e}"));
         (ao, image.pixels, stats.percent_recomputed())
     }
@@ -352,8 +352,14 @@ fn gpu_mask_and_opacity_match_the_cpu_twin() {
                 .unwrap_or_else(|e| panic!("{e}"));
             let lut = lao_lut(&s.tf, &s.vol.texels);
             let (v_o, v_m) = clip_volume_cpu(&s.vol.texels, &lut, &maps, 32);
-            let g_o = s.cao.read(&s.gpu, 0).unwrap_or_else(|e| panic!("{e}"));
-            let g_m = s.cao.read(&s.gpu, 1).unwrap_or_else(|e| panic!("{e}"));
+            let g_o = s
+                .cao
+                .read(&s.gpu, CaoVolume::ClippedOpacity)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let g_m = s
+                .cao
+                .read(&s.gpu, CaoVolume::Mask)
+                .unwrap_or_else(|e| panic!("{e}"));
             // The CPU's f32 arithmetic may round a sample lying on a map boundary the
             // other way than the GPU's (fused multiply-adds). In V_m such a voxel moves to
             // the neighbouring class (partly clipped ↔ not or wholly); in V_o it differs by
@@ -395,8 +401,14 @@ fn gpu_mask_and_opacity_match_the_cpu_twin() {
                 *seen |= g_m.contains(&class);
             }
             // Step V: the twin ray casts from the GPU's V_o, V_m, V_PAO.
-            let pao = s.cao.read(&s.gpu, 2).unwrap_or_else(|e| panic!("{e}"));
-            let ao = s.cao.read(&s.gpu, 3).unwrap_or_else(|e| panic!("{e}"));
+            let pao = s
+                .cao
+                .read(&s.gpu, CaoVolume::Precomputed)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let ao = s
+                .cao
+                .read(&s.gpu, CaoVolume::Ambient)
+                .unwrap_or_else(|e| panic!("{e}"));
             let twin = lao_on_opacity_cpu(
                 &s.vol.texels,
                 &g_o,

@@ -131,7 +131,7 @@ fn opaque_half_space_blocks_the_cones_pointing_into_it() {
 #[test]
 fn gpu_matches_cpu_twin() {
     let gpu = device();
-    let cone = ConeGpu::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let cone = gpu.stage::<ConeGpu>().unwrap_or_else(|e| panic!("{e}"));
     let cases = [
         ("engine", "raw/engine.raw", [96, 96, 40], [48, 40, 32]),
         ("cranium", "raw/cranium-ct.raw", [30, 100, 40], [40, 48, 24]),

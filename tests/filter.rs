@@ -171,7 +171,7 @@ fn wide_and_baseline_builds_of_the_cpu_twin_agree_bit_for_bit() {
 #[test]
 fn separable_statistics_equal_brute_force_gpu() {
     let gpu = device();
-    let filter = FilterGpu::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let filter = gpu.stage::<FilterGpu>().unwrap_or_else(|e| panic!("{e}"));
     let mut rng = Rng(0x1234_5678_9abc_def1);
     for dims in [[13, 7, 9], [90, 5, 4], [3, 70, 6]] {
         // f32 texels (an 8-bit unorm texel may convert 1 ulp away from k/255 on a GPU).
@@ -366,7 +366,7 @@ fn step_edge_and_staircase() {
 #[test]
 fn gpu_matches_cpu_twin_for_every_map_on_real_data() {
     let gpu = device();
-    let filter = FilterGpu::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let filter = gpu.stage::<FilterGpu>().unwrap_or_else(|e| panic!("{e}"));
     let cases = [
         ("engine", "raw/engine.raw", [96, 96, 40], [48, 40, 32]),
         ("cranium", "raw/cranium-ct.raw", [30, 100, 40], [40, 48, 32]),
@@ -420,7 +420,19 @@ fn offscreen_render_gpu_matches_cpu_for_every_method_and_modulation() {
     use volao::ao::filter::OpacityModulation;
     use volao::ao::{AoMethod, AoSettings};
     use volao::render::image::{Tolerance, check};
-    use volao::render::offscreen::render;
+    use volao::render::offscreen::{RenderJob, Rendered};
+    // `volao render`'s path on a fresh device (`on_gpu`) or on the CPU twin.
+    let render = |v: &volume::Volume,
+                  tf: &TransferFunction,
+                  frame: &Frame,
+                  ao: &AoSettings,
+                  on_gpu: bool,
+                  progress: &(dyn Fn(usize, usize) + Sync)|
+     -> Result<Rendered, volao::gpu::GpuError> {
+        let gpu = on_gpu.then(|| std::sync::Arc::new(device()));
+        let job = RenderJob::new(v, tf, frame, ao);
+        volao::render::offscreen::render(gpu.as_ref(), &job, progress)
+    };
     use volao::render::{Camera, Frame, Image, RenderSettings};
     // As tests/render.rs TWIN: the GPU's reduced-precision filtering weights move a few
     // surface pixels.

@@ -149,7 +149,7 @@ fn anisotropic_spacing_is_respected() {
 #[test]
 fn gpu_matches_cpu_twin_for_every_ray_set() {
     let gpu = device();
-    let lao = LaoGpu::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let lao = gpu.stage::<LaoGpu>().unwrap_or_else(|e| panic!("{e}"));
     let cases = [
         ("engine", "raw/engine.raw", [96, 96, 40], [40, 40, 20]),
         ("cranium", "raw/cranium-ct.raw", [30, 108, 40], [40, 32, 24]),

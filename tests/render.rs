@@ -49,7 +49,7 @@ fn both(
     let vol = GpuVolume::from_texels(gpu, texels.clone(), tf, frame.settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     let g = rc
-        .render(gpu, &vol, frame)
+        .render(gpu, &vol, frame, None)
         .unwrap_or_else(|e| panic!("{e}"));
     let (cv, occ) = cpu::prepare(texels, &vol.lut);
     let c = cpu::render(texels, &cv, &vol.lut, &occ, frame);
@@ -156,7 +156,9 @@ fn golden_images_with_the_ct_bone_preset() {
         };
         let vol =
             GpuVolume::new(&gpu, &v, &tf, f.settings.step_voxels).unwrap_or_else(|e| panic!("{e}"));
-        let image = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        let image = rc
+            .render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"));
         let path = golden_dir().join(format!("{name}_ct_bone.png"));
         if std::env::var_os("VOLAO_BLESS").is_some() {
             image.save_png(&path).unwrap_or_else(|e| panic!("{e}"));
@@ -198,9 +200,13 @@ fn empty_space_skipping_does_not_change_the_image() {
             occ.len()
         );
         f.settings.empty_space_skipping = true;
-        let on = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        let on = rc
+            .render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"));
         f.settings.empty_space_skipping = false;
-        let off = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        let off = rc
+            .render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"));
         // Skipping visits exactly the samples it would have found transparent, so the
         // image must not change at all.
         check(
@@ -320,7 +326,9 @@ fn jittered_ray_starts_remove_wood_grain_rings() {
         };
         let vol =
             GpuVolume::new(&gpu, &v, &tf, f.settings.step_voxels).unwrap_or_else(|e| panic!("{e}"));
-        let img = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        let img = rc
+            .render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"));
         if std::env::var_os("VOLAO_DUMP").is_some() {
             let _ = std::fs::create_dir_all(out_dir());
             let _ = img.save_png(&out_dir().join(format!("ball_jitter_{jitter}.png")));
@@ -359,7 +367,9 @@ fn an_all_zero_volume_renders_the_background() {
             };
             let vol = GpuVolume::new(&gpu, &v, &tf, f.settings.step_voxels)
                 .unwrap_or_else(|e| panic!("{e}"));
-            let img = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+            let img = rc
+                .render(&gpu, &vol, &f, None)
+                .unwrap_or_else(|e| panic!("{e}"));
             let want = background.map(|c| (c * 255.0).round() as u8);
             // ±1: 0.3 × 255 = 76.5 may round either way in the GPU's unorm8 store.
             let off = img
@@ -423,7 +433,8 @@ fn a_saved_scene_renders_the_same_image() {
         };
         let vol = GpuVolume::new(&gpu, &v, &s.transfer_function, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
-        rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"))
+        rc.render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"))
     };
     let scene_path = dir.path().join("view.json");
     let before = render(&scene, &scene_path);
@@ -446,7 +457,7 @@ fn gpu_matches_cpu_twin_with_lao() {
     use volao::ao::rays::RaySet;
     let gpu = device();
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
-    let lao = LaoGpu::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let lao = gpu.stage::<LaoGpu>().unwrap_or_else(|e| panic!("{e}"));
     let v = volume::demo::head_phantom(48);
     let texels = small(&v);
     let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
@@ -465,7 +476,9 @@ fn gpu_matches_cpu_twin_with_lao() {
         .compute(&gpu, &vol, &lut, &rays, 10, &|_, _| {})
         .unwrap_or_else(|e| panic!("{e}"));
     vol.set_ambient_occlusion(&gpu, &a);
-    let g = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+    let g = rc
+        .render(&gpu, &vol, &f, None)
+        .unwrap_or_else(|e| panic!("{e}"));
     // The CPU twin computes its own LAO (the GPU keeps it as f32 too).
     let (mut cv, occ) = cpu::prepare(&texels, &vol.lut);
     let cpu_a = lao_cpu(&texels, &lut, &rays, 10, &|_, _| {});

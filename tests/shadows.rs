@@ -18,9 +18,9 @@ use volao::volume::Volume;
 
 fn gpu_light(gpu: &Gpu, v: &Volume, tf: &TransferFunction, dir: Vec3) -> Vec<f32> {
     let t = texels(v);
-    LightGpu::new(&gpu.device)
+    gpu.stage::<LightGpu>()
         .unwrap_or_else(|e| panic!("{e}"))
-        .compute(gpu, &t, &light_lut(tf, &t), dir, &|_, _| {})
+        .compute(gpu, &t, &light_lut(tf, &t), dir, None, &|_, _| {})
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
@@ -30,7 +30,7 @@ fn empty_volume_casts_no_shadow() {
     let tf = flat_tf(0.0);
     let dir = light_direction([1.0, -2.0, 0.5]).expect("valid");
     let t = texels(&v);
-    let c = light_cpu(&t, &light_lut(&tf, &t), dir, &|_, _| {});
+    let c = light_cpu(&t, &light_lut(&tf, &t), dir, None, &|_, _| {});
     assert!(c.iter().all(|&x| x == 1.0));
     let g = gpu_light(&device(), &v, &tf, dir);
     assert!(g.iter().all(|&x| x == 1.0));
@@ -46,7 +46,7 @@ fn uniform_medium_attenuates_by_beers_law_over_the_jittered_samples() {
     let tf = flat_tf(alpha);
     let dir = light_direction([0.3, -0.5, 0.8]).expect("valid");
     let t = texels(&v);
-    let c = light_cpu(&t, &light_lut(&tf, &t), dir, &|_, _| {});
+    let c = light_cpu(&t, &light_lut(&tf, &t), dir, None, &|_, _| {});
     let g = gpu_light(&device(), &v, &tf, dir);
     let extent = Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32);
     let mut checked = 0;
@@ -98,7 +98,7 @@ fn light_volume_gpu_matches_cpu_twin_on_real_data() {
         for d in [[0.0, 0.0, 1.0], [-0.5, 0.6, 0.62], [0.9, -0.2, -0.3]] {
             let dir = light_direction(d).expect("valid");
             let g = gpu_light(&gpu, &v, &tf, dir);
-            let c = light_cpu(&t, &light_lut(&tf, &t), dir, &|_, _| {});
+            let c = light_cpu(&t, &light_lut(&tf, &t), dir, None, &|_, _| {});
             let max = g
                 .iter()
                 .zip(&c)
@@ -153,18 +153,21 @@ fn shadowed_rendering_gpu_matches_cpu_twin_and_darkens() {
             };
             let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
                 .unwrap_or_else(|e| panic!("{e}"));
-            let light = LightGpu::new(&gpu.device)
+            let light = gpu
+                .stage::<LightGpu>()
                 .unwrap_or_else(|e| panic!("{e}"))
-                .compute(&gpu, &t, &light_lut(&tf, &t), dir, &|_, _| {})
+                .compute(&gpu, &t, &light_lut(&tf, &t), dir, None, &|_, _| {})
                 .unwrap_or_else(|e| panic!("{e}"));
             let sampled = vol
                 .set_light_volume(&gpu, Some((&light, dir)))
                 .unwrap_or_else(|e| panic!("{e}"));
-            let g = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+            let g = rc
+                .render(&gpu, &vol, &f, None)
+                .unwrap_or_else(|e| panic!("{e}"));
             let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
             cv.light = Some(LightVolume {
                 direction: dir,
-                values: quantise(&light_cpu(&t, &light_lut(&tf, &t), dir, &|_, _| {})),
+                values: quantise(&light_cpu(&t, &light_lut(&tf, &t), dir, None, &|_, _| {})),
             });
             assert_eq!(sampled.map(|l| l.values.len()), Some(light.len()));
             let c = cpu::render(&t, &cv, &vol.lut, &occ, &f);
@@ -177,7 +180,9 @@ fn shadowed_rendering_gpu_matches_cpu_twin_and_darkens() {
             // Shadows darken: the same frame lit without them is brighter.
             vol.set_light_volume(&gpu, None)
                 .unwrap_or_else(|e| panic!("{e}"));
-            let lit = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+            let lit = rc
+                .render(&gpu, &vol, &f, None)
+                .unwrap_or_else(|e| panic!("{e}"));
             let lum = |img: &Image| img.pixels.iter().map(|p| p[0] as u64).sum::<u64>();
             assert!(
                 (lum(&g) as f64) < 0.9 * lum(&lit) as f64,
@@ -217,7 +222,7 @@ fn imagire_filter_keeps_linear_light_and_softens_a_hard_edge() {
             })
             .fold(0.0f32, f32::max)
     };
-    let plain = steepest(&|x| volao::render::cpu::trilinear(&edge, dims, at(x)));
+    let plain = steepest(&|x| volao::sample::trilinear(&edge, dims, at(x)));
     let filtered = steepest(&|x| shadow_factor(&edge, dims, at(x), half_step));
     assert!(
         (plain - 1.0).abs() < 1e-6 && (filtered - 0.75).abs() < 1e-6,
@@ -229,7 +234,6 @@ fn imagire_filter_keeps_linear_light_and_softens_a_hard_edge() {
 fn light_passes_through_clipped_space_on_gpu_and_cpu_alike() {
     use volao::clip::ClipShape;
     use volao::clip::gpu::ClipMaps;
-    use volao::render::shadow::light_cpu_clipped;
     // A uniform medium with the upper half carved away, light from above: voxels just
     // below the cut see the light through empty space.
     let n = [20, 18, 24];
@@ -243,19 +247,20 @@ fn light_passes_through_clipped_space_on_gpu_and_cpu_alike() {
     let radius = Vec3::from(t.extent()).length() * 0.5;
     maps.update(&gpu, std::slice::from_ref(&plane), radius, 1.0, 128)
         .unwrap_or_else(|e| panic!("{e}"));
-    let g = LightGpu::new(&gpu.device)
+    let g = gpu
+        .stage::<LightGpu>()
         .unwrap_or_else(|e| panic!("{e}"))
-        .compute_clipped(&gpu, &t, &light_lut(&tf, &t), dir, Some(&maps), &|_, _| {})
+        .compute(&gpu, &t, &light_lut(&tf, &t), dir, Some(&maps), &|_, _| {})
         .unwrap_or_else(|e| panic!("{e}"));
     let cpu_maps = maps.read_back(&gpu).unwrap_or_else(|e| panic!("{e}"));
-    let c = light_cpu_clipped(&t, &light_lut(&tf, &t), dir, Some(&cpu_maps), &|_, _| {});
+    let c = light_cpu(&t, &light_lut(&tf, &t), dir, Some(&cpu_maps), &|_, _| {});
     let worst = g
         .iter()
         .zip(&c)
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f32::max);
     assert!(worst < 1e-4, "GPU vs CPU: {worst}");
-    let unclipped = light_cpu(&t, &light_lut(&tf, &t), dir, &|_, _| {});
+    let unclipped = light_cpu(&t, &light_lut(&tf, &t), dir, None, &|_, _| {});
     // Just below the cut (z = 11, the plane is at z = 12 mm): brighter when clipped.
     let at = |values: &[f32], x: usize, y: usize, z: usize| values[x + n[0] * (y + n[1] * z)];
     let (lit, shaded) = (at(&c, 10, 9, 11), at(&unclipped, 10, 9, 11));

@@ -41,7 +41,9 @@ fn both(
     let mut vol = GpuVolume::from_texels(gpu, t.clone(), tf, f.settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     vol.extras.surfaces = surfaces.to_vec();
-    let g = rc.render(gpu, &vol, f).unwrap_or_else(|e| panic!("{e}"));
+    let g = rc
+        .render(gpu, &vol, f, None)
+        .unwrap_or_else(|e| panic!("{e}"));
     let (mut cv, occ) = cpu::prepare(t, &vol.lut);
     cv.surfaces = Some(CpuSurfaces {
         surfaces: surfaces.to_vec(),
@@ -173,7 +175,9 @@ fn surfaces_in_real_data_gpu_matches_cpu_twin() {
         let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
         vol.extras.surfaces.clear();
-        let plain = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        let plain = rc
+            .render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"));
         let changed = plain
             .pixels
             .iter()

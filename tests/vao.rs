@@ -46,7 +46,7 @@ fn centre(v: [usize; 3], dims: [usize; 3]) -> Vec3 {
 fn gpu_vao(gpu: &Gpu, v: &Volume, tf: &TransferFunction, s: &VaoSettings) -> Vec<f32> {
     let t = texels(v);
     let inputs = VaoInputs::new(gpu, &t, tf, s).unwrap_or_else(|e| panic!("{e}"));
-    VaoGpu::new(&gpu.device)
+    gpu.stage::<VaoGpu>()
         .unwrap_or_else(|e| panic!("{e}"))
         .compute(gpu, t.dims, &inputs, &|_, _| {})
         .unwrap_or_else(|e| panic!("{e}"))
@@ -277,7 +277,9 @@ fn live_mode_gpu_matches_cpu_twin() {
         .unwrap_or_else(|e| panic!("{e}"));
     vol.set_live_vao(&gpu, &tf, Some(&s))
         .unwrap_or_else(|e| panic!("{e}"));
-    let g = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+    let g = rc
+        .render(&gpu, &vol, &f, None)
+        .unwrap_or_else(|e| panic!("{e}"));
     let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
     cv.live_vao = Some(PositionalAo::new(&t, &tf, &s));
     let c = cpu::render(&t, &cv, &vol.lut, &occ, &f);
@@ -351,17 +353,22 @@ fn live_and_precomputed_agree_at_voxel_centres() {
         let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
         let inputs = VaoInputs::new(&gpu, &t, &tf, &s).unwrap_or_else(|e| panic!("{e}"));
-        let a = VaoGpu::new(&gpu.device)
+        let a = gpu
+            .stage::<VaoGpu>()
             .unwrap_or_else(|e| panic!("{e}"))
             .compute(&gpu, t.dims, &inputs, &|_, _| {})
             .unwrap_or_else(|e| panic!("{e}"));
         vol.set_ambient_occlusion(&gpu, &a);
-        let precomputed = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        let precomputed = rc
+            .render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"));
         let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
         vol.set_live_vao(&gpu, &tf, Some(&s))
             .unwrap_or_else(|e| panic!("{e}"));
-        let live = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        let live = rc
+            .render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"));
         // The precomputed volume is stored as 16-bit unorm (±1/131070) and the sample
         // positions carry f32 rounding of the camera matrices: one level of 255.
         let cmp = compare(
@@ -383,7 +390,9 @@ fn live_and_precomputed_agree_at_voxel_centres() {
         // The check has teeth: without AO the image differs.
         vol.set_live_vao(&gpu, &tf, None)
             .unwrap_or_else(|e| panic!("{e}"));
-        let plain = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+        let plain = rc
+            .render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"));
         assert!(compare(&plain, &precomputed, Tolerance::EXACT).max_diff > 10);
     }
 }
@@ -418,11 +427,15 @@ fn live_mode_follows_a_transfer_function_change_at_once() {
         vol
     };
     let mut vol = fresh(&bone);
-    let before = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+    let before = rc
+        .render(&gpu, &vol, &f, None)
+        .unwrap_or_else(|e| panic!("{e}"));
     vol.set_transfer_function(&gpu, &soft, f.settings.step_voxels);
-    let after = rc.render(&gpu, &vol, &f).unwrap_or_else(|e| panic!("{e}"));
+    let after = rc
+        .render(&gpu, &vol, &f, None)
+        .unwrap_or_else(|e| panic!("{e}"));
     let expected = rc
-        .render(&gpu, &fresh(&soft), &f)
+        .render(&gpu, &fresh(&soft), &f, None)
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(
         after.pixels, expected.pixels,
@@ -648,8 +661,14 @@ fn float_volumes_beyond_the_f16_range_give_the_same_ao_and_light() {
     assert!(a32.iter().any(|&a| a < 0.9), "some occlusion");
     use volao::render::shadow::{light_cpu, light_direction, light_lut};
     let dir = light_direction([0.3, 0.2, 1.0]).expect("valid");
-    let l8 = light_cpu(&t8, &light_lut(&ramp(255.0), &t8), dir, &|_, _| {});
-    let l32 = light_cpu(&t32, &light_lut(&ramp(255_000.0), &t32), dir, &|_, _| {});
+    let l8 = light_cpu(&t8, &light_lut(&ramp(255.0), &t8), dir, None, &|_, _| {});
+    let l32 = light_cpu(
+        &t32,
+        &light_lut(&ramp(255_000.0), &t32),
+        dir,
+        None,
+        &|_, _| {},
+    );
     assert!(
         max(&l8, &l32) <= 1e-3,
         "light u8 vs f32: {}",
@@ -734,7 +753,7 @@ fn live_mode_treats_clipped_space_as_empty_and_matches_its_twin() {
     )
     .unwrap_or_else(|e| panic!("{e}"));
     let g = rc
-        .render_clipped(&gpu, &vol, &f, Some(&maps))
+        .render(&gpu, &vol, &f, Some(&maps))
         .unwrap_or_else(|e| panic!("{e}"));
     let cpu_maps = maps.read_back(&gpu).unwrap_or_else(|e| panic!("{e}"));
     let (mut cv, occ) = cpu::prepare(&t, &vol.lut);

@@ -769,13 +769,12 @@ fn add_a_clip_shape_drag_it_and_cao_follows() {
     use volao::render::gpu::{GpuVolume, RayCaster};
     let dir = tempfile::tempdir().expect("temp dir");
     let gpu = device();
-    let twin = volao::gpu::Gpu {
-        instance: gpu.instance.clone(),
-        adapter: gpu.adapter.clone(),
-        device: gpu.device.clone(),
-        queue: gpu.queue.clone(),
-        info: gpu.info.clone(),
-    };
+    let twin = volao::gpu::Gpu::new(
+        gpu.instance.clone(),
+        gpu.adapter.clone(),
+        gpu.device.clone(),
+        gpu.queue.clone(),
+    );
     let mut h = harness_on(gpu, bucky(), dir.path());
     settle(&mut h);
     h.get_by_label("Sphere").scroll_to_me();
@@ -844,7 +843,7 @@ fn add_a_clip_shape_drag_it_and_cao_follows() {
     clip.update(&twin, &doc.clip_shapes, doc.radius, reach, CLIP_MAPS)
         .unwrap_or_else(|e| panic!("{e}"));
     let expected = RayCaster::new(&twin.device)
-        .and_then(|rc| rc.render_clipped(&twin, &vol, &frame, Some(&clip)))
+        .and_then(|rc| rc.render(&twin, &vol, &frame, Some(&clip)))
         .unwrap_or_else(|e| panic!("{e}"));
     check(
         "clipped_viewport",
@@ -855,7 +854,7 @@ fn add_a_clip_shape_drag_it_and_cao_follows() {
     )
     .unwrap_or_else(|e| panic!("{e}"));
     let unclipped = RayCaster::new(&twin.device)
-        .and_then(|rc| rc.render(&twin, &vol, &frame))
+        .and_then(|rc| rc.render(&twin, &vol, &frame, None))
         .unwrap_or_else(|e| panic!("{e}"));
     assert_ne!(
         viewport.pixels, unclipped.pixels,

@@ -23,20 +23,20 @@ use super::lao::{Rays, STEP_MM, lao_lut};
 use crate::clip::ClipShape;
 use crate::clip::cpu::ClipMapsCpu;
 use crate::clip::gpu::{ClipMaps, ClipUpdate};
+use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, read_buffer, read_texture_f32, readback_buffer, shaders,
-    submit_compute_with, uniform_buffer, validated,
+    Gpu, GpuError, bind_group, compute_pipeline, read_buffer, read_texture_f32, readback_buffer,
+    shaders, storage_buffer, uniform_buffer, validated,
 };
-use crate::render::cpu::trilinear;
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
+use crate::sample::trilinear;
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Extra anti-aliasing samples for partly clipped voxels (the paper's N; 41 in all).
-pub const DEFAULT_MSAA: u32 = 32;
+pub use super::settings::DEFAULT_MSAA;
 
 /// Ray samples per GPU submission in step V (see [`super::lao::SAMPLES_PER_SUBMISSION`]).
 const SAMPLES_PER_SUBMISSION: u64 = 1 << 30;
@@ -73,21 +73,81 @@ pub fn reach_mm(samples: u32, spacing: [f32; 3]) -> f32 {
     (samples.max(1) - 1) as f32 * STEP_MM + 1.5 * Vec3::from(spacing).length()
 }
 
+/// Uniforms of step IV. Mirrors `struct Params` in `cao_clip.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct ClipParams {
-    dims: [u32; 4],
-    spacing: [f32; 4],
-    half: [f32; 4],
-    lut_map: [f32; 4],
+    dims: [u32; 3],
+    /// First z-slice of this dispatch.
+    z0: u32,
+    spacing: [f32; 3],
+    /// N, the extra anti-aliasing samples.
+    msaa: f32,
+    /// Half the volume's extent (mm).
+    half: [f32; 3],
+    _pad0: f32,
+    /// LUT index = norm · lut_scale + lut_offset, clamped to lut_last.
+    lut_scale: f32,
+    lut_offset: f32,
+    lut_last: f32,
+    _pad1: f32,
 }
 
+const _: () = assert!(std::mem::size_of::<ClipParams>() == 64);
+
+slab_fields!(ClipParams, tiles);
+
+/// Uniforms of step V. Mirrors `struct Params` in `cao_lao.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct LaoParams {
-    dims: [u32; 4],
-    mm_to_uvw: [f32; 4],
-    counts: [u32; 4],
+    dims: [u32; 3],
+    /// First z-slice of this dispatch.
+    z0: u32,
+    mm_to_uvw: [f32; 3],
+    _pad0: f32,
+    rays: u32,
+    samples: u32,
+    /// 1: ray cast every unclipped voxel (the baseline), 0: only category b.
+    full: u32,
+    _pad1: u32,
+}
+
+const _: () = assert!(std::mem::size_of::<LaoParams>() == 48);
+
+slab_fields!(LaoParams, tiles);
+
+/// Which CAO volume to read back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CaoVolume {
+    /// `V_o`, the clipped opacity volume.
+    ClippedOpacity,
+    /// `V_m`, the mask (0 clipped, ½ recompute, 1 copy).
+    Mask,
+    /// `V_PAO`, LAO of the unclipped volume.
+    Precomputed,
+    /// `V_AO`, this frame's ambient factor.
+    Ambient,
+}
+
+/// CAO's pipelines and sampler, built once per device.
+#[derive(Debug)]
+pub struct CaoPipelines {
+    clip: wgpu::ComputePipeline,
+    lao: wgpu::ComputePipeline,
+    sampler: wgpu::Sampler,
+}
+
+impl crate::gpu::Stage for CaoPipelines {
+    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
+        let clip_module = shaders::module(device, "cao_clip.wgsl")?;
+        let lao_module = shaders::module(device, "cao_lao.wgsl")?;
+        validated(device, "CaoPipelines::create", || CaoPipelines {
+            clip: compute_pipeline(device, "Cao::clip", &clip_module, "main", None),
+            lao: compute_pipeline(device, "Cao::lao", &lao_module, "main", None),
+            sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
+        })
+    }
 }
 
 /// Per-frame figures.
@@ -114,44 +174,35 @@ impl CaoStats {
 }
 
 fn volume_texture(device: &wgpu::Device, label: &str, dims: [u32; 3]) -> wgpu::Texture {
-    device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d {
-            width: dims[0],
-            height: dims[1],
-            depth_or_array_layers: dims[2],
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D3,
-        format: wgpu::TextureFormat::R32Float,
-        usage: wgpu::TextureUsages::STORAGE_BINDING
+    crate::gpu::texture_3d(
+        device,
+        label,
+        dims,
+        wgpu::TextureFormat::R32Float,
+        wgpu::TextureUsages::STORAGE_BINDING
             | wgpu::TextureUsages::TEXTURE_BINDING
             | wgpu::TextureUsages::COPY_SRC
             | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[],
-    })
+    )
 }
 
 /// The CAO volumes and pipelines for one uploaded volume.
 #[derive(Debug)]
 pub struct CaoGpu {
-    clip_pipeline: wgpu::ComputePipeline,
-    lao_pipeline: wgpu::ComputePipeline,
-    sampler: wgpu::Sampler,
+    pipelines: std::sync::Arc<CaoPipelines>,
     pub clip: ClipMaps,
     v_o: wgpu::Texture,
     v_m: wgpu::Texture,
     v_pao: wgpu::Texture,
     v_ao: wgpu::Texture,
     views: [wgpu::TextureView; 4],
-    /// The density volume V (the ray caster's texture).
-    volume_view: wgpu::TextureView,
-    lut_buffer: wgpu::Buffer,
-    msaa_buffer: wgpu::Buffer,
-    ray_buffer: wgpu::Buffer,
     counters: wgpu::Buffer,
     counters_readback: wgpu::Buffer,
+    /// Uniforms of steps IV and V, rewritten per slab, and the bind groups reading them.
+    clip_uniforms: wgpu::Buffer,
+    lao_uniforms: wgpu::Buffer,
+    clip_group: wgpu::BindGroup,
+    lao_group: wgpu::BindGroup,
     clip_params: ClipParams,
     lao_params: LaoParams,
     dims: [u32; 3],
@@ -186,10 +237,9 @@ impl CaoGpu {
         }
         let texels = &vol.texels;
         let dims = texels.dims.map(|d| d as u32);
-        let clip_module = shaders::module(device, "cao_clip.wgsl")?;
-        let lao_module = shaders::module(device, "cao_lao.wgsl")?;
+        let pipelines = gpu.stage::<CaoPipelines>()?;
         let lut = lao_lut(tf, texels);
-        let alpha: Vec<f32> = lut.rgba.iter().map(|e| e[3]).collect();
+        let alpha = crate::sample::alpha_column(&lut);
         let offsets: Vec<[f32; 4]> = msaa_offsets(msaa.max(1))
             .iter()
             .map(|o| [o.x, o.y, o.z, 0.0])
@@ -204,72 +254,104 @@ impl CaoGpu {
         let extent = texels.extent();
         let (a, b) = texels.lut_map(&lut);
         let clip_params = ClipParams {
-            dims: [dims[0], dims[1], dims[2], 0],
-            spacing: [
-                texels.spacing[0],
-                texels.spacing[1],
-                texels.spacing[2],
-                msaa as f32,
-            ],
-            half: [extent[0] * 0.5, extent[1] * 0.5, extent[2] * 0.5, 0.0],
-            lut_map: [a, b, (lut.rgba.len().max(2) - 1) as f32, 0.0],
+            dims,
+            z0: 0,
+            spacing: texels.spacing,
+            msaa: msaa as f32,
+            half: [extent[0] * 0.5, extent[1] * 0.5, extent[2] * 0.5],
+            _pad0: 0.0,
+            lut_scale: a,
+            lut_offset: b,
+            lut_last: (lut.rgba.len().max(2) - 1) as f32,
+            _pad1: 0.0,
         };
         let lao_params = LaoParams {
-            dims: [dims[0], dims[1], dims[2], 0],
+            dims,
+            z0: 0,
             mm_to_uvw: [
                 STEP_MM / extent[0],
                 STEP_MM / extent[1],
                 STEP_MM / extent[2],
-                0.0,
             ],
-            counts: [rays.directions.len() as u32, samples.max(1), 0, 0],
+            _pad0: 0.0,
+            rays: rays.directions.len() as u32,
+            samples: samples.max(1),
+            full: 0,
+            _pad1: 0,
         };
         let mut cao = validated(device, "CaoGpu::new", || {
-            let storage = |label, bytes: &[u8], extra| {
-                let b = device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(label),
-                    size: bytes.len().max(16) as u64,
-                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
-                    mapped_at_creation: false,
-                });
-                gpu.queue.write_buffer(&b, 0, bytes);
-                b
+            let storage = |label, bytes: &[u8]| {
+                storage_buffer(gpu, label, bytes, wgpu::BufferUsages::empty())
             };
-            let pipeline =
-                |label, module| crate::gpu::compute_pipeline(device, label, module, "main", None);
             let v_o = volume_texture(device, "Cao::v_o", dims);
             let v_m = volume_texture(device, "Cao::v_m", dims);
             let v_pao = volume_texture(device, "Cao::v_pao", dims);
             let v_ao = volume_texture(device, "Cao::v_ao", dims);
             let views = [&v_o, &v_m, &v_pao, &v_ao].map(|t| t.create_view(&Default::default()));
+            let lut_buffer = storage("Cao::lut_alpha", bytemuck::cast_slice(&alpha));
+            let msaa_buffer = storage("Cao::msaa", bytemuck::cast_slice(&offsets));
+            let ray_buffer = storage("Cao::rays", bytemuck::cast_slice(&packed));
+            let counters = storage_buffer(
+                gpu,
+                "Cao::counters",
+                &[0u8; 16],
+                wgpu::BufferUsages::COPY_SRC,
+            );
+            let clip_uniforms = uniform_buffer(
+                device,
+                &gpu.queue,
+                "Cao::clip_params",
+                bytemuck::bytes_of(&clip_params),
+            );
+            let lao_uniforms = uniform_buffer(
+                device,
+                &gpu.queue,
+                "Cao::lao_params",
+                bytemuck::bytes_of(&lao_params),
+            );
+            let volume_view = vol.volume_view();
+            let clip_group = bind_group(
+                device,
+                "Cao::clip",
+                &pipelines.clip.get_bind_group_layout(0),
+                &[
+                    clip_uniforms.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(volume_view),
+                    lut_buffer.as_entire_binding(),
+                    msaa_buffer.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&views[0]),
+                    wgpu::BindingResource::TextureView(&views[1]),
+                    counters.as_entire_binding(),
+                ],
+            );
+            let lao_group = bind_group(
+                device,
+                "Cao::lao",
+                &pipelines.lao.get_bind_group_layout(0),
+                &[
+                    lao_uniforms.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&views[0]),
+                    wgpu::BindingResource::Sampler(&pipelines.sampler),
+                    ray_buffer.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&views[1]),
+                    wgpu::BindingResource::TextureView(&views[2]),
+                    wgpu::BindingResource::TextureView(&views[3]),
+                ],
+            );
             CaoGpu {
-                clip_pipeline: pipeline("Cao::clip", &clip_module),
-                lao_pipeline: pipeline("Cao::lao", &lao_module),
-                sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
+                pipelines,
                 clip,
                 v_o,
                 v_m,
                 v_pao,
                 v_ao,
                 views,
-                volume_view: vol.volume_view().clone(),
-                lut_buffer: storage(
-                    "Cao::lut_alpha",
-                    bytemuck::cast_slice(&alpha),
-                    wgpu::BufferUsages::empty(),
-                ),
-                msaa_buffer: storage(
-                    "Cao::msaa",
-                    bytemuck::cast_slice(&offsets),
-                    wgpu::BufferUsages::empty(),
-                ),
-                ray_buffer: storage(
-                    "Cao::rays",
-                    bytemuck::cast_slice(&packed),
-                    wgpu::BufferUsages::empty(),
-                ),
-                counters: storage("Cao::counters", &[0u8; 16], wgpu::BufferUsages::COPY_SRC),
+                counters,
                 counters_readback: readback_buffer(device, "Cao::counters_readback", 16),
+                clip_uniforms,
+                lao_uniforms,
+                clip_group,
+                lao_group,
                 clip_params,
                 lao_params,
                 dims,
@@ -346,55 +428,26 @@ impl CaoGpu {
     /// Step IV over the whole volume; returns (voxels to recompute, voxels clipped).
     fn step_iv(&self, gpu: &Gpu) -> Result<(u64, u64), GpuError> {
         let device = &gpu.device;
-        let [nx, ny, nz] = self.dims;
         // Bound each submission's clip samples (41 per voxel per shape at worst).
-        let per_slice = nx as u64
-            * ny as u64
-            * (9 + self.msaa as u64)
-            * self.clip.uniforms.counts[0].max(1) as u64;
-        let slab = ((SAMPLES_PER_SUBMISSION / per_slice.max(1)) as u32).clamp(1, nz);
+        let per_voxel = (9 + self.msaa as u64) * self.clip.uniforms.counts[0].max(1) as u64;
+        let slabs = SlabDispatch::new(
+            self.dims,
+            Grid::Tiles,
+            per_voxel,
+            SAMPLES_PER_SUBMISSION,
+            u64::MAX,
+        );
         gpu.queue.write_buffer(&self.counters, 0, &[0u8; 16]);
         let clip_group = self
             .clip
-            .bind_group(device, &self.clip_pipeline.get_bind_group_layout(1));
-        let mut z0 = 0;
-        while z0 < nz {
-            let depth = slab.min(nz - z0);
-            let mut p = self.clip_params;
-            p.dims[3] = z0;
-            validated(device, "Cao::step_iv", || {
-                let uniforms = uniform_buffer(
-                    device,
-                    &gpu.queue,
-                    "Cao::clip_params",
-                    bytemuck::bytes_of(&p),
-                );
-                let group = bind_group(
-                    device,
-                    "Cao::clip",
-                    &self.clip_pipeline.get_bind_group_layout(0),
-                    &[
-                        uniforms.as_entire_binding(),
-                        wgpu::BindingResource::TextureView(&self.volume_view),
-                        self.lut_buffer.as_entire_binding(),
-                        self.msaa_buffer.as_entire_binding(),
-                        wgpu::BindingResource::TextureView(&self.views[0]),
-                        wgpu::BindingResource::TextureView(&self.views[1]),
-                        self.counters.as_entire_binding(),
-                    ],
-                );
-                submit_compute_with(
-                    device,
-                    &gpu.queue,
-                    "Cao::step_iv",
-                    &self.clip_pipeline,
-                    &[&group, &clip_group],
-                    [nx.div_ceil(8), ny.div_ceil(8), depth],
-                    |_| {},
-                );
-            })?;
-            z0 += depth;
-        }
+            .bind_group(device, &self.pipelines.clip.get_bind_group_layout(1));
+        let pass = Pass {
+            label: "Cao::step_iv",
+            pipeline: &self.pipelines.clip,
+            bind_groups: &[&self.clip_group, &clip_group],
+            uniforms: &self.clip_uniforms,
+        };
+        slabs.run(gpu, &pass, self.clip_params, false, &|_, _| {})?;
         validated(device, "Cao::counters", || {
             let mut encoder = device.create_command_encoder(&Default::default());
             encoder.copy_buffer_to_buffer(&self.counters, 0, &self.counters_readback, 0, 16);
@@ -411,54 +464,23 @@ impl CaoGpu {
         mode: CaoMode,
         progress: &dyn Fn(usize, usize),
     ) -> Result<(), GpuError> {
-        let device = &gpu.device;
-        let [nx, ny, nz] = self.dims;
-        let per_slice = nx as u64 * ny as u64 * self.rays as u64 * self.samples as u64;
-        let slab = ((SAMPLES_PER_SUBMISSION / per_slice.max(1)) as u32).clamp(1, nz);
-        let mut z0 = 0;
-        while z0 < nz {
-            let depth = slab.min(nz - z0);
-            let mut p = self.lao_params;
-            p.dims[3] = z0;
-            p.counts[2] = u32::from(mode == CaoMode::Full);
-            validated(device, "Cao::step_v", || {
-                let uniforms = uniform_buffer(
-                    device,
-                    &gpu.queue,
-                    "Cao::lao_params",
-                    bytemuck::bytes_of(&p),
-                );
-                let group = bind_group(
-                    device,
-                    "Cao::lao",
-                    &self.lao_pipeline.get_bind_group_layout(0),
-                    &[
-                        uniforms.as_entire_binding(),
-                        wgpu::BindingResource::TextureView(&self.views[0]),
-                        wgpu::BindingResource::Sampler(&self.sampler),
-                        self.ray_buffer.as_entire_binding(),
-                        wgpu::BindingResource::TextureView(&self.views[1]),
-                        wgpu::BindingResource::TextureView(&self.views[2]),
-                        wgpu::BindingResource::TextureView(&self.views[3]),
-                    ],
-                );
-                submit_compute_with(
-                    device,
-                    &gpu.queue,
-                    "Cao::step_v",
-                    &self.lao_pipeline,
-                    &[&group],
-                    [nx.div_ceil(8), ny.div_ceil(8), depth],
-                    |_| {},
-                );
-            })?;
-            if slab < nz {
-                crate::gpu::wait(device, "Cao::step_v", crate::gpu::WAIT)?;
-            }
-            z0 += depth;
-            progress(z0 as usize, nz as usize);
-        }
-        Ok(())
+        let per_voxel = self.rays as u64 * self.samples as u64;
+        let slabs = SlabDispatch::new(
+            self.dims,
+            Grid::Tiles,
+            per_voxel,
+            SAMPLES_PER_SUBMISSION,
+            u64::MAX,
+        );
+        let mut params = self.lao_params;
+        params.full = u32::from(mode == CaoMode::Full);
+        let pass = Pass {
+            label: "Cao::step_v",
+            pipeline: &self.pipelines.lao,
+            bind_groups: &[&self.lao_group],
+            uniforms: &self.lao_uniforms,
+        };
+        slabs.run(gpu, &pass, params, true, progress)
     }
 
     /// `V_AO` for the ray caster.
@@ -466,9 +488,14 @@ impl CaoGpu {
         &self.views[3]
     }
 
-    /// Reads `V_o`, `V_m`, `V_PAO` or `V_AO` (0–3) back, x fastest.
-    pub fn read(&self, gpu: &Gpu, which: usize) -> Result<Vec<f32>, GpuError> {
-        let t = [&self.v_o, &self.v_m, &self.v_pao, &self.v_ao][which.min(3)];
+    /// Reads one of the CAO volumes back, x fastest.
+    pub fn read(&self, gpu: &Gpu, which: CaoVolume) -> Result<Vec<f32>, GpuError> {
+        let t = match which {
+            CaoVolume::ClippedOpacity => &self.v_o,
+            CaoVolume::Mask => &self.v_m,
+            CaoVolume::Precomputed => &self.v_pao,
+            CaoVolume::Ambient => &self.v_ao,
+        };
         read_texture_f32(gpu, t, self.dims, "Cao::read")
     }
 

@@ -15,95 +15,18 @@
 //! `A(x)` is the mean over cones. A sphere whose centre lies outside the volume is empty
 //! (as LAO treats samples outside).
 
+use crate::gpu::dispatch::{Grid, SlabDispatch};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, padded_row_bytes, read_buffer, readback_buffer, shaders,
-    submit_compute, uniform_buffer, validated,
+    ComputeStage, Gpu, GpuError, bind_group, copy_texture_out, read_buffer, storage_buffer,
+    submit_compute, texture_readback, uniform_buffer, unpad, validated,
 };
-use crate::render::cpu::trilinear;
 use crate::render::texels::VolumeTexels;
+use crate::sample::trilinear;
 use crate::tf::TransferFunction;
 use glam::Vec3;
 use rayon::prelude::*;
 
-/// Spheres per cone: low / medium / high = 3 / 5 / 7 (the paper's quality presets).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ConePreset {
-    Low,
-    #[default]
-    Medium,
-    High,
-}
-
-impl ConePreset {
-    pub fn spheres(self) -> u32 {
-        match self {
-            ConePreset::Low => 3,
-            ConePreset::Medium => 5,
-            ConePreset::High => 7,
-        }
-    }
-
-    pub fn parse(s: &str) -> Result<Self, String> {
-        match s {
-            "low" => Ok(Self::Low),
-            "medium" => Ok(Self::Medium),
-            "high" => Ok(Self::High),
-            o => Err(format!(
-                "unknown cone preset {o:?} (available: low, medium, high)"
-            )),
-        }
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            ConePreset::Low => "low",
-            ConePreset::Medium => "medium",
-            ConePreset::High => "high",
-        }
-    }
-}
-
-/// Cone axes over the whole sphere: 6 (faces), 14 (+ corners), 26 (+ edges).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-pub enum ConeSet {
-    #[default]
-    #[serde(rename = "6")]
-    Six,
-    #[serde(rename = "14")]
-    Fourteen,
-    #[serde(rename = "26")]
-    TwentySix,
-}
-
-impl ConeSet {
-    pub fn parse(s: &str) -> Result<Self, String> {
-        match s {
-            "6" => Ok(Self::Six),
-            "14" => Ok(Self::Fourteen),
-            "26" => Ok(Self::TwentySix),
-            o => Err(format!("unknown cone count {o:?} (available: 6, 14, 26)")),
-        }
-    }
-
-    pub fn directions(self) -> Vec<Vec3> {
-        use super::rays::RaySet;
-        match self {
-            ConeSet::Six => RaySet::Six,
-            ConeSet::Fourteen => RaySet::Fourteen,
-            ConeSet::TwentySix => RaySet::TwentySix,
-        }
-        .directions()
-    }
-
-    pub fn count(self) -> usize {
-        match self {
-            ConeSet::Six => 6,
-            ConeSet::Fourteen => 14,
-            ConeSet::TwentySix => 26,
-        }
-    }
-}
+pub use super::settings::{ConePreset, ConeSet};
 
 /// An averaged opacity pyramid; level 0 is the volume, x fastest in each level.
 #[derive(Debug, Clone, PartialEq)]
@@ -259,22 +182,15 @@ pub fn cone_cpu(
 
 /// Long-lived cone-tracing state.
 #[derive(Debug)]
-pub struct ConeGpu {
-    pipeline: wgpu::ComputePipeline,
-    sampler: wgpu::Sampler,
+pub struct ConeGpu(ComputeStage);
+
+impl crate::gpu::Stage for ConeGpu {
+    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
+        ComputeStage::new(device, "Cone", "cone.wgsl").map(ConeGpu)
+    }
 }
 
 impl ConeGpu {
-    pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let module = shaders::module(device, "cone.wgsl")?;
-        validated(device, "Cone::new", || ConeGpu {
-            pipeline: crate::gpu::compute_pipeline(device, "Cone::pipeline", &module, "main", None),
-            // Linear within a level; levels are picked exactly (integer LOD) and blended
-            // in the shader, so the CPU twin can follow.
-            sampler: crate::gpu::linear_sampler(device, "Cone::linear_clamp"),
-        })
-    }
-
     /// Uploads the pyramid (R32Float, one mip level per pyramid level), traces the cones
     /// and reads `A(x)` back, x fastest.
     pub fn compute(
@@ -291,59 +207,29 @@ impl ConeGpu {
         let sph = spheres(preset.spheres(), reach_mm, texels, pyramid.levels.len());
         let p = params(texels, pyramid.levels.len(), dirs.len(), sph.len());
         let dims = texels.dims.map(|d| d as u32);
-        let [nx, ny, nz] = dims;
-        let size = |d: [u32; 3]| wgpu::Extent3d {
-            width: d[0],
-            height: d[1],
-            depth_or_array_layers: d[2],
-        };
-        let row = padded_row_bytes(nx * 4);
         let packed_dirs: Vec<[f32; 4]> = dirs.iter().map(|d| [d.x, d.y, d.z, 0.0]).collect();
         let packed_spheres: Vec<[f32; 4]> = sph.iter().map(|s| [s[0], s[1], 0.0, 0.0]).collect();
-        let (out, readback) = validated(device, "Cone::compute", || {
-            let mip = device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("Cone::opacity_mips"),
-                size: size(dims),
-                mip_level_count: pyramid.levels.len() as u32,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format: wgpu::TextureFormat::R32Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            });
+        let (out, readback, row) = validated(device, "Cone::compute", || {
+            let mip = crate::gpu::mip_texture_3d(
+                device,
+                "Cone::opacity_mips",
+                dims,
+                pyramid.levels.len() as u32,
+                wgpu::TextureFormat::R32Float,
+                wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            );
             for (level, (d, values)) in pyramid.levels.iter().enumerate() {
                 let d = d.map(|x| x as u32);
-                gpu.queue.write_texture(
-                    wgpu::TexelCopyTextureInfo {
-                        texture: &mip,
-                        mip_level: level as u32,
-                        origin: wgpu::Origin3d::ZERO,
-                        aspect: wgpu::TextureAspect::All,
-                    },
-                    bytemuck::cast_slice(values),
-                    wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(d[0] * 4),
-                        rows_per_image: Some(d[1]),
-                    },
-                    size(d),
-                );
+                let bytes = bytemuck::cast_slice(values);
+                crate::gpu::write_texture_3d(&gpu.queue, &mip, level as u32, d, 4, bytes);
             }
             let storage = |label, bytes: &[u8]| {
-                let b = device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(label),
-                    size: bytes.len().max(16) as u64,
-                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                });
-                gpu.queue.write_buffer(&b, 0, bytes);
-                b
+                storage_buffer(gpu, label, bytes, wgpu::BufferUsages::empty())
             };
             let dir_buf = storage("Cone::directions", bytemuck::cast_slice(&packed_dirs));
             let sphere_buf = storage("Cone::spheres", bytemuck::cast_slice(&packed_spheres));
             let out = crate::gpu::output_volume(device, "Cone::ambient", dims);
-            let readback =
-                readback_buffer(device, "Cone::readback", row as u64 * ny as u64 * nz as u64);
+            let (readback, row) = texture_readback(device, "Cone::readback", dims, 4);
             let uniforms =
                 uniform_buffer(device, &gpu.queue, "Cone::params", bytemuck::bytes_of(&p));
             let mip_view = mip.create_view(&Default::default());
@@ -351,48 +237,32 @@ impl ConeGpu {
             let group = bind_group(
                 device,
                 "Cone::bind_group",
-                &self.pipeline.get_bind_group_layout(0),
+                &self.0.pipeline.get_bind_group_layout(0),
                 &[
                     uniforms.as_entire_binding(),
                     wgpu::BindingResource::TextureView(&mip_view),
-                    wgpu::BindingResource::Sampler(&self.sampler),
+                    wgpu::BindingResource::Sampler(&self.0.sampler),
                     dir_buf.as_entire_binding(),
                     sphere_buf.as_entire_binding(),
                     wgpu::BindingResource::TextureView(&out_view),
                 ],
             );
+            // The shader covers the whole volume in one dispatch (a fraction of a second).
+            let slab = SlabDispatch::whole(dims, Grid::Tiles).slabs().next();
+            let groups = slab.map_or([1, 1, 1], |s| s.groups);
             submit_compute(
                 device,
                 &gpu.queue,
                 "Cone::trace",
-                &self.pipeline,
+                &self.0.pipeline,
                 &group,
-                [nx.div_ceil(8), ny.div_ceil(8), nz],
-                |encoder| {
-                    encoder.copy_texture_to_buffer(
-                        out.as_image_copy(),
-                        wgpu::TexelCopyBufferInfo {
-                            buffer: &readback,
-                            layout: wgpu::TexelCopyBufferLayout {
-                                offset: 0,
-                                bytes_per_row: Some(row),
-                                rows_per_image: Some(ny),
-                            },
-                        },
-                        size(dims),
-                    );
-                },
+                groups,
+                |e| copy_texture_out(e, &out, &readback, row, dims),
             );
-            (out, readback)
+            (out, readback, row)
         })?;
         let bytes = read_buffer(device, &readback, "Cone::readback")?;
         drop(out);
-        let mut values = Vec::with_capacity((nx * ny * nz) as usize);
-        for r in bytes.chunks_exact(row as usize) {
-            values.extend(bytemuck::pod_collect_to_vec::<u8, f32>(
-                &r[..(nx * 4) as usize],
-            ));
-        }
-        Ok(values)
+        Ok(unpad::<f32>(&bytes, row, dims[0]))
     }
 }

@@ -1,9 +1,8 @@
-//! The cheap AO methods behind one call each for the GPU and the CPU twin: the filter
-//! maps of Ruiz et al. ([`super::filter`]) and cone tracing ([`super::cone`]). They take
-//! a fraction of a second, so callers recompute them whenever the transfer function
-//! changes instead of caching.
+//! The cheap methods' parameters and the opacity modulation: the filter maps of Ruiz
+//! et al. ([`super::filter`]) and cone tracing ([`super::cone`]) take a fraction of a
+//! second, so callers recompute them whenever the transfer function changes instead of
+//! caching. [`super::engine::AoEngine`] runs them.
 
-use super::cone::{ConeGpu, MipPyramid, cone_cpu, opacity};
 use super::filter::{self, AmbientMap, FilterGpu, OpacityModulation, RadiusUnit, Source};
 use super::{AoMethod, AoSettings};
 use crate::gpu::{Gpu, GpuError};
@@ -83,20 +82,6 @@ pub fn statistics_device(gpu: &Gpu) -> String {
     }
 }
 
-/// `A(x)` for a method of this module with `gpu` at hand: [`compute_gpu`], or the CPU
-/// twin on the uploaded texels where [`twin_is_faster`] for a filter map.
-pub fn compute(
-    gpu: &Gpu,
-    vol: &GpuVolume,
-    tf: &TransferFunction,
-    settings: &AoSettings,
-) -> Result<Option<Vec<f32>>, GpuError> {
-    if map_of(settings.method).is_some() && twin_is_faster(gpu) {
-        return Ok(compute_cpu(&vol.texels, tf, settings));
-    }
-    compute_gpu(gpu, vol, tf, settings)
-}
-
 /// Opacity modulation factors with `gpu` at hand: [`modulation_gpu`], or the CPU twin
 /// on the uploaded texels where [`twin_is_faster`].
 pub fn modulation(
@@ -111,59 +96,6 @@ pub fn modulation(
     modulation_gpu(gpu, vol, tf, m)
 }
 
-/// `A(x)` on the GPU for a method of this module (`None` for any other method).
-pub fn compute_gpu(
-    gpu: &Gpu,
-    vol: &GpuVolume,
-    tf: &TransferFunction,
-    settings: &AoSettings,
-) -> Result<Option<Vec<f32>>, GpuError> {
-    let texels = &vol.texels;
-    if let Some(map) = map_of(settings.method) {
-        let source = Source::new(texels, tf, settings.statistic);
-        let radius = box_radius(settings, texels);
-        let mut maps = FilterGpu::new(&gpu.device)?.compute(gpu, vol, &source, radius, &[map])?;
-        return Ok(maps.pop());
-    }
-    if settings.method == AoMethod::Cone {
-        let pyramid = MipPyramid::new(texels.dims, opacity(texels, tf));
-        let a = ConeGpu::new(&gpu.device)?.compute(
-            gpu,
-            texels,
-            &pyramid,
-            settings.cones,
-            settings.cone_preset,
-            cone_reach(settings),
-        )?;
-        return Ok(Some(a));
-    }
-    Ok(None)
-}
-
-/// CPU twin of [`compute_gpu`].
-pub fn compute_cpu(
-    texels: &VolumeTexels,
-    tf: &TransferFunction,
-    settings: &AoSettings,
-) -> Option<Vec<f32>> {
-    if let Some(map) = map_of(settings.method) {
-        let source = Source::new(texels, tf, settings.statistic);
-        let radius = box_radius(settings, texels);
-        return filter::compute_cpu(texels, &source, radius, &[map]).pop();
-    }
-    if settings.method == AoMethod::Cone {
-        let pyramid = MipPyramid::new(texels.dims, opacity(texels, tf));
-        return Some(cone_cpu(
-            texels,
-            &pyramid,
-            settings.cones,
-            settings.cone_preset,
-            cone_reach(settings),
-        ));
-    }
-    None
-}
-
 fn modulation_radius(m: &OpacityModulation) -> [u32; 3] {
     filter::radius_voxels(m.radius, false, [1.0; 3])
 }
@@ -176,7 +108,7 @@ pub fn modulation_gpu(
     m: &OpacityModulation,
 ) -> Result<Vec<f32>, GpuError> {
     let source = Source::new(&vol.texels, tf, m.source);
-    let mut maps = FilterGpu::new(&gpu.device)?.compute(
+    let mut maps = gpu.stage::<FilterGpu>()?.compute(
         gpu,
         vol,
         &source,

@@ -7,19 +7,19 @@
 //! Opacities `a_i` come from the transfer function, corrected for a 1 mm step; samples
 //! outside the volume are empty.
 
+use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, read_buffer, readback_buffer, shaders, submit_compute,
+    ComputeStage, Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer,
     uniform_buffer, validated,
 };
-use crate::render::cpu::trilinear;
-use crate::render::gpu::{GpuVolume, bake_lut};
+use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
+use crate::sample::bake_lut;
+use crate::sample::{alpha_column, lut_lerp, per_voxel, trilinear, voxel_centre};
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
-use rayon::prelude::*;
 
-/// Samples per ray by default (the paper's M).
-pub const DEFAULT_SAMPLES: u32 = 20;
+pub use super::settings::DEFAULT_SAMPLES;
 
 /// Distance between samples along an LAO ray.
 pub const STEP_MM: f32 = 1.0;
@@ -61,32 +61,49 @@ impl Rays {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct LaoParams {
-    pub dims: [u32; 4],
-    pub mm_to_uvw: [f32; 4],
-    pub lut_map: [f32; 4],
-    pub counts: [u32; 4],
+    pub dims: [u32; 3],
+    /// First z-slice of this dispatch.
+    pub z0: u32,
+    /// One LAO step (1 mm) in texture coordinates per axis.
+    pub mm_to_uvw: [f32; 3],
+    pub _pad0: f32,
+    /// LUT index = norm · lut_scale + lut_offset, clamped to lut_last.
+    pub lut_scale: f32,
+    pub lut_offset: f32,
+    pub lut_last: f32,
+    pub _pad1: f32,
+    /// K and M.
+    pub rays: u32,
+    pub samples: u32,
+    /// Voxels in this dispatch and invocations per row of workgroups.
+    pub voxels: u32,
+    pub row_stride: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<LaoParams>() == 64);
+
+slab_fields!(LaoParams, linear);
 
 fn params(texels: &VolumeTexels, lut: &Lut, rays: &Rays, samples: u32) -> LaoParams {
     let extent = texels.extent();
     let (a, b) = texels.lut_map(lut);
     LaoParams {
-        dims: [
-            texels.dims[0] as u32,
-            texels.dims[1] as u32,
-            texels.dims[2] as u32,
-            0,
-        ],
+        dims: texels.dims.map(|d| d as u32),
+        z0: 0,
         mm_to_uvw: [
             STEP_MM / extent[0],
             STEP_MM / extent[1],
             STEP_MM / extent[2],
-            0.0,
         ],
-        lut_map: [a, b, (lut.rgba.len().max(2) - 1) as f32, 0.0],
-        counts: [rays.directions.len() as u32, samples.max(1), 0, 0],
+        _pad0: 0.0,
+        lut_scale: a,
+        lut_offset: b,
+        lut_last: (lut.rgba.len().max(2) - 1) as f32,
+        _pad1: 0.0,
+        rays: rays.directions.len() as u32,
+        samples: samples.max(1),
+        voxels: 0,
+        row_stride: 0,
     }
 }
 
@@ -95,11 +112,7 @@ fn alpha_at(p: &LaoParams, alpha: &[f32], norm: &[f32], dims: [usize; 3], uvw: V
         return 0.0;
     }
     let n = trilinear(norm, dims, uvw);
-    let t = (n * p.lut_map[0] + p.lut_map[1]).clamp(0.0, p.lut_map[2]);
-    let i0 = t.floor() as usize;
-    let i1 = (i0 + 1).min(p.lut_map[2] as usize);
-    let f = t - t.floor();
-    alpha[i0] + (alpha[i1] - alpha[i0]) * f
+    lut_lerp(alpha, [p.lut_scale, p.lut_offset, p.lut_last], n)
 }
 
 /// CPU twin of one invocation of `lao.wgsl`: A(x) of the voxel at `voxel`.
@@ -111,10 +124,9 @@ fn lao_voxel(
     rays: &[[f32; 4]],
     voxel: [usize; 3],
 ) -> f32 {
-    let centre = (Vec3::new(voxel[0] as f32, voxel[1] as f32, voxel[2] as f32) + Vec3::splat(0.5))
-        / Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32);
-    let samples = p.counts[1];
-    let scale = Vec3::new(p.mm_to_uvw[0], p.mm_to_uvw[1], p.mm_to_uvw[2]);
+    let centre = voxel_centre(voxel, dims);
+    let samples = p.samples;
+    let scale = Vec3::from(p.mm_to_uvw);
     let mut total = 0.0;
     for ray in rays {
         let step = Vec3::new(ray[0], ray[1], ray[2]) * scale;
@@ -140,24 +152,12 @@ pub fn lao_cpu(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Vec<f32> {
     let p = params(texels, lut, rays, samples);
-    let alpha: Vec<f32> = lut.rgba.iter().map(|e| e[3]).collect();
+    let alpha = alpha_column(lut);
     let norm = texels.norm_values();
     let packed = rays.packed();
-    let [nx, ny, nz] = texels.dims;
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    (0..nz)
-        .into_par_iter()
-        .flat_map_iter(|z| {
-            let slice: Vec<f32> = (0..nx * ny)
-                .map(|i| lao_voxel(&p, &alpha, &norm, texels.dims, &packed, [i % nx, i / nx, z]))
-                .collect();
-            progress(
-                done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
-                nz,
-            );
-            slice
-        })
-        .collect()
+    per_voxel(texels.dims, progress, |v| {
+        lao_voxel(&p, &alpha, &norm, texels.dims, &packed, v)
+    })
 }
 
 /// Samples per submission on the GPU: small enough that no dispatch runs into a driver
@@ -166,20 +166,15 @@ pub const SAMPLES_PER_SUBMISSION: u64 = 1 << 30;
 
 /// Long-lived LAO compute state.
 #[derive(Debug)]
-pub struct LaoGpu {
-    pipeline: wgpu::ComputePipeline,
-    sampler: wgpu::Sampler,
+pub struct LaoGpu(ComputeStage);
+
+impl crate::gpu::Stage for LaoGpu {
+    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
+        ComputeStage::new(device, "Lao", "lao.wgsl").map(LaoGpu)
+    }
 }
 
 impl LaoGpu {
-    pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let module = shaders::module(device, "lao.wgsl")?;
-        validated(device, "Lao::new", || LaoGpu {
-            pipeline: crate::gpu::compute_pipeline(device, "Lao::pipeline", &module, "main", None),
-            sampler: crate::gpu::linear_sampler(device, "Lao::linear_clamp"),
-        })
-    }
-
     /// `V_PAO` of an uploaded volume, computed in z-slabs (one submission each) and read
     /// back. `progress(done, total)` counts z-slices.
     pub fn compute(
@@ -193,84 +188,56 @@ impl LaoGpu {
     ) -> Result<Vec<f32>, GpuError> {
         let device = &gpu.device;
         let texels = &vol.texels;
-        let [nx, ny, nz] = texels.dims;
-        let slice = nx * ny;
+        let base = params(texels, lut, rays, samples);
         let per_voxel = rays.directions.len() as u64 * samples.max(1) as u64;
         let max_storage = device.limits().max_storage_buffer_binding_size / 4;
-        let slab = ((SAMPLES_PER_SUBMISSION / per_voxel.max(1)).min(max_storage) / slice as u64)
-            .clamp(1, nz as u64) as usize;
-        let alpha: Vec<f32> = lut.rgba.iter().map(|e| e[3]).collect();
-        let base = params(texels, lut, rays, samples);
-        let (lut_buf, ray_buf, out, readback) = validated(device, "Lao::buffers", || {
-            let storage = |label, bytes: &[u8]| {
-                let b = device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(label),
-                    size: bytes.len().max(16) as u64,
-                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                });
-                gpu.queue.write_buffer(&b, 0, bytes);
-                b
-            };
-            let lut_buf = storage("Lao::lut_alpha", bytemuck::cast_slice(&alpha));
-            let ray_buf = storage("Lao::rays", bytemuck::cast_slice(&rays.packed()));
-            let size = (slab * slice * 4) as u64;
-            let out = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("Lao::v_pao"),
-                size,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
+        let slabs = SlabDispatch::new(
+            base.dims,
+            Grid::Linear,
+            per_voxel,
+            SAMPLES_PER_SUBMISSION,
+            max_storage,
+        );
+        let alpha = alpha_column(lut);
+        let (uniforms, out, readback, group) = validated(device, "Lao::buffers", || {
+            let lut_buf = storage_buffer(
+                gpu,
+                "Lao::lut_alpha",
+                bytemuck::cast_slice(&alpha),
+                wgpu::BufferUsages::empty(),
+            );
+            let ray_buf = storage_buffer(
+                gpu,
+                "Lao::rays",
+                bytemuck::cast_slice(&rays.packed()),
+                wgpu::BufferUsages::empty(),
+            );
+            let size = slabs.max_slab_voxels() * 4;
+            let out = output_buffer(device, "Lao::v_pao", size);
             let readback = readback_buffer(device, "Lao::readback", size);
-            (lut_buf, ray_buf, out, readback)
+            let uniforms =
+                uniform_buffer(device, &gpu.queue, "Lao::params", bytemuck::bytes_of(&base));
+            let group = bind_group(
+                device,
+                "Lao::bind_group",
+                &self.0.pipeline.get_bind_group_layout(0),
+                &[
+                    uniforms.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(vol.volume_view()),
+                    wgpu::BindingResource::Sampler(&self.0.sampler),
+                    lut_buf.as_entire_binding(),
+                    ray_buf.as_entire_binding(),
+                    out.as_entire_binding(),
+                ],
+            );
+            (uniforms, out, readback, group)
         })?;
-        let mut result = Vec::with_capacity(nx * ny * nz);
-        let mut z0 = 0;
-        while z0 < nz {
-            let depth = slab.min(nz - z0);
-            let count = (depth * slice) as u32;
-            let groups = count.div_ceil(64);
-            let gx = groups.min(65535);
-            let gy = groups.div_ceil(gx);
-            let mut p = base;
-            p.dims[3] = z0 as u32;
-            p.counts[2] = count;
-            p.counts[3] = gx * 64;
-            validated(device, "Lao::slab", || {
-                let uniforms =
-                    uniform_buffer(device, &gpu.queue, "Lao::params", bytemuck::bytes_of(&p));
-                let group = bind_group(
-                    device,
-                    "Lao::bind_group",
-                    &self.pipeline.get_bind_group_layout(0),
-                    &[
-                        uniforms.as_entire_binding(),
-                        wgpu::BindingResource::TextureView(vol.volume_view()),
-                        wgpu::BindingResource::Sampler(&self.sampler),
-                        lut_buf.as_entire_binding(),
-                        ray_buf.as_entire_binding(),
-                        out.as_entire_binding(),
-                    ],
-                );
-                submit_compute(
-                    device,
-                    &gpu.queue,
-                    "Lao::slab",
-                    &self.pipeline,
-                    &group,
-                    [gx, gy, 1],
-                    |encoder| {
-                        encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, count as u64 * 4);
-                    },
-                );
-            })?;
-            let bytes = read_buffer(device, &readback, "Lao::readback")?;
-            result.extend(bytemuck::pod_collect_to_vec::<u8, f32>(
-                &bytes[..count as usize * 4],
-            ));
-            z0 += depth;
-            progress(z0, nz);
-        }
-        Ok(result)
+        let pass = Pass {
+            label: "Lao::slab",
+            pipeline: &self.0.pipeline,
+            bind_groups: &[&group],
+            uniforms: &uniforms,
+        };
+        slabs.run_readback(gpu, &pass, base, (&out, &readback), progress)
     }
 }

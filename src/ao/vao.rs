@@ -17,120 +17,25 @@
 //! - a ray stops at an accepted sample with V ≥ V_thres (the sample itself still counts,
 //!   Eq. 7 is kept), or once γ is within 1/256 of 1.
 
+use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, read_buffer, readback_buffer, shaders, uniform_buffer, validated,
+    Gpu, GpuError, bind_group, f16_texture, output_buffer, readback_buffer, shaders,
+    uniform_buffer, validated,
 };
-use crate::render::cpu::trilinear;
-use crate::render::gpu::bake_lut;
 use crate::render::texels::VolumeTexels;
+use crate::sample::{
+    bake_lut, f16_lut_map, f16_map, mip_chain, per_voxel, trilinear, voxel_centre,
+};
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
-use rayon::prelude::*;
 
-/// Rays per point by default (the paper's Fig. 7c uses 20).
-pub const DEFAULT_DIRECTIONS: u32 = 20;
-/// Samples per ray by default (the paper uses 8–12, 8 for its figures).
-pub const DEFAULT_SAMPLES: u32 = 8;
-/// Ray length by default: the same 20 mm radius as LAO's 20 samples 1 mm apart.
-pub const DEFAULT_R_MAX_MM: f32 = 20.0;
-/// Opacity at which a ray stops by default.
-pub const DEFAULT_V_THRES: f32 = 0.95;
-/// A ray whose obscurance γ is within this of 1 stops (nothing further can matter).
-pub const GAMMA_STOP: f32 = 1.0 / 256.0;
 /// Coarsest mip level used (1/16 of the resolution).
 pub const MAX_MIP_LEVEL: u32 = 4;
-/// Most directions accepted (the live mode runs all of them at every ray-cast sample).
-pub const MAX_DIRECTIONS: u32 = 4096;
 
-/// The isosurface variant (§5.2.1): a ray is fully occluded when a sample beyond the
-/// guard distance `v_s·√3/2` lies within `tolerance` of `value` (data units).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Isosurface {
-    pub value: f64,
-    pub tolerance: f64,
-}
-
-/// Parameters of positional AO, as saved in scene files (`ambient_occlusion.vao`).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct VaoSettings {
-    /// N_dir: rays over the whole sphere (Fibonacci lattice).
-    pub directions: u32,
-    /// N_samples: stratified samples per ray.
-    pub samples: u32,
-    /// r_max: ray length in mm.
-    pub r_max_mm: f32,
-    /// V_thres: an accepted sample this opaque stops the ray.
-    pub v_thres: f32,
-    /// Use the isosurface variant instead of Beer's law.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub isosurface: Option<Isosurface>,
-}
-
-impl Default for VaoSettings {
-    fn default() -> Self {
-        VaoSettings {
-            directions: DEFAULT_DIRECTIONS,
-            samples: DEFAULT_SAMPLES,
-            r_max_mm: DEFAULT_R_MAX_MM,
-            v_thres: DEFAULT_V_THRES,
-            isosurface: None,
-        }
-    }
-}
-
-/// Why positional-AO settings were refused.
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum VaoError {
-    #[error("positional AO: {what} is {value}; {need}")]
-    Setting {
-        what: &'static str,
-        value: String,
-        need: &'static str,
-    },
-}
-
-impl VaoSettings {
-    /// Checks every field, naming the first bad one.
-    pub fn validate(&self) -> Result<(), VaoError> {
-        let bad = |what, value: String, need| Err(VaoError::Setting { what, value, need });
-        if self.directions == 0 || self.directions > MAX_DIRECTIONS {
-            return bad(
-                "the number of directions",
-                self.directions.to_string(),
-                "use 1 to 4096",
-            );
-        }
-        if self.samples == 0 || self.samples > 1024 {
-            return bad(
-                "the number of samples per ray",
-                self.samples.to_string(),
-                "use 1 to 1024",
-            );
-        }
-        if !(self.r_max_mm.is_finite() && self.r_max_mm > 0.0) {
-            return bad(
-                "r_max",
-                self.r_max_mm.to_string(),
-                "it must be a positive length in mm",
-            );
-        }
-        if !(self.v_thres > 0.0 && self.v_thres <= 1.0) {
-            return bad("V_thres", self.v_thres.to_string(), "it must be in (0, 1]");
-        }
-        if let Some(iso) = self.isosurface
-            && !(iso.value.is_finite() && iso.tolerance.is_finite() && iso.tolerance > 0.0)
-        {
-            return bad(
-                "the isosurface",
-                format!("{} ± {}", iso.value, iso.tolerance),
-                "value and a positive tolerance must be finite numbers",
-            );
-        }
-        Ok(())
-    }
-}
+pub use super::settings::{
+    DEFAULT_DIRECTIONS, DEFAULT_R_MAX_MM, DEFAULT_V_THRES, DEFAULT_VAO_SAMPLES as DEFAULT_SAMPLES,
+    GAMMA_STOP, Isosurface, MAX_DIRECTIONS, VaoError, VaoSettings,
+};
 
 /// Ray directions (unit, physical space) with their constant jitter in [0, 1) as w.
 pub fn rays(directions: u32) -> Vec<[f32; 4]> {
@@ -165,130 +70,6 @@ pub fn mip_level(stratum_mm: f32, v_s: f32, dims: [usize; 3]) -> u32 {
     (ratio.log2().floor() as u32)
         .min(MAX_MIP_LEVEL)
         .min(available)
-}
-
-/// The map from texel values to the f16 copy: `stored = (norm − lo) / scale`. Unorm
-/// texels are already in [0, 1] (identity); float texels hold physical values, which
-/// may exceed f16's range (65504), so they are normalised by their own range.
-pub fn f16_map(texels: &VolumeTexels) -> (f64, f64) {
-    match texels.format {
-        crate::render::texels::TexelFormat::R32Float => {
-            let (lo, hi) = texels.norm_range();
-            let (lo, hi) = (lo as f64, hi as f64);
-            if lo.is_finite() && hi > lo {
-                (lo, hi - lo)
-            } else {
-                (if lo.is_finite() { lo } else { 0.0 }, 1.0)
-            }
-        }
-        _ => (0.0, 1.0),
-    }
-}
-
-/// The LUT map `t = stored · a + b` for values of the f16 copy (see [`f16_map`]).
-pub fn f16_lut_map(texels: &VolumeTexels, lut: &Lut) -> (f32, f32) {
-    let (a, b) = texels.lut_map(lut);
-    let (lo, scale) = f16_map(texels);
-    ((a as f64 * scale) as f32, (b as f64 + a as f64 * lo) as f32)
-}
-
-/// Rounds to the nearest f16 (what an R16Float texel holds).
-fn to_f16(x: f32) -> u16 {
-    half::f16::from_f32(x).to_bits()
-}
-
-/// Mip levels 0..=`levels` of the texel values as R16Float bits: level 0 the texels
-/// mapped by [`f16_map`] and rounded to f16, each next one a 2×2×2 box filter of the one before (sizes halved
-/// and rounded down, as a GPU's mip chain is), each with its dims.
-///
-/// f16 rather than the volume's own texture: lavapipe filters 8-bit unorm textures in
-/// fixed point, which flips Eq. 4's comparisons of equal neighbours between GPU and CPU;
-/// float texels filter identically on both. 11 significant bits are plenty for AO.
-pub fn mip_chain(texels: &VolumeTexels, levels: u32) -> Vec<(Vec<u16>, [usize; 3])> {
-    let (lo, scale) = f16_map(texels);
-    let level0: Vec<u16> = (0..texels.dims.iter().product::<usize>())
-        .into_par_iter()
-        .map(|i| to_f16(((texels.norm_at(i) as f64 - lo) / scale) as f32))
-        .collect();
-    let mut chain = vec![(level0, texels.dims)];
-    for _ in 0..levels {
-        let Some((prev, prev_dims)) = chain.last() else {
-            break;
-        };
-        let prev_dims = *prev_dims;
-        let dims = prev_dims.map(|d| (d / 2).max(1));
-        let values: Vec<u16> = (0..dims[0] * dims[1] * dims[2])
-            .into_par_iter()
-            .map(|i| {
-                let v = [
-                    i % dims[0],
-                    (i / dims[0]) % dims[1],
-                    i / (dims[0] * dims[1]),
-                ];
-                let mut sum = 0.0f32;
-                for dz in 0..2 {
-                    for dy in 0..2 {
-                        for dx in 0..2 {
-                            let c: [usize; 3] = std::array::from_fn(|a| {
-                                (2 * v[a] + [dx, dy, dz][a]).min(prev_dims[a] - 1)
-                            });
-                            let bits = prev[c[0] + prev_dims[0] * (c[1] + prev_dims[1] * c[2])];
-                            sum += half::f16::from_bits(bits).to_f32();
-                        }
-                    }
-                }
-                to_f16(sum / 8.0)
-            })
-            .collect();
-        chain.push((values, dims));
-    }
-    chain
-}
-
-/// An R16Float 3-D texture holding `chain` as its mip levels (from [`mip_chain`]).
-pub fn f16_texture(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    label: &str,
-    chain: &[(Vec<u16>, [usize; 3])],
-) -> wgpu::Texture {
-    let first = chain[0].1.map(|d| d as u32);
-    let texture = device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d {
-            width: first[0],
-            height: first[1],
-            depth_or_array_layers: first[2],
-        },
-        mip_level_count: chain.len() as u32,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D3,
-        format: wgpu::TextureFormat::R16Float,
-        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[],
-    });
-    for (l, (values, dims)) in chain.iter().enumerate() {
-        queue.write_texture(
-            wgpu::TexelCopyTextureInfo {
-                texture: &texture,
-                mip_level: l as u32,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
-            bytemuck::cast_slice(values),
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(dims[0] as u32 * 2),
-                rows_per_image: Some(dims[1] as u32),
-            },
-            wgpu::Extent3d {
-                width: dims[0] as u32,
-                height: dims[1] as u32,
-                depth_or_array_layers: dims[2] as u32,
-            },
-        );
-    }
-    texture
 }
 
 /// Uniforms of the positional-AO function. Mirrors `struct VaoParams` in
@@ -475,25 +256,9 @@ pub fn vao_cpu(
     dims: [usize; 3],
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Vec<f32> {
-    let [nx, ny, nz] = dims;
-    let size = Vec3::new(nx as f32, ny as f32, nz as f32);
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    (0..nz)
-        .into_par_iter()
-        .flat_map_iter(|z| {
-            let slice: Vec<f32> = (0..nx * ny)
-                .map(|i| {
-                    let v = Vec3::new((i % nx) as f32, (i / nx) as f32, z as f32);
-                    1.0 - pao.positional_ao((v + Vec3::splat(0.5)) / size)
-                })
-                .collect();
-            progress(
-                done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
-                nz,
-            );
-            slice
-        })
-        .collect()
+    per_voxel(dims, progress, |v| {
+        1.0 - pao.positional_ao(voxel_centre(v, dims))
+    })
 }
 
 /// Layout entries of bind group 1 (`vao_common.wgsl`), bindings 0–4, for compute.
@@ -652,15 +417,22 @@ pub struct VaoGpu {
 /// Uniforms of `vao.wgsl`. Mirrors `struct Slab` there.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-struct SlabParams {
-    dims: [u32; 4],
-    work: [u32; 4],
+struct VaoSlab {
+    dims: [u32; 3],
+    /// First z-slice of this dispatch.
+    z0: u32,
+    /// Voxels in this dispatch and invocations per row of workgroups.
+    voxels: u32,
+    row_stride: u32,
+    _pad: [u32; 2],
 }
 
-const _: () = assert!(std::mem::size_of::<SlabParams>() == 32);
+const _: () = assert!(std::mem::size_of::<VaoSlab>() == 32);
 
-impl VaoGpu {
-    pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
+slab_fields!(VaoSlab, linear);
+
+impl crate::gpu::Stage for VaoGpu {
+    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
         let module = shaders::module(device, "vao.wgsl")?;
         validated(device, "Vao::new", || {
             let slab_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -713,7 +485,9 @@ impl VaoGpu {
             }
         })
     }
+}
 
+impl VaoGpu {
     /// The ambient factor `1 − A_P` at every voxel centre of a volume of `dims`, in
     /// z-slabs, read back. `progress(done, total)` counts z-slices.
     pub fn compute(
@@ -724,147 +498,44 @@ impl VaoGpu {
         progress: &dyn Fn(usize, usize),
     ) -> Result<Vec<f32>, GpuError> {
         let device = &gpu.device;
-        let [nx, ny, nz] = dims;
-        let slice = nx * ny;
+        let dims = dims.map(|d| d as u32);
         let per_voxel = inputs.params.counts[0] as u64 * (inputs.params.counts[1] as u64 + 1);
         let max_storage = device.limits().max_storage_buffer_binding_size / 4;
-        let slab = ((SAMPLES_PER_SUBMISSION / per_voxel.max(1)).min(max_storage) / slice as u64)
-            .clamp(1, nz as u64) as usize;
-        let size = (slab * slice * 4) as u64;
-        let (out, readback, group1) = validated(device, "Vao::buffers", || {
-            let out = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("Vao::ambient"),
-                size,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
+        let slabs = SlabDispatch::new(
+            dims,
+            Grid::Linear,
+            per_voxel,
+            SAMPLES_PER_SUBMISSION,
+            max_storage,
+        );
+        let size = slabs.max_slab_voxels() * 4;
+        let base = VaoSlab {
+            dims,
+            z0: 0,
+            voxels: 0,
+            row_stride: 0,
+            _pad: [0; 2],
+        };
+        let (uniforms, out, readback, group0, group2) = validated(device, "Vao::buffers", || {
+            let out = output_buffer(device, "Vao::ambient", size);
             let readback = readback_buffer(device, "Vao::readback", size);
-            let group1 = bind_group(device, "Vao::inputs", &self.vao_layout, &inputs.resources());
-            (out, readback, group1)
-        })?;
-        let mut result = Vec::with_capacity(nx * ny * nz);
-        let mut z0 = 0;
-        while z0 < nz {
-            let depth = slab.min(nz - z0);
-            let count = (depth * slice) as u32;
-            let groups = count.div_ceil(64);
-            let gx = groups.min(65535);
-            let gy = groups.div_ceil(gx);
-            let p = SlabParams {
-                dims: [nx as u32, ny as u32, nz as u32, z0 as u32],
-                work: [count, gx * 64, 0, 0],
-            };
-            validated(device, "Vao::slab", || {
-                let uniforms =
-                    uniform_buffer(device, &gpu.queue, "Vao::slab", bytemuck::bytes_of(&p));
-                let group0 = bind_group(
-                    device,
-                    "Vao::slab",
-                    &self.slab_layout,
-                    &[uniforms.as_entire_binding(), out.as_entire_binding()],
-                );
-                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("Vao::slab"),
-                });
-                {
-                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some("Vao::slab"),
-                        timestamp_writes: None,
-                    });
-                    pass.set_pipeline(&self.pipeline);
-                    pass.set_bind_group(0, &group0, &[]);
-                    pass.set_bind_group(1, &self.no_clip, &[]);
-                    pass.set_bind_group(2, &group1, &[]);
-                    pass.dispatch_workgroups(gx, gy, 1);
-                }
-                encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, count as u64 * 4);
-                gpu.queue.submit([encoder.finish()]);
-            })?;
-            let bytes = read_buffer(device, &readback, "Vao::readback")?;
-            result.extend(bytemuck::pod_collect_to_vec::<u8, f32>(
-                &bytes[..count as usize * 4],
-            ));
-            z0 += depth;
-            progress(z0, nz);
-        }
-        Ok(result)
-    }
-}
-
-/// The precomputed ambient factor `1 − A_P` of `volume` in its own geometry, as
-/// [`crate::ao::compute_volume`] returns it: on the GPU `gpu` names when the volume fits
-/// at full resolution, else the CPU twin.
-pub fn compute_volume(
-    volume: &crate::volume::Volume,
-    tf: &TransferFunction,
-    s: &VaoSettings,
-    gpu: &crate::gpu::GpuUse,
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<(crate::volume::Volume, String), GpuError> {
-    use crate::render::texels::UploadLimits;
-    s.validate().map_err(|e| GpuError::Validation {
-        stage: "positional AO settings".into(),
-        message: e.to_string(),
-    })?;
-    let mut computed = None;
-    if let Some(device) = gpu.device() {
-        match device {
-            Ok(g) => {
-                let limits = g.device.limits();
-                let texels = VolumeTexels::new(
-                    volume,
-                    UploadLimits {
-                        max_dim: limits.max_texture_dimension_3d as usize,
-                        max_bytes: crate::render::gpu::MAX_VOLUME_BYTES,
-                    },
-                );
-                if texels.downsampled == 0 {
-                    let inputs = VaoInputs::new(&g, &texels, tf, s)?;
-                    let a = VaoGpu::new(&g.device)?.compute(&g, texels.dims, &inputs, progress)?;
-                    computed = Some((a, g.describe()));
-                } else {
-                    eprintln!(
-                        "warning: the volume does not fit the adapter at full resolution; computing AO on the CPU"
-                    );
-                }
-            }
-            Err(e) => eprintln!("warning: {e}\nwarning: computing AO on the CPU instead (slow)"),
-        }
-    }
-    let (values, device) = match computed {
-        Some(c) => c,
-        None => {
-            let texels = VolumeTexels::new(
-                volume,
-                UploadLimits {
-                    max_dim: usize::MAX,
-                    max_bytes: u64::MAX,
-                },
+            let uniforms =
+                uniform_buffer(device, &gpu.queue, "Vao::slab", bytemuck::bytes_of(&base));
+            let group0 = bind_group(
+                device,
+                "Vao::slab",
+                &self.slab_layout,
+                &[uniforms.as_entire_binding(), out.as_entire_binding()],
             );
-            let pao = PositionalAo::new(&texels, tf, s);
-            (
-                vao_cpu(&pao, texels.dims, progress),
-                format!("CPU twin ({} threads)", rayon::current_num_threads()),
-            )
-        }
-    };
-    let iso = match s.isosurface {
-        Some(i) => format!(", isosurface {} ± {}", i.value, i.tolerance),
-        None => String::new(),
-    };
-    let out = crate::volume::Volume {
-        dims: volume.dims,
-        spacing: volume.spacing,
-        data: crate::volume::VoxelData::F32(values),
-        scaling: crate::volume::Scaling::IDENTITY,
-        orientation: volume.orientation,
-        descriptions: vec![(
-            "description".into(),
-            format!(
-                "positional AO ambient factor 1 - A_P, {} directions x {} samples, r_max {} mm{iso}, TF {}",
-                s.directions, s.samples, s.r_max_mm, tf.name
-            ),
-        )],
-    };
-    Ok((out, device))
+            let group2 = bind_group(device, "Vao::inputs", &self.vao_layout, &inputs.resources());
+            (uniforms, out, readback, group0, group2)
+        })?;
+        let pass = Pass {
+            label: "Vao::slab",
+            pipeline: &self.pipeline,
+            bind_groups: &[&group0, &self.no_clip, &group2],
+            uniforms: &uniforms,
+        };
+        slabs.run_readback(gpu, &pass, base, (&out, &readback), progress)
+    }
 }

@@ -546,13 +546,12 @@ impl std::fmt::Debug for Viewer {
 
 /// The [`Gpu`] of egui's render state: the same device the viewport draws with.
 pub fn gpu_of(rs: &egui_wgpu::RenderState) -> Gpu {
-    Gpu {
-        instance: rs.instance.clone(),
-        adapter: rs.adapter.clone(),
-        device: rs.device.clone(),
-        queue: rs.queue.clone(),
-        info: rs.adapter.get_info(),
-    }
+    Gpu::new(
+        rs.instance.clone(),
+        rs.adapter.clone(),
+        rs.device.clone(),
+        rs.queue.clone(),
+    )
 }
 
 /// eframe's wgpu setup with volao's device: the adapter's limits and the features
@@ -1070,45 +1069,54 @@ impl Viewer {
                 let texels = texels.ok_or("no volume uploaded")?;
                 let vol =
                     GpuVolume::from_texels(&gpu, texels, &tf, step).map_err(|e| e.to_string())?;
-                let rays = crate::ao::lao::Rays::uniform(settings.rays.directions());
-                let cao = crate::ao::cao::CaoGpu::new(
-                    &gpu,
-                    &vol,
-                    &tf,
-                    &rays,
-                    settings.samples,
-                    settings.msaa,
-                    &|d, t| p.set(d as u64, t as u64),
-                )
-                .map_err(|e| e.to_string())?;
+                // With clip shapes LAO runs as CAO; V_AO follows them from the next sync.
+                let mut cao = settings;
+                if !cao.method.is_clipped() {
+                    cao.method = AoMethod::Cao;
+                }
+                let request = crate::ao::AoRequest {
+                    tf: &tf,
+                    settings: &cao,
+                    clip: None,
+                };
+                let engine = crate::ao::AoEngine::on(Some(Arc::clone(&gpu)));
+                let computed = engine
+                    .compute(crate::ao::AoInput::Uploaded(&vol), &request, &|d, t| {
+                        p.set(d as u64, t as u64)
+                    })
+                    .map_err(|e| e.to_string())?;
+                let crate::ao::Ambient::Cao(cao) = computed.ambient else {
+                    return Err("CAO came back without its volumes".into());
+                };
                 Ok(AoResult {
-                    kind: AoData::Cao(Box::new(cao)),
-                    device: gpu.describe(),
+                    kind: AoData::Cao(cao),
+                    device: computed.device,
                     seconds: start.elapsed().as_secs_f64(),
                 })
             })
         } else {
-            // The viewer's own device; a filter map on a CPU adapter goes to the twin.
-            let gpu = if crate::ao::fast::map_of(settings.method).is_some()
-                && crate::ao::fast::twin_is_faster(&self.gpu)
-            {
-                crate::gpu::GpuUse::Cpu
-            } else {
-                crate::gpu::GpuUse::Shared(Arc::clone(&self.gpu))
-            };
+            // The viewer's own device (the engine sends a filter map on a CPU adapter to
+            // the twin), on the volume at full resolution.
+            let gpu = Arc::clone(&self.gpu);
             Job::spawn(label, self.repaint_fn(), move |p| {
                 let start = Instant::now();
-                let (ao, device) =
-                    crate::ao::compute_volume(&volume, &tf, &settings, &gpu, &|d, t| {
+                let texels = VolumeTexels::new(&volume, UploadLimits::NONE);
+                let request = crate::ao::AoRequest {
+                    tf: &tf,
+                    settings: &settings,
+                    clip: None,
+                };
+                let computed = crate::ao::AoEngine::on(Some(gpu))
+                    .compute(crate::ao::AoInput::Texels(&texels), &request, &|d, t| {
                         p.set(d as u64, t as u64)
                     })
                     .map_err(|e| e.to_string())?;
-                let volume::VoxelData::F32(values) = ao.data else {
-                    return Err("the AO volume came back in an unexpected voxel type".into());
+                let crate::ao::Ambient::Values(values) = computed.ambient else {
+                    return Err("the AO volume came back in an unexpected form".into());
                 };
                 Ok(AoResult {
                     kind: AoData::Volume(values),
-                    device,
+                    device: computed.device,
                     seconds: start.elapsed().as_secs_f64(),
                 })
             })
@@ -1271,10 +1279,10 @@ impl Viewer {
                     Some(m)
                 }
             };
-            crate::render::shadow::LightGpu::new(&gpu.device)
+            gpu.stage::<crate::render::shadow::LightGpu>()
                 .and_then(|l| {
                     let progress = |d: usize, t: usize| p.set(d as u64, t as u64);
-                    l.compute_clipped(&gpu, &texels, &lut, dir, maps.as_ref(), &progress)
+                    l.compute(&gpu, &texels, &lut, dir, maps.as_ref(), &progress)
                 })
                 .map_err(|e| e.to_string())
         });

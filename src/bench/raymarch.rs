@@ -46,7 +46,7 @@ pub fn raymarch_bench(args: &RaymarchBenchArgs) -> Result<()> {
         .to_ras();
     let tf = TransferFunction::preset(Preset::CaoSingleColor, &volume.stats());
 
-    let kernel = VaoGpu::new(&gpu.device)?;
+    let kernel = gpu.stage::<VaoGpu>()?;
     if !args.frames_only {
         accuracy(&gpu, &kernel, &volume, &tf, args)?;
     }
@@ -71,7 +71,7 @@ fn accuracy(
     let small_vol = GpuVolume::from_texels(gpu, small.clone(), tf, 0.5)?;
     let voxels = small.dims.iter().product::<usize>() as f64;
     let start = Instant::now();
-    let truth = LaoGpu::new(&gpu.device)?.compute(
+    let truth = gpu.stage::<LaoGpu>()?.compute(
         gpu,
         &small_vol,
         &lao_lut(tf, &small),
@@ -150,11 +150,11 @@ fn frames(
         height: args.size,
     };
     let time_frames = |vol: &GpuVolume| -> Result<f64> {
-        rc.render(gpu, vol, &frame)?;
+        rc.render(gpu, vol, &frame, None)?;
         let mut times = Vec::new();
         for _ in 0..args.runs.max(1) {
             let start = Instant::now();
-            rc.render(gpu, vol, &frame)?;
+            rc.render(gpu, vol, &frame, None)?;
             times.push(start.elapsed().as_secs_f64());
         }
         Ok(median(times))
@@ -200,11 +200,12 @@ fn frames(
     );
     let dir = light_direction(crate::render::shadow::DEFAULT_LIGHT).map_err(anyhow::Error::msg)?;
     let start = Instant::now();
-    let light = LightGpu::new(&gpu.device)?.compute(
+    let light = gpu.stage::<LightGpu>()?.compute(
         gpu,
         &vol.texels,
         &light_lut(tf, &vol.texels),
         dir,
+        None,
         &|_, _| {},
     )?;
     vol.set_light_volume(gpu, Some((&light, dir)))?;

@@ -2,7 +2,7 @@
 //! (`shaders/clip_maps.wgsl`, Algorithm 1), working on maps read back from the GPU.
 
 use super::camera::EMPTY;
-use super::gpu::{ClipUniforms, LAYERS_PER_SHAPE};
+use super::gpu_data::{ClipUniforms, LAYERS_PER_SHAPE};
 use glam::{Mat4, Vec3, Vec4};
 
 /// The clip maps and uniforms as the shaders see them.

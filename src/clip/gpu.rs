@@ -8,36 +8,11 @@
 //! resolution) changes; moving a shape only rewrites its matrix in the uniforms.
 
 use super::camera::ClipCamera;
+pub use super::gpu_data::{ClipUniforms, DEFAULT_RESOLUTION, LAYERS_PER_SHAPE, ShapeUniform};
 use super::mesh::TriMesh;
 use super::{ClipError, ClipMode, ClipShape, MAX_SHAPES, Shape};
 use crate::gpu::{Gpu, GpuError, bind_group, shaders, uniform_buffer, validated};
 use glam::Mat4;
-
-/// Layers per shape in the map array (see `shaders/clip_common.wgsl`).
-pub const LAYERS_PER_SHAPE: u32 = 8;
-
-/// Default depth-map size (pixels, square).
-pub const DEFAULT_RESOLUTION: u32 = 1024;
-
-/// One shape as the shaders see it. Mirrors `struct ClipShape` in `clip_common.wgsl`.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct ShapeUniform {
-    pub volume_to_map: [[f32; 4]; 4],
-    /// mode (0 carve, 1 probe), first layer, resolution, unused.
-    pub info: [u32; 4],
-}
-
-/// Mirrors `struct Clip` in `clip_common.wgsl`.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct ClipUniforms {
-    /// shapes, probing shapes, unused, unused.
-    pub counts: [u32; 4],
-    pub shapes: [ShapeUniform; MAX_SHAPES],
-}
-
-const _: () = assert!(std::mem::size_of::<ClipUniforms>() == 16 + MAX_SHAPES * 80);
 
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -83,13 +58,76 @@ pub struct ClipUpdate {
     pub rebuilt: usize,
 }
 
-/// The clip shapes' maps and uniforms on the GPU.
+/// The pipelines that build clip maps (depth peeling, then `clip_maps.wgsl`), built
+/// once per device.
 #[derive(Debug)]
-pub struct ClipMaps {
+pub struct ClipPipelines {
     peel_front: wgpu::RenderPipeline,
     peel_back: wgpu::RenderPipeline,
     /// `clip_maps.wgsl` entry points: resolve, reduce, dilate, expand.
     passes: [wgpu::ComputePipeline; 4],
+}
+
+impl crate::gpu::Stage for ClipPipelines {
+    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
+        let depth_module = shaders::module(device, "clip_depth.wgsl")?;
+        let maps_module = shaders::module(device, "clip_maps.wgsl")?;
+        validated(device, "ClipPipelines::create", || {
+            let peel = |label, cull| {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some(label),
+                    layout: None,
+                    vertex: wgpu::VertexState {
+                        module: &depth_module,
+                        entry_point: Some("vs"),
+                        compilation_options: Default::default(),
+                        buffers: &[Some(wgpu::VertexBufferLayout {
+                            array_stride: 12,
+                            step_mode: wgpu::VertexStepMode::Vertex,
+                            attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                        })],
+                    },
+                    primitive: wgpu::PrimitiveState {
+                        topology: wgpu::PrimitiveTopology::TriangleList,
+                        front_face: wgpu::FrontFace::Ccw,
+                        cull_mode: Some(cull),
+                        ..Default::default()
+                    },
+                    depth_stencil: Some(wgpu::DepthStencilState {
+                        format: wgpu::TextureFormat::Depth32Float,
+                        depth_write_enabled: Some(true),
+                        depth_compare: Some(wgpu::CompareFunction::Less),
+                        stencil: Default::default(),
+                        bias: Default::default(),
+                    }),
+                    multisample: Default::default(),
+                    fragment: Some(wgpu::FragmentState {
+                        module: &depth_module,
+                        entry_point: Some("fs"),
+                        compilation_options: Default::default(),
+                        targets: &[],
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            };
+            let passes = ["resolve", "reduce", "dilate", "expand"].map(|entry| {
+                crate::gpu::compute_pipeline(device, entry, &maps_module, entry, None)
+            });
+            ClipPipelines {
+                // Front faces: cull the back ones, and vice versa.
+                peel_front: peel("ClipMaps::peel_front", wgpu::Face::Back),
+                peel_back: peel("ClipMaps::peel_back", wgpu::Face::Front),
+                passes,
+            }
+        })
+    }
+}
+
+/// The clip shapes' maps and uniforms on the GPU.
+#[derive(Debug)]
+pub struct ClipMaps {
+    pipelines: std::sync::Arc<ClipPipelines>,
     maps: wgpu::Texture,
     maps_view: wgpu::TextureView,
     dummy_depth: wgpu::TextureView,
@@ -222,58 +260,13 @@ fn shape_uniform(shape: &ClipShape, camera: &ClipCamera, slot: usize) -> ShapeUn
 impl ClipMaps {
     pub fn new(gpu: &Gpu) -> Result<Self, GpuError> {
         let device = &gpu.device;
-        let depth_module = shaders::module(device, "clip_depth.wgsl")?;
-        let maps_module = shaders::module(device, "clip_maps.wgsl")?;
+        let pipelines = gpu.stage::<ClipPipelines>()?;
         validated(device, "ClipMaps::new", || {
-            let peel = |label, cull| {
-                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                    label: Some(label),
-                    layout: None,
-                    vertex: wgpu::VertexState {
-                        module: &depth_module,
-                        entry_point: Some("vs"),
-                        compilation_options: Default::default(),
-                        buffers: &[Some(wgpu::VertexBufferLayout {
-                            array_stride: 12,
-                            step_mode: wgpu::VertexStepMode::Vertex,
-                            attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                        })],
-                    },
-                    primitive: wgpu::PrimitiveState {
-                        topology: wgpu::PrimitiveTopology::TriangleList,
-                        front_face: wgpu::FrontFace::Ccw,
-                        cull_mode: Some(cull),
-                        ..Default::default()
-                    },
-                    depth_stencil: Some(wgpu::DepthStencilState {
-                        format: wgpu::TextureFormat::Depth32Float,
-                        depth_write_enabled: Some(true),
-                        depth_compare: Some(wgpu::CompareFunction::Less),
-                        stencil: Default::default(),
-                        bias: Default::default(),
-                    }),
-                    multisample: Default::default(),
-                    fragment: Some(wgpu::FragmentState {
-                        module: &depth_module,
-                        entry_point: Some("fs"),
-                        compilation_options: Default::default(),
-                        targets: &[],
-                    }),
-                    multiview_mask: None,
-                    cache: None,
-                })
-            };
-            let passes = ["resolve", "reduce", "dilate", "expand"].map(|entry| {
-                crate::gpu::compute_pipeline(device, entry, &maps_module, entry, None)
-            });
             let maps = maps_texture(device, 1, LAYERS_PER_SHAPE);
             let dummy = depth_texture(device, "ClipMaps::no_previous_layer", 1);
             let uniforms: ClipUniforms = bytemuck::Zeroable::zeroed();
             ClipMaps {
-                // Front faces: cull the back ones, and vice versa.
-                peel_front: peel("ClipMaps::peel_front", wgpu::Face::Back),
-                peel_back: peel("ClipMaps::peel_back", wgpu::Face::Front),
-                passes,
+                pipelines,
                 maps_view: array_view(&maps),
                 maps,
                 dummy_depth: dummy.create_view(&Default::default()),
@@ -447,9 +440,9 @@ impl ClipMaps {
             });
             for layer in 0..4 {
                 let pipeline = if layer % 2 == 0 {
-                    &self.peel_front
+                    &self.pipelines.peel_front
                 } else {
-                    &self.peel_back
+                    &self.pipelines.peel_back
                 };
                 let peel = PeelUniform {
                     projection: camera.projection.to_cols_array_2d(),
@@ -582,7 +575,7 @@ impl ClipMaps {
                 ),
             ];
             for (pass_index, entries, size) in steps {
-                let pipeline = &self.passes[pass_index];
+                let pipeline = &self.pipelines.passes[pass_index];
                 let entries: Vec<wgpu::BindGroupEntry<'_>> = entries
                     .into_iter()
                     .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource })

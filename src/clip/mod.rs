@@ -10,6 +10,7 @@
 pub mod camera;
 pub mod cpu;
 pub mod gpu;
+pub mod gpu_data;
 pub mod mesh;
 
 use glam::{EulerRot, Mat4, Quat, Vec3};

@@ -5,8 +5,12 @@
 //! silently writes 3-D storage textures to slice 0 only, which would corrupt every AO
 //! volume without an error.
 
+pub mod dispatch;
+pub mod resources;
 pub mod shaders;
 pub mod smoke;
+
+pub use resources::*;
 
 use std::time::Duration;
 
@@ -58,9 +62,68 @@ pub struct Gpu {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub info: wgpu::AdapterInfo,
+    /// Each stage's long-lived state (pipelines, layouts, samplers), built on first use.
+    stages: StageCache,
 }
 
+/// Long-lived GPU state of one pipeline stage, built once per device (rerun's
+/// `ctx.renderer::<T>()` pattern): [`Gpu::stage`] creates it on first use and keeps it.
+pub trait Stage: std::fmt::Debug + Send + Sync + 'static {
+    fn create(device: &wgpu::Device) -> Result<Self, GpuError>
+    where
+        Self: Sized;
+}
+
+type StageMap =
+    std::collections::HashMap<std::any::TypeId, std::sync::Arc<dyn std::any::Any + Send + Sync>>;
+
+#[derive(Debug, Default)]
+struct StageCache(std::sync::Mutex<StageMap>);
+
 impl Gpu {
+    /// Wraps a device opened elsewhere (the viewer's, from eframe).
+    pub fn new(
+        instance: wgpu::Instance,
+        adapter: wgpu::Adapter,
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+    ) -> Self {
+        let info = adapter.get_info();
+        Gpu {
+            instance,
+            adapter,
+            device,
+            queue,
+            info,
+            stages: StageCache::default(),
+        }
+    }
+
+    /// The device's one instance of stage `T`, created on first use.
+    pub fn stage<T: Stage>(&self) -> Result<std::sync::Arc<T>, GpuError> {
+        let key = std::any::TypeId::of::<T>();
+        let existing = self
+            .stages
+            .0
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&key)
+            .cloned();
+        if let Some(any) = existing
+            && let Ok(stage) = any.downcast::<T>()
+        {
+            return Ok(stage);
+        }
+        // Built outside the lock: creating a pipeline compiles shaders (tens of ms).
+        let stage = std::sync::Arc::new(T::create(&self.device)?);
+        self.stages
+            .0
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(key, stage.clone());
+        Ok(stage)
+    }
+
     /// One line naming the adapter, e.g. `llvmpipe (LLVM 15.0.6, 256 bits) — Vulkan, Cpu`.
     pub fn describe(&self) -> String {
         describe(&self.info)
@@ -121,56 +184,6 @@ impl GpuUse {
     }
 }
 
-/// The compute pipeline of entry point `entry` in `module`; without `layout`, the layout
-/// is derived from the shader.
-pub fn compute_pipeline(
-    device: &wgpu::Device,
-    label: &str,
-    module: &wgpu::ShaderModule,
-    entry: &str,
-    layout: Option<&wgpu::PipelineLayout>,
-) -> wgpu::ComputePipeline {
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout,
-        module,
-        entry_point: Some(entry),
-        compilation_options: Default::default(),
-        cache: None,
-    })
-}
-
-/// An R32Float 3-D texture of `dims` that a compute pass writes (storage) and the host
-/// reads back (copy source).
-pub fn output_volume(device: &wgpu::Device, label: &str, dims: [u32; 3]) -> wgpu::Texture {
-    device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d {
-            width: dims[0],
-            height: dims[1],
-            depth_or_array_layers: dims[2],
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D3,
-        format: wgpu::TextureFormat::R32Float,
-        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    })
-}
-
-/// Trilinear filtering within a mip level, the nearest level, clamped at the edges (the
-/// sampler every volume pass uses).
-pub fn linear_sampler(device: &wgpu::Device, label: &str) -> wgpu::Sampler {
-    device.create_sampler(&wgpu::SamplerDescriptor {
-        label: Some(label),
-        mag_filter: wgpu::FilterMode::Linear,
-        min_filter: wgpu::FilterMode::Linear,
-        mipmap_filter: wgpu::MipmapFilterMode::Nearest,
-        ..Default::default()
-    })
-}
-
 /// Picks an adapter (high performance first) and creates the device. Blocks.
 pub fn request_device() -> Result<Gpu, GpuError> {
     pollster::block_on(request_device_async())
@@ -204,6 +217,7 @@ async fn request_device_async() -> Result<Gpu, GpuError> {
         device,
         queue,
         info,
+        stages: StageCache::default(),
     })
 }
 
@@ -245,193 +259,4 @@ pub fn validated<T>(
             message: e.to_string(),
         }),
     }
-}
-
-/// Maps a `MAP_READ` buffer, copies its bytes out and unmaps it.
-pub fn read_buffer(
-    device: &wgpu::Device,
-    buffer: &wgpu::Buffer,
-    stage: &str,
-) -> Result<Vec<u8>, GpuError> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-        let _ = tx.send(r);
-    });
-    wait(device, stage, WAIT)?;
-    match rx.try_recv() {
-        Ok(Ok(())) => {}
-        Ok(Err(e)) => {
-            return Err(GpuError::Readback {
-                stage: stage.into(),
-                message: e.to_string(),
-            });
-        }
-        Err(_) => {
-            return Err(GpuError::Readback {
-                stage: stage.into(),
-                message: "map callback never ran".into(),
-            });
-        }
-    }
-    let bytes = buffer
-        .slice(..)
-        .get_mapped_range()
-        .map_err(|e| GpuError::Readback {
-            stage: stage.into(),
-            message: e.to_string(),
-        })?
-        .to_vec();
-    buffer.unmap();
-    Ok(bytes)
-}
-
-/// `bytes_per_row` for texture↔buffer copies, padded to wgpu's 256-byte alignment.
-pub fn padded_row_bytes(unpadded: u32) -> u32 {
-    let align = wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    unpadded.div_ceil(align) * align
-}
-
-/// A bind group whose entries are `resources` at bindings 0, 1, 2, … in order.
-pub fn bind_group(
-    device: &wgpu::Device,
-    label: &str,
-    layout: &wgpu::BindGroupLayout,
-    resources: &[wgpu::BindingResource<'_>],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry<'_>> = resources
-        .iter()
-        .enumerate()
-        .map(|(i, r)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            resource: r.clone(),
-        })
-        .collect();
-    device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout,
-        entries: &entries,
-    })
-}
-
-/// A uniform buffer initialised with `bytes`.
-pub fn uniform_buffer(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    label: &str,
-    bytes: &[u8],
-) -> wgpu::Buffer {
-    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes.len() as u64,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    queue.write_buffer(&buffer, 0, bytes);
-    buffer
-}
-
-/// A host-readable buffer to copy results into.
-pub fn readback_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
-}
-
-/// Encodes one compute dispatch of `groups` workgroups, then whatever `after` adds
-/// (typically copies to a readback buffer), and submits it.
-pub fn submit_compute(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    label: &str,
-    pipeline: &wgpu::ComputePipeline,
-    bind_group: &wgpu::BindGroup,
-    groups: [u32; 3],
-    after: impl FnOnce(&mut wgpu::CommandEncoder),
-) {
-    let mut encoder =
-        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
-    {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(label),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, bind_group, &[]);
-        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-    }
-    after(&mut encoder);
-    queue.submit([encoder.finish()]);
-}
-
-/// Like [`submit_compute`], with bind groups 0, 1, … set from `groups_bound`.
-pub fn submit_compute_with(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    label: &str,
-    pipeline: &wgpu::ComputePipeline,
-    groups_bound: &[&wgpu::BindGroup],
-    groups: [u32; 3],
-    after: impl FnOnce(&mut wgpu::CommandEncoder),
-) {
-    let mut encoder =
-        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
-    {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(label),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(pipeline);
-        for (i, g) in groups_bound.iter().enumerate() {
-            pass.set_bind_group(i as u32, *g, &[]);
-        }
-        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-    }
-    after(&mut encoder);
-    queue.submit([encoder.finish()]);
-}
-
-/// Reads an `R32Float` texture (2-D array or 3-D; `size` = width, height, layers/depth)
-/// back as f32 values, x fastest, then y, then layer.
-pub fn read_texture_f32(
-    gpu: &Gpu,
-    texture: &wgpu::Texture,
-    size: [u32; 3],
-    stage: &str,
-) -> Result<Vec<f32>, GpuError> {
-    let device = &gpu.device;
-    let row = padded_row_bytes(size[0] * 4);
-    let readback = validated(device, stage, || {
-        let readback = readback_buffer(device, stage, row as u64 * size[1] as u64 * size[2] as u64);
-        let mut encoder =
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(stage) });
-        encoder.copy_texture_to_buffer(
-            texture.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: Some(size[1]),
-                },
-            },
-            wgpu::Extent3d {
-                width: size[0],
-                height: size[1],
-                depth_or_array_layers: size[2],
-            },
-        );
-        gpu.queue.submit([encoder.finish()]);
-        readback
-    })?;
-    let bytes = read_buffer(device, &readback, stage)?;
-    let mut out = Vec::with_capacity((size[0] * size[1] * size[2]) as usize);
-    for r in bytes.chunks_exact(row as usize) {
-        out.extend(bytemuck::pod_collect_to_vec::<u8, f32>(
-            &r[..(size[0] * 4) as usize],
-        ));
-    }
-    Ok(out)
 }

@@ -3,6 +3,7 @@
 
 use super::texels::{BlockRanges, VolumeTexels};
 use super::{Frame, Image, OPAQUE, RaycastParams, jitter};
+use crate::sample::trilinear;
 use crate::tf::Lut;
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
@@ -53,32 +54,6 @@ impl CpuVolume {
             clip: None,
         }
     }
-}
-
-/// Trilinear sample with clamp-to-edge, texel centres at (i + 0.5) / n, as a GPU's
-/// linear sampler does.
-pub fn trilinear(values: &[f32], dims: [usize; 3], uvw: Vec3) -> f32 {
-    let c = uvw * Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) - Vec3::splat(0.5);
-    let base = c.floor();
-    let f = c - base;
-    let idx = |axis: usize, off: i64| -> usize {
-        (base[axis] as i64 + off).clamp(0, dims[axis] as i64 - 1) as usize
-    };
-    let at = |x: usize, y: usize, z: usize| values[x + dims[0] * (y + dims[1] * z)];
-    let (x0, x1, y0, y1, z0, z1) = (
-        idx(0, 0),
-        idx(0, 1),
-        idx(1, 0),
-        idx(1, 1),
-        idx(2, 0),
-        idx(2, 1),
-    );
-    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
-    let c00 = lerp(at(x0, y0, z0), at(x1, y0, z0), f.x);
-    let c10 = lerp(at(x0, y1, z0), at(x1, y1, z0), f.x);
-    let c01 = lerp(at(x0, y0, z1), at(x1, y0, z1), f.x);
-    let c11 = lerp(at(x0, y1, z1), at(x1, y1, z1), f.x);
-    lerp(lerp(c00, c10, f.y), lerp(c01, c11, f.y), f.z)
 }
 
 fn intersect_box(origin: Vec3, dir: Vec3, lo: Vec3, hi: Vec3) -> (f32, f32) {

@@ -2,20 +2,23 @@
 //! layout, sampler); [`GpuVolume`] holds one volume's textures and its transfer function;
 //! a [`Frame`] is all that changes per frame.
 
+use super::extras::GpuLight;
+use super::shadow::{LightVolume, quantise};
 use super::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use super::{Frame, Image};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, padded_row_bytes, read_buffer, readback_buffer, shaders,
-    uniform_buffer, validated,
+    Gpu, GpuError, bind_group, copy_texture_out, read_buffer, shaders, texture_readback,
+    uniform_buffer, unpad, validated,
 };
-use crate::tf::{Lut, TransferFunction, correct_opacity};
+use crate::sample::bake_lut;
+use crate::tf::{Lut, TransferFunction};
+use glam::Vec3;
 
 /// Largest tile rendered in one submission: keeps each dispatch short (no driver
 /// watchdog on real GPUs) and lets any image size fit the 2-D texture limit.
 pub const TILE: u32 = 2048;
 
-/// Bytes of voxels we upload before halving the resolution.
-pub const MAX_VOLUME_BYTES: u64 = 2 << 30;
+pub use super::texels::MAX_VOLUME_BYTES;
 
 /// Long-lived ray-casting state: built once per device.
 #[derive(Debug)]
@@ -28,8 +31,29 @@ pub struct RayCaster {
     sampler: wgpu::Sampler,
     /// Group 2: live positional AO and shadows (`render::shadow`).
     layout_2: wgpu::BindGroupLayout,
-    placeholders: super::shadow::Placeholders,
+    placeholders: super::extras::Placeholders,
     surfaces: super::surface::SurfaceRenderer,
+    /// Uniform buffers and bind groups per render target, written each frame and
+    /// rebuilt only when the volume's resources change (egui's `custom3d_wgpu` pattern).
+    bound: std::sync::Mutex<Vec<Bound>>,
+    /// Tile textures of [`Self::render`], by size.
+    tiles: std::sync::Mutex<Vec<wgpu::Texture>>,
+}
+
+/// Render targets whose bindings are kept (the viewport, a screenshot tile, a CLI tile).
+const BOUND_TARGETS: usize = 4;
+
+/// What one render target binds: its uniforms, written per frame, and bind groups 0 and
+/// 2, valid while the volume's generation and the surface layer stay the same.
+#[derive(Debug)]
+struct Bound {
+    target: wgpu::Texture,
+    params: wgpu::Buffer,
+    extras: wgpu::Buffer,
+    generation: u64,
+    layer: Option<(wgpu::TextureView, wgpu::TextureView)>,
+    group: wgpu::BindGroup,
+    group_2: wgpu::BindGroup,
 }
 
 /// One volume on the GPU with its transfer function baked.
@@ -47,8 +71,18 @@ pub struct GpuVolume {
     pub lut: Lut,
     lut_step: f32,
     tf: TransferFunction,
-    /// Live positional AO and the light volume (bind group 1), see `render::shadow`.
-    pub extras: super::shadow::RayExtras,
+    /// Live positional AO, the light volume and surfaces (bind group 2), see
+    /// `render::extras`.
+    pub extras: super::extras::RayExtras,
+    /// Changes whenever a resource the ray caster binds is replaced, so it knows when
+    /// its cached bind groups are stale.
+    generation: u64,
+}
+
+/// A fresh value for [`GpuVolume::generation`], unique across volumes.
+fn next_generation() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 fn texture_3d(
@@ -96,33 +130,6 @@ fn write_3d(
     );
 }
 
-/// Bakes `tf` over the texels' value range with opacity corrected for `step_voxels`.
-pub fn bake_lut(tf: &TransferFunction, texels: &VolumeTexels, step_voxels: f32) -> Lut {
-    let (a, b) = (
-        texels.value_offset,
-        texels.value_offset + texels.value_scale,
-    );
-    let (lo, hi) = (a.min(b), a.max(b));
-    // Unorm texels span [lo, hi] exactly; float texels use the TF's own span, widened.
-    let (lo, hi) = match texels.format {
-        super::texels::TexelFormat::R32Float => {
-            let (mn, mx) = texels.norm_range();
-            let (mn, mx) = (mn as f64, mx as f64);
-            if mx > mn {
-                (mn, mx)
-            } else {
-                (mn - 0.5, mn + 0.5)
-            }
-        }
-        _ => (lo, hi),
-    };
-    let mut lut = tf.bake(lo, hi, crate::tf::LUT_ENTRIES);
-    for e in &mut lut.rgba {
-        e[3] = correct_opacity(e[3], step_voxels);
-    }
-    lut
-}
-
 impl GpuVolume {
     /// Uploads a volume (halving it until it fits the adapter) with a transfer function.
     pub fn new(
@@ -131,14 +138,7 @@ impl GpuVolume {
         tf: &TransferFunction,
         step_voxels: f32,
     ) -> Result<Self, GpuError> {
-        let limits = gpu.device.limits();
-        let texels = VolumeTexels::new(
-            volume,
-            UploadLimits {
-                max_dim: limits.max_texture_dimension_3d as usize,
-                max_bytes: MAX_VOLUME_BYTES,
-            },
-        );
+        let texels = VolumeTexels::new(volume, UploadLimits::of(gpu));
         Self::from_texels(gpu, texels, tf, step_voxels)
     }
 
@@ -196,6 +196,7 @@ impl GpuVolume {
                 lut_step: step_voxels,
                 tf: tf.clone(),
                 extras: Default::default(),
+                generation: next_generation(),
                 ranges,
                 texels,
             }
@@ -207,6 +208,7 @@ impl GpuVolume {
         if *tf == self.tf && step_voxels == self.lut_step {
             return;
         }
+        self.generation = next_generation();
         self.lut = bake_lut(tf, &self.texels, step_voxels);
         self.tf = tf.clone();
         self.lut_step = step_voxels;
@@ -235,6 +237,7 @@ impl GpuVolume {
     /// Stored as R32Float (filtered with `FLOAT32_FILTERABLE`), the format CAO's compute
     /// passes write, so a precomputed and a per-frame AO volume shade alike.
     pub fn set_ambient_occlusion(&mut self, gpu: &Gpu, values: &[f32]) {
+        self.generation = next_generation();
         let dims = self.texels.dims.map(|d| d as u32);
         let texture = texture_3d(
             &gpu.device,
@@ -249,12 +252,14 @@ impl GpuVolume {
     /// Uses an AO volume already on the GPU (R32Float, the volume's dims), such as
     /// CAO's `V_AO`.
     pub fn set_ambient_occlusion_view(&mut self, view: &wgpu::TextureView) {
+        self.generation = next_generation();
         self.ao_view = view.clone();
     }
 
     /// Back to no ambient occlusion (A = 1 everywhere), as right after upload. The viewer
     /// shows this while a new AO volume is computed for a changed transfer function.
     pub fn clear_ambient_occlusion(&mut self, gpu: &Gpu) {
+        self.generation = next_generation();
         let ao = texture_3d(
             &gpu.device,
             "GpuVolume::ambient_occlusion",
@@ -267,6 +272,7 @@ impl GpuVolume {
 
     /// Drops the opacity modulation (factor 1 everywhere).
     pub fn clear_opacity_modulation(&mut self, gpu: &Gpu) {
+        self.generation = next_generation();
         self.modulation_view = no_modulation(&gpu.device, &gpu.queue);
     }
 
@@ -274,6 +280,7 @@ impl GpuVolume {
     /// variance modulation. Stored as R16Unorm like the AO volume; returns the values as
     /// the GPU will sample them (for the CPU twin).
     pub fn set_opacity_modulation(&mut self, gpu: &Gpu, values: &[f32]) -> Vec<f32> {
+        self.generation = next_generation();
         let dims = self.texels.dims.map(|d| d as u32);
         let quantised: Vec<u16> = values
             .iter()
@@ -370,7 +377,7 @@ impl RayCaster {
             let clip_layout = crate::clip::gpu::bind_group_layout(device);
             let layout_2 = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("RayCaster::layout_2"),
-                entries: &super::shadow::layout_entries(),
+                entries: &super::extras::layout_entries(),
             });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("RayCaster::pipeline_layout"),
@@ -393,18 +400,19 @@ impl RayCaster {
                 no_clip,
                 sampler,
                 layout_2,
-                placeholders: super::shadow::Placeholders::new(device),
+                placeholders: super::extras::Placeholders::new(device),
                 surfaces,
+                bound: Default::default(),
+                tiles: Default::default(),
             }
         })
     }
 
     /// Encodes the ray casting of one tile of `frame` into `encoder`, writing the caller's
     /// `target` (Rgba8Unorm with `STORAGE_BINDING`; its size is the tile's, `origin` where
-    /// it sits in the frame), with no readback, clipped by `clip` as
-    /// [`Self::render_clipped`] is. The viewer draws `target` through a paint callback and
-    /// copies screenshot tiles out of it asynchronously; the pixels are those
-    /// [`Self::render_clipped`] reads back for the same frame.
+    /// it sits in the frame), with no readback, clipped by `clip`'s shapes. The viewer
+    /// draws `target` through a paint callback and copies screenshot tiles out of it
+    /// asynchronously; the pixels are those [`Self::render`] reads back for the same frame.
     pub fn encode_tile(
         &self,
         (device, queue): (&wgpu::Device, &wgpu::Queue),
@@ -414,10 +422,6 @@ impl RayCaster {
         (target, origin): (&wgpu::Texture, (u32, u32)),
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
-        let params = frame.params(&vol.texels, &vol.lut, origin.0, origin.1);
-        let clip_group = clip.map(|c| c.bind_group(device, &self.clip_layout));
-        let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
-        let (tw, th) = (target.width(), target.height());
         // The surfaces, rasterised for the whole frame (submitted before the caller's
         // encoder, so they are ready when the ray cast reads them).
         let layer = match vol.extras.surfaces.is_empty() {
@@ -429,65 +433,137 @@ impl RayCaster {
                 &vol.texels,
             )?),
         };
+        self.encode(
+            (device, queue),
+            vol,
+            frame,
+            clip,
+            layer.as_ref(),
+            (target, origin),
+            encoder,
+        )
+    }
+
+    /// Writes this frame's uniforms for `target` and encodes its dispatch; the bind groups
+    /// are reused while `vol`'s resources and the surface layer stay the same.
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "one tile of one frame: every argument is a different input"
+    )]
+    fn encode(
+        &self,
+        (device, queue): (&wgpu::Device, &wgpu::Queue),
+        vol: &GpuVolume,
+        frame: &Frame,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        layer: Option<&super::surface::SurfaceLayer>,
+        (target, origin): (&wgpu::Texture, (u32, u32)),
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<(), GpuError> {
+        let params = frame.params(&vol.texels, &vol.lut, origin.0, origin.1);
+        let clip_group = clip.map(|c| c.bind_group(device, &self.clip_layout));
+        let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
+        let (tw, th) = (target.width(), target.height());
+        let layer_views = layer.map(|l| (l.position.clone(), l.color.clone()));
+        let mut bound = self.bound.lock().unwrap_or_else(|e| e.into_inner());
         validated(device, "RayCaster::encode_tile", || {
-            let uniforms = uniform_buffer(
-                device,
-                queue,
-                "RayCaster::params",
-                bytemuck::bytes_of(&params),
-            );
-            let target_view = target.create_view(&Default::default());
-            let group = bind_group(
-                device,
-                "RayCaster::bind_group",
-                &self.layout,
-                &[
-                    uniforms.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&vol.volume_view),
-                    wgpu::BindingResource::Sampler(&self.sampler),
-                    vol.lut_buffer.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&vol.ao_view),
-                    wgpu::BindingResource::TextureView(&vol.occupancy_view),
-                    wgpu::BindingResource::TextureView(&target_view),
-                    wgpu::BindingResource::TextureView(&vol.modulation_view),
-                ],
-            );
-            let group_2 = super::shadow::bind_group_2(
-                device,
-                queue,
-                &self.layout_2,
-                &vol.extras,
-                layer.as_ref(),
-                &self.placeholders,
-                &self.sampler,
-            );
+            let slot = match bound.iter().position(|b| b.target == *target) {
+                Some(i) => i,
+                None => {
+                    if bound.len() >= BOUND_TARGETS {
+                        bound.remove(0);
+                    }
+                    let uniform = |label, bytes: &[u8]| uniform_buffer(device, queue, label, bytes);
+                    let params_buffer = uniform("RayCaster::params", bytemuck::bytes_of(&params));
+                    let extras = uniform(
+                        "RayCaster::extras",
+                        bytemuck::bytes_of(&vol.extras.params()),
+                    );
+                    let (group, group_2) =
+                        self.bind_groups(device, vol, target, &params_buffer, &extras, layer);
+                    bound.push(Bound {
+                        target: target.clone(),
+                        params: params_buffer,
+                        extras,
+                        generation: vol.generation,
+                        layer: layer_views.clone(),
+                        group,
+                        group_2,
+                    });
+                    bound.len() - 1
+                }
+            };
+            let b = &mut bound[slot];
+            if b.generation != vol.generation || b.layer != layer_views {
+                let (group, group_2) =
+                    self.bind_groups(device, vol, target, &b.params, &b.extras, layer);
+                b.group = group;
+                b.group_2 = group_2;
+                b.generation = vol.generation;
+                b.layer = layer_views.clone();
+            }
+            queue.write_buffer(&b.params, 0, bytemuck::bytes_of(&params));
+            queue.write_buffer(&b.extras, 0, bytemuck::bytes_of(&vol.extras.params()));
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("RayCaster::encode_tile"),
                 timestamp_writes: None,
             });
             pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &group, &[]);
+            pass.set_bind_group(0, &b.group, &[]);
             pass.set_bind_group(1, clip_group, &[]);
-            pass.set_bind_group(2, &group_2, &[]);
+            pass.set_bind_group(2, &b.group_2, &[]);
             pass.dispatch_workgroups(tw.div_ceil(8), th.div_ceil(8), 1);
         })
     }
 
-    /// Renders a frame in tiles of at most [`TILE`]² and reads it back.
-    pub fn render(&self, gpu: &Gpu, vol: &GpuVolume, frame: &Frame) -> Result<Image, GpuError> {
-        self.render_clipped(gpu, vol, frame, None)
+    /// Bind groups 0 (volume, LUT, AO, occupancy, target, modulation) and 2 (extras).
+    fn bind_groups(
+        &self,
+        device: &wgpu::Device,
+        vol: &GpuVolume,
+        target: &wgpu::Texture,
+        params: &wgpu::Buffer,
+        extras: &wgpu::Buffer,
+        layer: Option<&super::surface::SurfaceLayer>,
+    ) -> (wgpu::BindGroup, wgpu::BindGroup) {
+        let target_view = target.create_view(&Default::default());
+        let group = bind_group(
+            device,
+            "RayCaster::bind_group",
+            &self.layout,
+            &[
+                params.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&vol.volume_view),
+                wgpu::BindingResource::Sampler(&self.sampler),
+                vol.lut_buffer.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&vol.ao_view),
+                wgpu::BindingResource::TextureView(&vol.occupancy_view),
+                wgpu::BindingResource::TextureView(&target_view),
+                wgpu::BindingResource::TextureView(&vol.modulation_view),
+            ],
+        );
+        let group_2 = super::extras::bind_group_2(
+            device,
+            &self.layout_2,
+            &vol.extras,
+            extras,
+            layer,
+            &self.placeholders,
+            &self.sampler,
+        );
+        (group, group_2)
     }
 
-    /// [`Self::render`] with shadow-test clipping against `clip`'s shapes.
-    pub fn render_clipped(
+    /// Renders a frame in tiles of at most [`TILE`]², with shadow-test clipping against
+    /// `clip`'s shapes, and reads it back.
+    pub fn render(
         &self,
         gpu: &Gpu,
         vol: &GpuVolume,
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
     ) -> Result<Image, GpuError> {
-        let clip_group = clip.map(|c| c.bind_group(&gpu.device, &self.clip_layout));
-        let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
+        let device = &gpu.device;
         let (w, h) = (frame.width.max(1), frame.height.max(1));
         let mut image = Image {
             width: w,
@@ -497,7 +573,7 @@ impl RayCaster {
         let layer = match vol.extras.surfaces.is_empty() {
             true => None,
             false => Some(self.surfaces.rasterise(
-                (&gpu.device, &gpu.queue),
+                (device, &gpu.queue),
                 &vol.extras.surfaces,
                 frame,
                 &vol.texels,
@@ -507,9 +583,31 @@ impl RayCaster {
         while y0 < h {
             let mut x0 = 0;
             while x0 < w {
-                let size = ((w - x0).min(TILE), (h - y0).min(TILE));
-                let tile =
-                    self.render_tile(gpu, vol, frame, clip_group, layer.as_ref(), (x0, y0), size)?;
+                let (tw, th) = ((w - x0).min(TILE), (h - y0).min(TILE));
+                let target = self.tile_target(device, tw, th)?;
+                let (readback, row) =
+                    texture_readback(device, "RayCaster::readback", [tw, th, 1], 4);
+                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("RayCaster::tile"),
+                });
+                self.encode(
+                    (device, &gpu.queue),
+                    vol,
+                    frame,
+                    clip,
+                    layer.as_ref(),
+                    (&target, (x0, y0)),
+                    &mut encoder,
+                )?;
+                copy_texture_out(&mut encoder, &target, &readback, row, [tw, th, 1]);
+                gpu.queue.submit([encoder.finish()]);
+                let bytes = read_buffer(device, &readback, "RayCaster::readback")?;
+                let pixels: Vec<[u8; 4]> = unpad(&bytes, row, tw);
+                let tile = Image {
+                    width: tw,
+                    height: th,
+                    pixels,
+                };
                 image.blit(&tile, x0, y0);
                 x0 += TILE;
             }
@@ -518,111 +616,99 @@ impl RayCaster {
         Ok(image)
     }
 
-    #[allow(
-        clippy::too_many_arguments,
-        reason = "one tile of one frame: every argument is a different input"
-    )]
-    fn render_tile(
+    /// A tile texture of `tw × th` for [`Self::render`], kept for the next frame of the
+    /// same size (so are its bindings).
+    fn tile_target(
         &self,
-        gpu: &Gpu,
-        vol: &GpuVolume,
-        frame: &Frame,
-        clip_group: &wgpu::BindGroup,
-        layer: Option<&super::surface::SurfaceLayer>,
-        (x0, y0): (u32, u32),
-        (tw, th): (u32, u32),
-    ) -> Result<Image, GpuError> {
-        let device = &gpu.device;
-        let params = frame.params(&vol.texels, &vol.lut, x0, y0);
-        let row = padded_row_bytes(tw * 4);
-        let readback = validated(device, "RayCaster::tile", || {
-            let uniforms = uniform_buffer(
-                device,
-                &gpu.queue,
-                "RayCaster::params",
-                bytemuck::bytes_of(&params),
-            );
-            let target = device.create_texture(&wgpu::TextureDescriptor {
+        device: &wgpu::Device,
+        tw: u32,
+        th: u32,
+    ) -> Result<wgpu::Texture, GpuError> {
+        let mut tiles = self.tiles.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(t) = tiles.iter().find(|t| (t.width(), t.height()) == (tw, th)) {
+            return Ok(t.clone());
+        }
+        let t = validated(device, "RayCaster::tile", || {
+            device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("RayCaster::tile"),
-                size: wgpu::Extent3d {
-                    width: tw,
-                    height: th,
-                    depth_or_array_layers: 1,
-                },
+                size: crate::gpu::extent([tw, th, 1]),
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
                 format: wgpu::TextureFormat::Rgba8Unorm,
                 usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
                 view_formats: &[],
-            });
-            let target_view = target.create_view(&Default::default());
-            let readback = readback_buffer(device, "RayCaster::readback", row as u64 * th as u64);
-            let group = bind_group(
-                device,
-                "RayCaster::bind_group",
-                &self.layout,
-                &[
-                    uniforms.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&vol.volume_view),
-                    wgpu::BindingResource::Sampler(&self.sampler),
-                    vol.lut_buffer.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&vol.ao_view),
-                    wgpu::BindingResource::TextureView(&vol.occupancy_view),
-                    wgpu::BindingResource::TextureView(&target_view),
-                    wgpu::BindingResource::TextureView(&vol.modulation_view),
-                ],
-            );
-            let group_2 = super::shadow::bind_group_2(
-                device,
-                &gpu.queue,
-                &self.layout_2,
-                &vol.extras,
-                layer,
-                &self.placeholders,
-                &self.sampler,
-            );
-            crate::gpu::submit_compute_with(
-                device,
-                &gpu.queue,
-                "RayCaster::tile",
-                &self.pipeline,
-                &[&group, clip_group, &group_2],
-                [tw.div_ceil(8), th.div_ceil(8), 1],
-                |encoder| {
-                    encoder.copy_texture_to_buffer(
-                        target.as_image_copy(),
-                        wgpu::TexelCopyBufferInfo {
-                            buffer: &readback,
-                            layout: wgpu::TexelCopyBufferLayout {
-                                offset: 0,
-                                bytes_per_row: Some(row),
-                                rows_per_image: Some(th),
-                            },
-                        },
-                        wgpu::Extent3d {
-                            width: tw,
-                            height: th,
-                            depth_or_array_layers: 1,
-                        },
-                    );
-                },
-            );
-            readback
+            })
         })?;
-        let bytes = read_buffer(device, &readback, "RayCaster::readback")?;
-        let mut pixels = Vec::with_capacity((tw * th) as usize);
-        for r in bytes.chunks_exact(row as usize) {
-            pixels.extend(
-                r[..(tw * 4) as usize]
-                    .chunks_exact(4)
-                    .map(|c| [c[0], c[1], c[2], c[3]]),
-            );
+        if tiles.len() >= BOUND_TARGETS - 1 {
+            tiles.remove(0);
         }
-        Ok(Image {
-            width: tw,
-            height: th,
-            pixels,
-        })
+        tiles.push(t.clone());
+        Ok(t)
+    }
+}
+
+impl crate::gpu::Stage for RayCaster {
+    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
+        RayCaster::new(device)
+    }
+}
+
+impl GpuVolume {
+    /// Turns live positional AO on (`Some`) or off for this volume and transfer function.
+    /// Returns the CPU twin's equivalent of what is now on the GPU.
+    pub fn set_live_vao(
+        &mut self,
+        gpu: &Gpu,
+        tf: &TransferFunction,
+        settings: Option<&crate::ao::vao::VaoSettings>,
+    ) -> Result<(), GpuError> {
+        self.generation = next_generation();
+        self.extras.live_vao = match settings {
+            Some(s) => Some(crate::ao::vao::VaoInputs::new(gpu, &self.texels, tf, s)?),
+            None => None,
+        };
+        Ok(())
+    }
+
+    /// Uses `values` (transmittance per voxel, x fastest) as the light volume for shadows
+    /// from `direction` (unit, towards the light); `None` turns shadows off. Returns the
+    /// values as the GPU samples them (for the CPU twin).
+    pub fn set_light_volume(
+        &mut self,
+        gpu: &Gpu,
+        light: Option<(&[f32], Vec3)>,
+    ) -> Result<Option<LightVolume>, GpuError> {
+        self.generation = next_generation();
+        let Some((values, direction)) = light else {
+            self.extras.light = None;
+            return Ok(None);
+        };
+        let dims = self.texels.dims;
+        if values.len() != dims.iter().product::<usize>() {
+            return Err(GpuError::Validation {
+                stage: "GpuVolume::set_light_volume".into(),
+                message: format!(
+                    "{} light values for a {}×{}×{} volume",
+                    values.len(),
+                    dims[0],
+                    dims[1],
+                    dims[2]
+                ),
+            });
+        }
+        let bits: Vec<u16> = values
+            .iter()
+            .map(|&v| half::f16::from_f32(v.clamp(0.0, 1.0)).to_bits())
+            .collect();
+        let view = validated(&gpu.device, "GpuVolume::set_light_volume", || {
+            crate::gpu::f16_texture(&gpu.device, &gpu.queue, "GpuVolume::light", &[(bits, dims)])
+                .create_view(&Default::default())
+        })?;
+        self.extras.light = Some(GpuLight { view, direction });
+        Ok(Some(LightVolume {
+            direction,
+            values: quantise(values),
+        }))
     }
 }

@@ -10,6 +10,7 @@
 
 pub mod camera;
 pub mod cpu;
+pub mod extras;
 pub mod gpu;
 pub mod image;
 pub mod offscreen;
@@ -63,7 +64,7 @@ pub struct RenderSettings {
     /// Multiply each sample's opacity by `min(σ²/σ²_max, 1)` (Ruiz et al. §4.2); off
     /// when absent.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub opacity_modulation: Option<crate::ao::filter::OpacityModulation>,
+    pub opacity_modulation: Option<crate::ao::OpacityModulation>,
     /// Draw the clip shapes as surfaces of this straight RGBA (A < 1: translucent).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub clip_surface: Option<[f32; 4]>,

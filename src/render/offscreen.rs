@@ -1,17 +1,21 @@
-//! Offscreen rendering for the CLI and tests: GPU when an adapter exists, else the CPU twin.
+//! Offscreen rendering for the CLI, tests and benchmarks: one frame with its ambient
+//! occlusion, opacity modulation, shadows, clip shapes and surfaces, on the device the
+//! caller gives (`None`: the CPU twin).
 
+use super::cpu;
 use super::gpu::{GpuVolume, RayCaster};
 use super::shadow::{LightGpu, LightVolume, light_cpu, light_direction, light_lut, quantise};
 use super::texels::{UploadLimits, VolumeTexels};
-use super::{Frame, Image, cpu};
-use crate::ao::cao::{CaoGpu, CaoMode};
-use crate::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
-use crate::ao::{AoMethod, AoSettings, vao};
+use super::{Frame, Image};
+use crate::ao::cao::CaoStats;
+use crate::ao::vao::PositionalAo;
+use crate::ao::{Ambient, AoEngine, AoInput, AoRequest, AoSettings};
 use crate::clip::ClipShape;
 use crate::clip::gpu::ClipMaps;
-use crate::gpu::{self, GpuError};
+use crate::gpu::{Gpu, GpuError};
 use crate::tf::TransferFunction;
 use crate::volume::Volume;
+use std::sync::Arc;
 
 /// What rendered an image and how.
 #[derive(Debug, Clone)]
@@ -24,92 +28,65 @@ pub struct Rendered {
     /// Seconds spent computing ambient occlusion (0 without).
     pub ao_seconds: f64,
     /// CAO / LAO-every-frame figures for the frame.
-    pub cao: Option<crate::ao::cao::CaoStats>,
+    pub cao: Option<CaoStats>,
     /// Clip shapes left out, with why (the others clipped).
     pub clip_errors: Vec<String>,
+    /// How the AO was computed, where that needs saying (see [`crate::ao::AoComputed`]).
+    pub notes: Vec<String>,
 }
 
-/// What is drawn besides the volume.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Extras<'a> {
+/// One frame to render: the volume (already in RAS order) and everything drawn with it.
+#[derive(Debug, Clone, Copy)]
+pub struct RenderJob<'a> {
+    pub volume: &'a Volume,
+    pub tf: &'a TransferFunction,
+    pub frame: &'a Frame,
+    pub ao: &'a AoSettings,
     /// Clip shapes (mm from the volume's centre).
     pub clip: &'a [ClipShape],
     /// Triangle meshes drawn inside the volume (see `render::surface`).
     pub surfaces: &'a [super::surface::Surface],
 }
 
-/// Renders `volume` (already in RAS order) with ambient occlusion as `ao` says.
-///
-/// With `use_gpu` and no usable adapter, falls back to the CPU twin with a warning.
-/// `progress(done, total)` reports AO precomputation in z-slices.
+impl<'a> RenderJob<'a> {
+    /// A frame of `volume` with no clip shapes and no surfaces.
+    pub fn new(
+        volume: &'a Volume,
+        tf: &'a TransferFunction,
+        frame: &'a Frame,
+        ao: &'a AoSettings,
+    ) -> Self {
+        RenderJob {
+            volume,
+            tf,
+            frame,
+            ao,
+            clip: &[],
+            surfaces: &[],
+        }
+    }
+}
+
+/// Renders `job` on `gpu`, or on the CPU twin for `None`. Clipping, CAO and its baseline
+/// need the GPU: the clip shapes' depth maps are rasterised. `progress(done, total)`
+/// reports AO precomputation in z-slices.
 pub fn render(
-    volume: &Volume,
-    tf: &TransferFunction,
-    frame: &Frame,
-    ao: &AoSettings,
-    use_gpu: bool,
+    gpu: Option<&Arc<Gpu>>,
+    job: &RenderJob<'_>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Rendered, GpuError> {
-    render_with(volume, tf, frame, ao, Extras::default(), use_gpu, progress)
-}
-
-/// [`render`] with clip shapes. Clipping, CAO and its baseline need the GPU: the clip
-/// shapes' depth maps are rasterised.
-pub fn render_clipped(
-    volume: &Volume,
-    tf: &TransferFunction,
-    frame: &Frame,
-    ao: &AoSettings,
-    clip: &[ClipShape],
-    use_gpu: bool,
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<Rendered, GpuError> {
-    let extras = Extras {
-        clip,
-        ..Default::default()
-    };
-    render_with(volume, tf, frame, ao, extras, use_gpu, progress)
-}
-
-/// As [`render`], with triangle meshes drawn inside the volume (see `render::surface`).
-pub fn render_with_surfaces(
-    volume: &Volume,
-    tf: &TransferFunction,
-    frame: &Frame,
-    ao: &AoSettings,
-    surfaces: &[super::surface::Surface],
-    use_gpu: bool,
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<Rendered, GpuError> {
-    let extras = Extras {
-        surfaces,
-        ..Default::default()
-    };
-    render_with(volume, tf, frame, ao, extras, use_gpu, progress)
-}
-
-/// [`render`] with clip shapes and surfaces.
-pub fn render_with(
-    volume: &Volume,
-    tf: &TransferFunction,
-    frame: &Frame,
-    ao: &AoSettings,
-    extras: Extras<'_>,
-    use_gpu: bool,
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<Rendered, GpuError> {
-    let Extras { clip, surfaces } = extras;
-    let mut surfaces = surfaces.to_vec();
-    if let Some(rgba) = frame.settings.clip_surface {
+    let mut surfaces = job.surfaces.to_vec();
+    if let Some(rgba) = job.frame.settings.clip_surface {
+        let v = job.volume;
         let radius = glam::Vec3::new(
-            volume.dims[0] as f32 * volume.spacing[0],
-            volume.dims[1] as f32 * volume.spacing[1],
-            volume.dims[2] as f32 * volume.spacing[2],
+            v.dims[0] as f32 * v.spacing[0],
+            v.dims[1] as f32 * v.spacing[1],
+            v.dims[2] as f32 * v.spacing[2],
         )
         .length()
             * 0.5;
         // Shapes that cannot be built are reported by the clipping below.
-        surfaces.extend(clip.iter().filter_map(|c| {
+        surfaces.extend(job.clip.iter().filter_map(|c| {
             let m = c.posed_geometry(radius).ok()?;
             Some(super::surface::Surface {
                 triangles: m
@@ -121,119 +98,102 @@ pub fn render_with(
             })
         }));
     }
-    let surfaces = surfaces.as_slice();
-    let rays = Rays::uniform(ao.rays.directions());
-    if matches!(ao.method, AoMethod::Vao | AoMethod::VaoLive) {
-        ao.vao.validate().map_err(|e| GpuError::Validation {
-            stage: "positional AO settings".into(),
-            message: e.to_string(),
-        })?;
-    }
-    let clipped = !clip.is_empty() || matches!(ao.method, AoMethod::Cao | AoMethod::LaoFull);
-    if clipped && !use_gpu {
-        return Err(GpuError::Unsupported {
+    let needs_gpu = !job.clip.is_empty() || job.ao.method.is_clipped();
+    match gpu {
+        Some(g) => render_gpu(g, job, &surfaces, progress),
+        None if needs_gpu => Err(GpuError::Unsupported {
             what: "clipping, CAO and lao-full need a GPU adapter: the clip shapes' depth maps are rasterised (drop --cpu)".into(),
-        });
+        }),
+        None => render_cpu(job, &surfaces, progress),
     }
-    if use_gpu {
-        match gpu::request_device() {
-            Ok(g) => {
-                let rc = RayCaster::new(&g.device)?;
-                let mut vol = GpuVolume::new(&g, volume, tf, frame.settings.step_voxels)?;
-                vol.extras.surfaces = surfaces.to_vec();
-                let start = std::time::Instant::now();
-                let mut cao_stats = None;
-                let mut clip_errors = Vec::new();
-                let mut cao_state = None;
-                let mut maps = None;
-                match ao.method {
-                    AoMethod::Lao => {
-                        let lut = lao_lut(tf, &vol.texels);
-                        let a = LaoGpu::new(&g.device)?
-                            .compute(&g, &vol, &lut, &rays, ao.samples, progress)?;
-                        vol.set_ambient_occlusion(&g, &a);
-                    }
-                    AoMethod::Cao | AoMethod::LaoFull => {
-                        let mut c =
-                            CaoGpu::new(&g, &vol, tf, &rays, ao.samples, ao.msaa, progress)?;
-                        let mode = if ao.method == AoMethod::Cao {
-                            CaoMode::Selective
-                        } else {
-                            CaoMode::Full
-                        };
-                        let reach = c.reach_mm(&vol.texels);
-                        let stats =
-                            c.update(&g, &vol.texels, clip, ao.clip_resolution, reach, mode)?;
-                        vol.set_ambient_occlusion_view(c.ao_view());
-                        clip_errors = stats.clip_errors.clone();
-                        cao_stats = Some(stats);
-                        cao_state = Some(c);
-                    }
-                    AoMethod::Vao => {
-                        let inputs = vao::VaoInputs::new(&g, &vol.texels, tf, &ao.vao)?;
-                        let a = vao::VaoGpu::new(&g.device)?.compute(
-                            &g,
-                            vol.texels.dims,
-                            &inputs,
-                            progress,
-                        )?;
-                        vol.set_ambient_occlusion(&g, &a);
-                    }
-                    AoMethod::VaoLive => vol.set_live_vao(&g, tf, Some(&ao.vao))?,
-                    _ => {
-                        if let Some(a) = crate::ao::fast::compute(&g, &vol, tf, ao)? {
-                            vol.set_ambient_occlusion(&g, &a);
-                        }
-                    }
-                }
-                if let Some(m) = &frame.settings.opacity_modulation {
-                    let f = crate::ao::fast::modulation(&g, &vol, tf, m)?;
-                    vol.set_opacity_modulation(&g, &f);
-                }
-                if cao_state.is_none() && !clip.is_empty() {
-                    let mut m = ClipMaps::new(&g)?;
-                    let radius = glam::Vec3::from(vol.texels.extent()).length() * 0.5;
-                    // No AO depends on the clipping here: the dilation margin is unused.
-                    let update = m.update(&g, clip, radius, 1.0, ao.clip_resolution)?;
-                    clip_errors = update.errors.iter().map(|e| e.to_string()).collect();
-                    maps = Some(m);
-                }
-                let clip_maps = cao_state.as_ref().map(|c| &c.clip).or(maps.as_ref());
-                if frame.settings.shadows {
-                    let dir = light_dir(frame)?;
-                    let t = LightGpu::new(&g.device)?.compute_clipped(
-                        &g,
-                        &vol.texels,
-                        &light_lut(tf, &vol.texels),
-                        dir,
-                        clip_maps,
-                        progress,
-                    )?;
-                    vol.set_light_volume(&g, Some((&t, dir)))?;
-                }
-                let ao_seconds = start.elapsed().as_secs_f64();
-                let image = rc.render_clipped(&g, &vol, frame, clip_maps)?;
-                return Ok(Rendered {
-                    image,
-                    device: g.describe(),
-                    downsampled: vol.texels.downsampled,
-                    ao_seconds,
-                    cao: cao_stats,
-                    clip_errors,
-                });
-            }
-            Err(e) if clipped => return Err(e),
-            Err(e) => eprintln!("warning: {e}\nwarning: rendering on the CPU instead (slow)"),
+}
+
+fn render_gpu(
+    g: &Arc<Gpu>,
+    job: &RenderJob<'_>,
+    surfaces: &[super::surface::Surface],
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Rendered, GpuError> {
+    let RenderJob {
+        volume,
+        tf,
+        frame,
+        ao,
+        clip,
+        ..
+    } = *job;
+    let rc = g.stage::<RayCaster>()?;
+    let mut vol = GpuVolume::new(g, volume, tf, frame.settings.step_voxels)?;
+    vol.extras.surfaces = surfaces.to_vec();
+    let start = std::time::Instant::now();
+    let engine = AoEngine::on(Some(Arc::clone(g)));
+    let request = AoRequest {
+        tf,
+        settings: ao,
+        clip: Some(clip),
+    };
+    let computed = engine.compute(AoInput::Uploaded(&vol), &request, progress)?;
+    let mut clip_errors = Vec::new();
+    let mut cao_state = None;
+    match computed.ambient {
+        Ambient::One => {}
+        Ambient::Live => vol.set_live_vao(g, tf, Some(&ao.vao))?,
+        Ambient::Values(a) => vol.set_ambient_occlusion(g, &a),
+        Ambient::Cao(c) => {
+            vol.set_ambient_occlusion_view(c.ao_view());
+            cao_state = Some(c);
         }
     }
-    let texels = VolumeTexels::new(
-        volume,
-        UploadLimits {
-            max_dim: usize::MAX,
-            max_bytes: u64::MAX,
-        },
-    );
-    let lut = super::gpu::bake_lut(tf, &texels, frame.settings.step_voxels);
+    if let Some(stats) = &computed.cao {
+        clip_errors = stats.clip_errors.clone();
+    }
+    if let Some(m) = &frame.settings.opacity_modulation {
+        let f = crate::ao::fast::modulation(g, &vol, tf, m)?;
+        vol.set_opacity_modulation(g, &f);
+    }
+    let mut maps = None;
+    if cao_state.is_none() && !clip.is_empty() {
+        let mut m = ClipMaps::new(g)?;
+        let radius = glam::Vec3::from(vol.texels.extent()).length() * 0.5;
+        // No AO depends on the clipping here: the dilation margin is unused.
+        let update = m.update(g, clip, radius, 1.0, ao.clip_resolution)?;
+        clip_errors = update.errors.iter().map(|e| e.to_string()).collect();
+        maps = Some(m);
+    }
+    let clip_maps = cao_state.as_ref().map(|c| &c.clip).or(maps.as_ref());
+    if frame.settings.shadows {
+        let dir = light_dir(frame)?;
+        let t = g.stage::<LightGpu>()?.compute(
+            g,
+            &vol.texels,
+            &light_lut(tf, &vol.texels),
+            dir,
+            clip_maps,
+            progress,
+        )?;
+        vol.set_light_volume(g, Some((&t, dir)))?;
+    }
+    let ao_seconds = start.elapsed().as_secs_f64();
+    let image = rc.render(g, &vol, frame, clip_maps)?;
+    Ok(Rendered {
+        image,
+        device: g.describe(),
+        downsampled: vol.texels.downsampled,
+        ao_seconds,
+        cao: computed.cao,
+        clip_errors,
+        notes: computed.notes,
+    })
+}
+
+fn render_cpu(
+    job: &RenderJob<'_>,
+    surfaces: &[super::surface::Surface],
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Rendered, GpuError> {
+    let (volume, tf, frame, ao) = (job.volume, job.tf, job.frame, job.ao);
+    let texels = VolumeTexels::new(volume, UploadLimits::NONE);
+    let lut = crate::sample::bake_lut(tf, &texels, frame.settings.step_voxels);
     let (mut cv, occ) = cpu::prepare(&texels, &lut);
     if !surfaces.is_empty() {
         cv.surfaces = Some(cpu::CpuSurfaces {
@@ -243,32 +203,24 @@ pub fn render_with(
         });
     }
     let start = std::time::Instant::now();
+    let request = AoRequest {
+        tf,
+        settings: ao,
+        clip: None,
+    };
     // The GPU keeps AO volumes as f32 (R32Float), so the twin uses them as computed.
-    if ao.method == AoMethod::Lao {
-        cv.ao = Some(lao_cpu(
-            &texels,
-            &lao_lut(tf, &texels),
-            &rays,
-            ao.samples,
-            progress,
-        ));
-    }
-    if ao.method == AoMethod::Vao {
-        let pao = vao::PositionalAo::new(&texels, tf, &ao.vao);
-        cv.ao = Some(vao::vao_cpu(&pao, texels.dims, progress));
-    }
-    if ao.method == AoMethod::VaoLive {
-        cv.live_vao = Some(vao::PositionalAo::new(&texels, tf, &ao.vao));
-    }
-    if let Some(a) = crate::ao::fast::compute_cpu(&texels, tf, ao) {
-        cv.ao = Some(a);
+    let computed = AoEngine::on(None).compute(AoInput::Texels(&texels), &request, progress)?;
+    match computed.ambient {
+        Ambient::Values(a) => cv.ao = Some(a),
+        Ambient::Live => cv.live_vao = Some(PositionalAo::new(&texels, tf, &ao.vao)),
+        Ambient::One | Ambient::Cao(_) => {}
     }
     if let Some(m) = &frame.settings.opacity_modulation {
         cv.modulation = Some(quantise16(&crate::ao::fast::modulation_cpu(&texels, tf, m)));
     }
     if frame.settings.shadows {
         let dir = light_dir(frame)?;
-        let t = light_cpu(&texels, &light_lut(tf, &texels), dir, progress);
+        let t = light_cpu(&texels, &light_lut(tf, &texels), dir, None, progress);
         cv.light = Some(LightVolume {
             direction: dir,
             values: quantise(&t),
@@ -284,6 +236,7 @@ pub fn render_with(
         ao_seconds,
         cao: None,
         clip_errors: Vec::new(),
+        notes: computed.notes,
     })
 }
 

@@ -53,11 +53,36 @@ pub struct VolumeTexels {
     pub downsampled: u32,
 }
 
+/// Bytes of voxels we upload before halving the resolution.
+pub const MAX_VOLUME_BYTES: u64 = 2 << 30;
+
 /// Limits the upload must respect.
 #[derive(Debug, Clone, Copy)]
 pub struct UploadLimits {
     pub max_dim: usize,
     pub max_bytes: u64,
+}
+
+impl UploadLimits {
+    /// No limits: the volume at full resolution (for the CPU twins).
+    pub const NONE: UploadLimits = UploadLimits {
+        max_dim: usize::MAX,
+        max_bytes: u64::MAX,
+    };
+
+    /// What `gpu` holds: its 3-D texture size and [`MAX_VOLUME_BYTES`].
+    pub fn of(gpu: &crate::gpu::Gpu) -> Self {
+        UploadLimits {
+            max_dim: gpu.device.limits().max_texture_dimension_3d as usize,
+            max_bytes: MAX_VOLUME_BYTES,
+        }
+    }
+
+    /// Whether `texels` fit as they are (the test [`VolumeTexels::new`] halves until).
+    pub fn fits(&self, texels: &VolumeTexels) -> bool {
+        texels.dims.iter().all(|&d| d <= self.max_dim)
+            && texels.bytes.len() as u64 <= self.max_bytes
+    }
 }
 
 impl VolumeTexels {

@@ -24,12 +24,14 @@
 //! `≤ v_x`, so all three maps give exactly 1. A variance floor of 1e-12 keeps the
 //! Gaussian and Penner maps finite where rounding leaves `E[v²] − E[v]²` at 0.
 
+use crate::gpu::dispatch::{Grid, SlabDispatch, fold_linear};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, padded_row_bytes, read_buffer, readback_buffer, shaders,
-    submit_compute, uniform_buffer, validated,
+    Gpu, GpuError, bind_group, compute_pipeline, copy_texture_out, read_buffer, shaders,
+    storage_buffer, submit_compute, texture_3d, texture_readback, uniform_buffer, unpad, validated,
 };
-use crate::render::gpu::{GpuVolume, bake_lut};
+use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
+use crate::sample::bake_lut;
 use crate::tf::{Lut, TransferFunction};
 use rayon::prelude::*;
 
@@ -49,61 +51,7 @@ pub const VARIANCE_FLOOR: f32 = 1e-12;
 /// Winitzki's constant `a = 8(π − 3)/(3π(4 − π))` of the erf approximation.
 pub const ERF_A: f32 = 0.140_012_3;
 
-/// What the box statistics are taken of.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum StatisticSource {
-    /// The texel value mapped linearly onto [0, 1] over the volume's range (the paper).
-    #[default]
-    Density,
-    /// The transfer function's opacity (for one voxel of path length).
-    Opacity,
-}
-
-impl StatisticSource {
-    pub fn parse(s: &str) -> Result<Self, String> {
-        match s {
-            "density" => Ok(Self::Density),
-            "opacity" => Ok(Self::Opacity),
-            o => Err(format!(
-                "unknown statistic source {o:?} (available: density, opacity)"
-            )),
-        }
-    }
-}
-
-/// Unit of the box radius in settings and on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum RadiusUnit {
-    #[default]
-    Voxels,
-    Mm,
-}
-
-/// Opacity modulation by local variance (Ruiz et al. §4.2): each sample's opacity is
-/// multiplied by `min(σ²/σ²_max, 1)`, so homogeneous regions fade and boundaries stay.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct OpacityModulation {
-    /// `σ²_max`, in units of the source value squared (density normalised to [0, 1]).
-    pub sigma2_max: f32,
-    /// Box radius in voxels.
-    pub radius: f32,
-    pub source: StatisticSource,
-}
-
-impl Default for OpacityModulation {
-    fn default() -> Self {
-        OpacityModulation {
-            // About the paper's σ²_max = 5 on 0…255 data is 8e-5; CT's wider range makes
-            // a larger default read better.
-            sigma2_max: 1e-3,
-            radius: 10.0,
-            source: StatisticSource::Density,
-        }
-    }
-}
+pub use super::settings::{OpacityModulation, RadiusUnit, StatisticSource};
 
 /// Which map to build from the statistics.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -490,14 +438,23 @@ pub fn modulation(variance: &[f32], sigma2_max: f32) -> Vec<f32> {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 struct BoxParams {
-    /// x, y, z, axis (0, 1, 2).
-    dims: [u32; 4],
-    /// r along this axis, segment length L, segments per line, first pass (1) or not.
-    run: [u32; 4],
+    dims: [u32; 3],
+    /// The axis of this pass (0, 1, 2).
+    axis: u32,
+    /// r along this axis.
+    radius: u32,
+    /// Segment length L and segments per line.
+    segment_len: u32,
+    segments: u32,
+    /// 1 for the first pass (it reads the volume), 0 after.
+    first: u32,
     /// Source map: a, b, entries − 1, opacity (1) or density (0).
     source: [f32; 4],
-    /// Invocations in this pass, invocations per dispatch row, lines.
-    count: [u32; 4],
+    /// Invocations in this pass, invocations per row of workgroups, lines.
+    invocations: u32,
+    row_stride: u32,
+    lines: u32,
+    _pad: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<BoxParams>() == 64);
@@ -522,86 +479,36 @@ pub struct FilterGpu {
     map_pipeline: wgpu::ComputePipeline,
 }
 
-fn pipeline(
-    device: &wgpu::Device,
-    module: &wgpu::ShaderModule,
-    label: &str,
-) -> wgpu::ComputePipeline {
-    crate::gpu::compute_pipeline(device, label, module, "main", None)
-}
-
 fn stats_texture(device: &wgpu::Device, label: &str, dims: [u32; 3]) -> wgpu::Texture {
-    device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size: extent(dims),
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D3,
-        format: wgpu::TextureFormat::Rgba32Float,
-        usage: wgpu::TextureUsages::STORAGE_BINDING
+    texture_3d(
+        device,
+        label,
+        dims,
+        wgpu::TextureFormat::Rgba32Float,
+        wgpu::TextureUsages::STORAGE_BINDING
             | wgpu::TextureUsages::TEXTURE_BINDING
             | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    })
+    )
 }
 
-fn extent(dims: [u32; 3]) -> wgpu::Extent3d {
-    wgpu::Extent3d {
-        width: dims[0],
-        height: dims[1],
-        depth_or_array_layers: dims[2],
-    }
-}
-
-/// Copies a whole 3-D texture into `buffer` with rows of `row` bytes.
-fn copy_out(
-    encoder: &mut wgpu::CommandEncoder,
-    texture: &wgpu::Texture,
-    buffer: &wgpu::Buffer,
-    row: u32,
-    dims: [u32; 3],
-) {
-    encoder.copy_texture_to_buffer(
-        texture.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(row),
-                rows_per_image: Some(dims[1]),
-            },
-        },
-        extent(dims),
-    );
-}
-
-/// Strips the row padding of a read-back texture with `texel` bytes per texel.
-fn unpad<T: bytemuck::Pod>(bytes: &[u8], row: u32, width: u32, texel: u32) -> Vec<T> {
-    let mut out = Vec::new();
-    for r in bytes.chunks_exact(row as usize) {
-        out.extend(bytemuck::pod_collect_to_vec::<u8, T>(
-            &r[..(width * texel) as usize],
-        ));
-    }
-    out
-}
-
-/// The statistics on the GPU: the final (x, y, z-filtered) texture and the LUT buffer.
 struct GpuStats {
     stats: wgpu::Texture,
     lut: wgpu::Buffer,
 }
 
-impl FilterGpu {
-    pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
+impl crate::gpu::Stage for FilterGpu {
+    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
         let box_module = shaders::module(device, "box_stats.wgsl")?;
         let map_module = shaders::module(device, "ambient_maps.wgsl")?;
+        let pipeline = |label, module| compute_pipeline(device, label, module, "main", None);
         validated(device, "Filter::new", || FilterGpu {
-            box_pipeline: pipeline(device, &box_module, "Filter::box_stats"),
-            map_pipeline: pipeline(device, &map_module, "Filter::ambient_maps"),
+            box_pipeline: pipeline("Filter::box_stats", &box_module),
+            map_pipeline: pipeline("Filter::ambient_maps", &map_module),
         })
     }
+}
 
+impl FilterGpu {
     /// Runs the three separable passes (x: volume → a, y: a → b, z: b → a), one
     /// submission each.
     fn stats(
@@ -615,14 +522,12 @@ impl FilterGpu {
         let dims = vol.texels.dims.map(|d| d as u32);
         let [nx, ny, nz] = dims;
         let (tex_a, tex_b, lut) = validated(device, "Filter::buffers", || {
-            let lut = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("Filter::lut_alpha"),
-                size: (source.alpha.len().max(4) * 4) as u64,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            gpu.queue
-                .write_buffer(&lut, 0, bytemuck::cast_slice(&source.alpha));
+            let lut = storage_buffer(
+                gpu,
+                "Filter::lut_alpha",
+                bytemuck::cast_slice(&source.alpha),
+                wgpu::BufferUsages::empty(),
+            );
             (
                 stats_texture(device, "Filter::stats_a", dims),
                 stats_texture(device, "Filter::stats_b", dims),
@@ -643,14 +548,19 @@ impl FilterGpu {
             let segments = n.div_ceil(len);
             let lines = nx * ny * nz / n;
             let count = segments * lines;
-            let groups = count.div_ceil(64);
-            let gx = groups.min(65535);
-            let gy = groups.div_ceil(gx);
+            let (groups, row_stride) = fold_linear(count);
             let p = BoxParams {
-                dims: [nx, ny, nz, axis as u32],
-                run: [r, len, segments, u32::from(axis == 0)],
+                dims,
+                axis: axis as u32,
+                radius: r,
+                segment_len: len,
+                segments,
+                first: u32::from(axis == 0),
                 source: source.params,
-                count: [count, gx * 64, lines, 0],
+                invocations: count,
+                row_stride,
+                lines,
+                _pad: 0,
             };
             validated(device, "Filter::box_stats", || {
                 let uniforms = uniform_buffer(
@@ -677,7 +587,7 @@ impl FilterGpu {
                     "Filter::box_stats",
                     &self.box_pipeline,
                     &group,
-                    [gx, gy, 1],
+                    groups,
                     |_| {},
                 );
             })?;
@@ -698,14 +608,18 @@ impl FilterGpu {
         let device = &gpu.device;
         let dims = vol.texels.dims.map(|d| d as u32);
         let [nx, ny, nz] = dims;
-        let row = padded_row_bytes(nx * 4);
         let st = self.stats(gpu, vol, source, radius)?;
         let stats_view = st.stats.create_view(&Default::default());
-        let (out, readback) = validated(device, "Filter::map_buffers", || {
+        let (out, readback, row) = validated(device, "Filter::map_buffers", || {
             let out = crate::gpu::output_volume(device, "Filter::map", dims);
-            let size = row as u64 * ny as u64 * nz as u64;
-            (out, readback_buffer(device, "Filter::readback", size))
+            let (readback, row) = texture_readback(device, "Filter::readback", dims, 4);
+            (out, readback, row)
         })?;
+        // One dispatch over the whole volume (each invocation reads a box from the stats).
+        let whole_volume = SlabDispatch::whole(dims, Grid::Tiles)
+            .slabs()
+            .next()
+            .map_or([1, 1, 1], |s| s.groups);
         let out_view = out.create_view(&Default::default());
         let mut result = Vec::with_capacity(maps.len());
         for &map in maps {
@@ -739,12 +653,12 @@ impl FilterGpu {
                     "Filter::ambient_map",
                     &self.map_pipeline,
                     &group,
-                    [nx.div_ceil(8), ny.div_ceil(8), nz],
-                    |encoder| copy_out(encoder, &out, &readback, row, dims),
+                    whole_volume,
+                    |encoder| copy_texture_out(encoder, &out, &readback, row, dims),
                 );
             })?;
             let bytes = read_buffer(device, &readback, "Filter::readback")?;
-            result.push(unpad::<f32>(&bytes, row, nx, 4));
+            result.push(unpad::<f32>(&bytes, row, nx));
         }
         Ok(result)
     }
@@ -760,24 +674,19 @@ impl FilterGpu {
     ) -> Result<BoxStats, GpuError> {
         let device = &gpu.device;
         let dims = vol.texels.dims.map(|d| d as u32);
-        let [nx, ny, nz] = dims;
-        let row = padded_row_bytes(nx * 16);
+        let nx = dims[0];
         let st = self.stats(gpu, vol, source, radius)?;
-        let readback = validated(device, "Filter::stats_readback", || {
-            let rb = readback_buffer(
-                device,
-                "Filter::stats_readback",
-                row as u64 * ny as u64 * nz as u64,
-            );
+        let (readback, row) = validated(device, "Filter::stats_readback", || {
+            let (rb, row) = texture_readback(device, "Filter::stats_readback", dims, 16);
             let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("Filter::stats_copy"),
             });
-            copy_out(&mut encoder, &st.stats, &rb, row, dims);
+            copy_texture_out(&mut encoder, &st.stats, &rb, row, dims);
             gpu.queue.submit([encoder.finish()]);
-            rb
+            (rb, row)
         })?;
         let bytes = read_buffer(device, &readback, "Filter::stats_readback")?;
-        let raw = unpad::<[f32; 4]>(&bytes, row, nx, 16);
+        let raw = unpad::<[f32; 4]>(&bytes, row, nx);
         let channel = |k: usize| raw.iter().map(|v| v[k]).collect();
         Ok(BoxStats {
             dims: vol.texels.dims,

@@ -1,0 +1,277 @@
+//! [`SlabDispatch`]: the one z-slab loop of every per-voxel compute stage (LAO, the light
+//! volume, positional AO, CAO's steps IV and V, cone tracing, the filter passes).
+//!
+//! A stage bounds the work of one submission (so no dispatch runs into a driver watchdog
+//! or the readback bound) and, where it writes a storage buffer, the voxels that buffer
+//! holds. The dispatcher cuts the volume into slabs of whole z-slices within both bounds,
+//! writes the stage's uniforms for each slab into one buffer (the stage's `Params` struct
+//! sets its own slab fields, [`SlabParams::set_slab`]), submits, and optionally copies
+//! each slab's output to the host.
+
+use super::{GpuError, read_buffer, validated};
+use crate::gpu::Gpu;
+
+/// Invocations per workgroup of the linear stages (`@workgroup_size(64)`).
+pub const LINEAR_GROUP: u32 = 64;
+
+/// Most workgroups along one dispatch dimension (WebGPU's guaranteed limit).
+pub const MAX_GROUPS: u32 = 65535;
+
+/// How a stage's invocations cover a slab.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Grid {
+    /// One invocation per voxel of the slab, in 64-wide workgroups folded into two
+    /// dimensions; the shader reads its voxel from `row_stride` (see [`Slab`]).
+    Linear,
+    /// 8×8 workgroups over x and y, one layer of workgroups per z-slice.
+    Tiles,
+}
+
+/// One slab of z-slices and how it is dispatched.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Slab {
+    /// First z-slice.
+    pub z0: u32,
+    /// Number of z-slices.
+    pub depth: u32,
+    /// Voxels in the slab.
+    pub voxels: u32,
+    /// Linear grids: invocations per row of workgroups (index = y · row_stride + x).
+    pub row_stride: u32,
+    /// Workgroups to dispatch.
+    pub groups: [u32; 3],
+}
+
+/// A 1-D index space of `count` invocations in 64-wide workgroups, folded into two
+/// dimensions: the workgroups and the invocations per row of them.
+pub fn fold_linear(count: u32) -> ([u32; 3], u32) {
+    let groups = count.div_ceil(LINEAR_GROUP);
+    let gx = groups.clamp(1, MAX_GROUPS);
+    let gy = groups.div_ceil(gx);
+    ([gx, gy, 1], gx * LINEAR_GROUP)
+}
+
+/// A stage's uniform struct: it knows which of its fields say where the slab is.
+pub trait SlabParams: bytemuck::Pod {
+    fn set_slab(&mut self, slab: &Slab);
+}
+
+/// Implements [`SlabParams`] for a uniform struct with a `z0` field (`tiles`), or with
+/// `z0`, `voxels` and `row_stride` (`linear`, the fields a [`Grid::Linear`] shader reads).
+macro_rules! slab_fields {
+    ($params:ty, tiles) => {
+        impl $crate::gpu::dispatch::SlabParams for $params {
+            fn set_slab(&mut self, slab: &$crate::gpu::dispatch::Slab) {
+                self.z0 = slab.z0;
+            }
+        }
+    };
+    ($params:ty, linear) => {
+        impl $crate::gpu::dispatch::SlabParams for $params {
+            fn set_slab(&mut self, slab: &$crate::gpu::dispatch::Slab) {
+                self.z0 = slab.z0;
+                self.voxels = slab.voxels;
+                self.row_stride = slab.row_stride;
+            }
+        }
+    };
+}
+pub(crate) use slab_fields;
+
+/// The slabs of one per-voxel pass over a volume.
+#[derive(Debug, Clone, Copy)]
+pub struct SlabDispatch {
+    dims: [u32; 3],
+    depth: u32,
+    grid: Grid,
+}
+
+impl SlabDispatch {
+    /// Slabs of `dims` with at most `budget / work_per_voxel` voxels each (and at most
+    /// `max_voxels`, an output buffer's capacity), never less than one z-slice.
+    pub fn new(
+        dims: [u32; 3],
+        grid: Grid,
+        work_per_voxel: u64,
+        budget: u64,
+        max_voxels: u64,
+    ) -> Self {
+        let slice = (dims[0] as u64 * dims[1] as u64).max(1);
+        let nz = dims[2].max(1) as u64;
+        let depth = ((budget / work_per_voxel.max(1)).min(max_voxels) / slice).clamp(1, nz) as u32;
+        SlabDispatch { dims, depth, grid }
+    }
+
+    /// The whole volume in one slab.
+    pub fn whole(dims: [u32; 3], grid: Grid) -> Self {
+        SlabDispatch {
+            dims,
+            depth: dims[2].max(1),
+            grid,
+        }
+    }
+
+    /// z-slices per slab (the last may be thinner).
+    pub fn depth(&self) -> u32 {
+        self.depth
+    }
+
+    /// Voxels in the thickest slab: what a per-slab output buffer must hold.
+    pub fn max_slab_voxels(&self) -> u64 {
+        self.dims[0] as u64 * self.dims[1] as u64 * self.depth as u64
+    }
+
+    /// Whether the volume takes more than one slab.
+    pub fn is_split(&self) -> bool {
+        self.depth < self.dims[2]
+    }
+
+    pub fn slabs(&self) -> impl Iterator<Item = Slab> + '_ {
+        let [nx, ny, nz] = self.dims;
+        (0..nz).step_by(self.depth.max(1) as usize).map(move |z0| {
+            let depth = self.depth.min(nz - z0);
+            let voxels = nx * ny * depth;
+            let (groups, row_stride) = match self.grid {
+                Grid::Linear => fold_linear(voxels),
+                Grid::Tiles => ([nx.div_ceil(8), ny.div_ceil(8), depth], 0),
+            };
+            Slab {
+                z0,
+                depth,
+                voxels,
+                row_stride,
+                groups,
+            }
+        })
+    }
+
+    /// Runs `pass` once per slab with `base`'s slab fields set, one submission each, and
+    /// reports progress in z-slices. With `wait_between`, waits for each slab before the
+    /// next (so one long pass does not queue up minutes of work).
+    pub fn run<P: SlabParams>(
+        &self,
+        gpu: &Gpu,
+        pass: &Pass<'_>,
+        base: P,
+        wait_between: bool,
+        progress: &dyn Fn(usize, usize),
+    ) -> Result<(), GpuError> {
+        for slab in self.slabs() {
+            self.submit(gpu, pass, base, &slab, |_| {})?;
+            if wait_between && self.is_split() {
+                super::wait(&gpu.device, pass.label, super::WAIT)?;
+            }
+            progress((slab.z0 + slab.depth) as usize, self.dims[2] as usize);
+        }
+        Ok(())
+    }
+
+    /// Runs `pass` once per slab writing `out` (f32 per voxel of the slab), copies each
+    /// slab's values to `readback` and returns them all, x fastest.
+    pub fn run_readback<P: SlabParams>(
+        &self,
+        gpu: &Gpu,
+        pass: &Pass<'_>,
+        base: P,
+        (out, readback): (&wgpu::Buffer, &wgpu::Buffer),
+        progress: &dyn Fn(usize, usize),
+    ) -> Result<Vec<f32>, GpuError> {
+        let total = self.dims.iter().map(|&d| d as usize).product();
+        let mut result = Vec::with_capacity(total);
+        for slab in self.slabs() {
+            let bytes = slab.voxels as u64 * 4;
+            self.submit(gpu, pass, base, &slab, |encoder| {
+                encoder.copy_buffer_to_buffer(out, 0, readback, 0, bytes);
+            })?;
+            let back = read_buffer(&gpu.device, readback, pass.label)?;
+            result.extend(bytemuck::pod_collect_to_vec::<u8, f32>(
+                &back[..bytes as usize],
+            ));
+            progress((slab.z0 + slab.depth) as usize, self.dims[2] as usize);
+        }
+        Ok(result)
+    }
+
+    fn submit<P: SlabParams>(
+        &self,
+        gpu: &Gpu,
+        pass: &Pass<'_>,
+        base: P,
+        slab: &Slab,
+        after: impl FnOnce(&mut wgpu::CommandEncoder),
+    ) -> Result<(), GpuError> {
+        let mut p = base;
+        p.set_slab(slab);
+        validated(&gpu.device, pass.label, || {
+            // Ordered before this submission's commands (and after the previous one's).
+            gpu.queue
+                .write_buffer(pass.uniforms, 0, bytemuck::bytes_of(&p));
+            super::submit_compute_with(
+                &gpu.device,
+                &gpu.queue,
+                pass.label,
+                pass.pipeline,
+                pass.bind_groups,
+                slab.groups,
+                after,
+            );
+        })
+    }
+}
+
+/// What one slab pass binds: its pipeline, its bind groups (0, 1, … in order) and the
+/// uniform buffer the dispatcher rewrites for every slab (bound in one of the groups).
+#[derive(Debug, Clone, Copy)]
+pub struct Pass<'a> {
+    pub label: &'a str,
+    pub pipeline: &'a wgpu::ComputePipeline,
+    pub bind_groups: &'a [&'a wgpu::BindGroup],
+    pub uniforms: &'a wgpu::Buffer,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slabs_cover_the_volume_once_within_the_budget() {
+        for (dims, per_voxel, budget, cap) in [
+            ([7, 5, 13], 10, 700, u64::MAX),
+            ([7, 5, 13], 10, 1, u64::MAX),
+            ([7, 5, 13], 1, u64::MAX, 70),
+            ([1, 1, 1], 1, 1, 1),
+        ] {
+            for grid in [Grid::Linear, Grid::Tiles] {
+                let d = SlabDispatch::new(dims, grid, per_voxel, budget, cap);
+                let mut z = 0;
+                for s in d.slabs() {
+                    assert_eq!(s.z0, z);
+                    assert!(s.depth >= 1 && s.depth <= d.depth());
+                    assert_eq!(s.voxels, dims[0] * dims[1] * s.depth);
+                    let invocations = match grid {
+                        Grid::Linear => s.groups[0] as u64 * s.groups[1] as u64 * 64,
+                        Grid::Tiles => {
+                            s.groups[0] as u64 * 8 * s.groups[1] as u64 * 8 * s.groups[2] as u64
+                        }
+                    };
+                    assert!(invocations >= s.voxels as u64);
+                    z += s.depth;
+                }
+                assert_eq!(z, dims[2]);
+                let slab_voxels = d.max_slab_voxels();
+                assert!(d.depth() == 1 || slab_voxels * per_voxel <= budget);
+                assert!(d.depth() == 1 || slab_voxels <= cap);
+            }
+        }
+    }
+
+    #[test]
+    fn linear_folding_stays_within_the_dispatch_limit() {
+        for count in [1, 64, 65, 64 * 65535, 64 * 65535 + 1, 300_000_000] {
+            let (g, row) = fold_linear(count);
+            assert!(g[0] <= MAX_GROUPS && g[1] <= MAX_GROUPS);
+            assert_eq!(row, g[0] * 64);
+            assert!(g[0] as u64 * g[1] as u64 * 64 >= count as u64);
+        }
+    }
+}

@@ -1,0 +1,418 @@
+//! Buffers, textures, bind groups and readbacks: the few shapes every stage creates,
+//! each spelled out once. Labels follow `"Stage::what"` so validation errors say where.
+
+use super::{Gpu, GpuError, WAIT, validated, wait};
+
+/// `bytes_per_row` for texture↔buffer copies, padded to wgpu's 256-byte alignment.
+pub fn padded_row_bytes(unpadded: u32) -> u32 {
+    let align = wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    unpadded.div_ceil(align) * align
+}
+
+/// The extent of a 3-D texture (or a 2-D array: `dims[2]` layers).
+pub fn extent(dims: [u32; 3]) -> wgpu::Extent3d {
+    wgpu::Extent3d {
+        width: dims[0],
+        height: dims[1],
+        depth_or_array_layers: dims[2],
+    }
+}
+
+/// The compute pipeline of entry point `entry` in `module`; without `layout`, the layout
+/// is derived from the shader.
+pub fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+    layout: Option<&wgpu::PipelineLayout>,
+) -> wgpu::ComputePipeline {
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout,
+        module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// Trilinear filtering within a mip level, the nearest level, clamped at the edges (the
+/// sampler every volume pass uses).
+pub fn linear_sampler(device: &wgpu::Device, label: &str) -> wgpu::Sampler {
+    device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some(label),
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        mipmap_filter: wgpu::MipmapFilterMode::Nearest,
+        ..Default::default()
+    })
+}
+
+/// A compute pipeline of one shader's `main` with the linear sampler its volumes are
+/// read with: the long-lived state of most stages.
+#[derive(Debug)]
+pub struct ComputeStage {
+    pub pipeline: wgpu::ComputePipeline,
+    pub sampler: wgpu::Sampler,
+}
+
+impl ComputeStage {
+    /// Builds `shader`'s pipeline, labelled `"{name}::pipeline"`.
+    pub fn new(device: &wgpu::Device, name: &str, shader: &str) -> Result<Self, GpuError> {
+        let module = super::shaders::module(device, shader)?;
+        validated(device, &format!("{name}::new"), || ComputeStage {
+            pipeline: compute_pipeline(device, &format!("{name}::pipeline"), &module, "main", None),
+            sampler: linear_sampler(device, &format!("{name}::linear_clamp")),
+        })
+    }
+
+    /// The pipeline's bind group `index` with `resources` at bindings 0, 1, ….
+    pub fn bind_group(
+        &self,
+        device: &wgpu::Device,
+        label: &str,
+        index: u32,
+        resources: &[wgpu::BindingResource<'_>],
+    ) -> wgpu::BindGroup {
+        bind_group(
+            device,
+            label,
+            &self.pipeline.get_bind_group_layout(index),
+            resources,
+        )
+    }
+}
+
+/// A 3-D texture of `dims` with one mip level.
+pub fn texture_3d(
+    device: &wgpu::Device,
+    label: &str,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    mip_texture_3d(device, label, dims, 1, format, usage)
+}
+
+/// A 3-D texture of `dims` with `levels` mip levels.
+pub fn mip_texture_3d(
+    device: &wgpu::Device,
+    label: &str,
+    dims: [u32; 3],
+    levels: u32,
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: extent(dims),
+        mip_level_count: levels,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D3,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
+/// Writes `data` (tightly packed, x fastest) into mip level `level` of `texture`, whose
+/// size at that level is `dims`.
+pub fn write_texture_3d(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    level: u32,
+    dims: [u32; 3],
+    bytes_per_texel: u32,
+    data: &[u8],
+) {
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: level,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        data,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(dims[0] * bytes_per_texel),
+            rows_per_image: Some(dims[1]),
+        },
+        extent(dims),
+    );
+}
+
+/// A sampled 3-D texture of `dims` holding `data` (one mip level).
+pub fn sampled_volume(
+    gpu: &Gpu,
+    label: &str,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    bytes_per_texel: u32,
+    data: &[u8],
+) -> wgpu::Texture {
+    let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+    let texture = texture_3d(&gpu.device, label, dims, format, usage);
+    write_texture_3d(&gpu.queue, &texture, 0, dims, bytes_per_texel, data);
+    texture
+}
+
+/// An R32Float 3-D texture of `dims` that a compute pass writes (storage) and the host
+/// reads back (copy source).
+pub fn output_volume(device: &wgpu::Device, label: &str, dims: [u32; 3]) -> wgpu::Texture {
+    texture_3d(
+        device,
+        label,
+        dims,
+        wgpu::TextureFormat::R32Float,
+        wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+    )
+}
+
+/// An R16Float 3-D texture holding `chain` as its mip levels (level 0 first, each with
+/// its dims; see [`crate::sample::mip_chain`]).
+pub fn f16_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    chain: &[(Vec<u16>, [usize; 3])],
+) -> wgpu::Texture {
+    let first = chain[0].1.map(|d| d as u32);
+    let texture = mip_texture_3d(
+        device,
+        label,
+        first,
+        chain.len() as u32,
+        wgpu::TextureFormat::R16Float,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    );
+    for (l, (values, dims)) in chain.iter().enumerate() {
+        let dims = dims.map(|d| d as u32);
+        write_texture_3d(
+            queue,
+            &texture,
+            l as u32,
+            dims,
+            2,
+            bytemuck::cast_slice(values),
+        );
+    }
+    texture
+}
+
+/// A storage buffer initialised with `bytes` (at least 16 bytes, so an empty table
+/// still binds), with `extra` usages besides `STORAGE | COPY_DST`.
+pub fn storage_buffer(
+    gpu: &Gpu,
+    label: &str,
+    bytes: &[u8],
+    extra: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.len().max(16) as u64,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+        mapped_at_creation: false,
+    });
+    gpu.queue.write_buffer(&buffer, 0, bytes);
+    buffer
+}
+
+/// A storage buffer of `size` bytes a compute pass writes and the host copies out.
+pub fn output_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
+}
+
+/// A uniform buffer initialised with `bytes`.
+pub fn uniform_buffer(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    bytes: &[u8],
+) -> wgpu::Buffer {
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.len() as u64,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    queue.write_buffer(&buffer, 0, bytes);
+    buffer
+}
+
+/// A host-readable buffer to copy results into.
+pub fn readback_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// A bind group whose entries are `resources` at bindings 0, 1, 2, … in order.
+pub fn bind_group(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    resources: &[wgpu::BindingResource<'_>],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = resources
+        .iter()
+        .enumerate()
+        .map(|(i, r)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: r.clone(),
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
+}
+
+/// Encodes one compute dispatch of `groups` workgroups with bind groups 0, 1, … set from
+/// `bound`, then whatever `after` adds (typically copies to a readback buffer), and
+/// submits it.
+pub fn submit_compute_with(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    bound: &[&wgpu::BindGroup],
+    groups: [u32; 3],
+    after: impl FnOnce(&mut wgpu::CommandEncoder),
+) {
+    let mut encoder =
+        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(pipeline);
+        for (i, g) in bound.iter().enumerate() {
+            pass.set_bind_group(i as u32, *g, &[]);
+        }
+        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+    }
+    after(&mut encoder);
+    queue.submit([encoder.finish()]);
+}
+
+/// [`submit_compute_with`] with one bind group.
+pub fn submit_compute(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    bind_group: &wgpu::BindGroup,
+    groups: [u32; 3],
+    after: impl FnOnce(&mut wgpu::CommandEncoder),
+) {
+    submit_compute_with(device, queue, label, pipeline, &[bind_group], groups, after);
+}
+
+/// Maps a `MAP_READ` buffer, copies its bytes out and unmaps it.
+pub fn read_buffer(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    stage: &str,
+) -> Result<Vec<u8>, GpuError> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    wait(device, stage, WAIT)?;
+    let failed = |message: String| GpuError::Readback {
+        stage: stage.into(),
+        message,
+    };
+    match rx.try_recv() {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => return Err(failed(e.to_string())),
+        Err(_) => return Err(failed("map callback never ran".into())),
+    }
+    let bytes = buffer
+        .slice(..)
+        .get_mapped_range()
+        .map_err(|e| failed(e.to_string()))?
+        .to_vec();
+    buffer.unmap();
+    Ok(bytes)
+}
+
+/// Encodes a copy of `texture` (mip 0; `size` = width, height, layers/depth) into
+/// `buffer` with rows padded to `row` bytes.
+pub fn copy_texture_out(
+    encoder: &mut wgpu::CommandEncoder,
+    texture: &wgpu::Texture,
+    buffer: &wgpu::Buffer,
+    row: u32,
+    size: [u32; 3],
+) {
+    encoder.copy_texture_to_buffer(
+        texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(size[1]),
+            },
+        },
+        extent(size),
+    );
+}
+
+/// Rows of `bytes` padded to `row` bytes, cut to `width` texels of `T` each.
+pub fn unpad<T: bytemuck::Pod>(bytes: &[u8], row: u32, width: u32) -> Vec<T> {
+    let texel = std::mem::size_of::<T>() as u32;
+    let mut out = Vec::with_capacity(bytes.len() / texel.max(1) as usize);
+    for r in bytes.chunks_exact(row as usize) {
+        out.extend(bytemuck::pod_collect_to_vec::<u8, T>(
+            &r[..(width * texel) as usize],
+        ));
+    }
+    out
+}
+
+/// A buffer to copy a texture of `size` texels of `texel_bytes` into, and its padded row.
+pub fn texture_readback(
+    device: &wgpu::Device,
+    label: &str,
+    size: [u32; 3],
+    texel_bytes: u32,
+) -> (wgpu::Buffer, u32) {
+    let row = padded_row_bytes(size[0] * texel_bytes);
+    let buffer = readback_buffer(device, label, row as u64 * size[1] as u64 * size[2] as u64);
+    (buffer, row)
+}
+
+/// Reads an `R32Float` texture (2-D array or 3-D; `size` = width, height, layers/depth)
+/// back as f32 values, x fastest, then y, then layer.
+pub fn read_texture_f32(
+    gpu: &Gpu,
+    texture: &wgpu::Texture,
+    size: [u32; 3],
+    stage: &str,
+) -> Result<Vec<f32>, GpuError> {
+    let device = &gpu.device;
+    let (readback, row) = validated(device, stage, || {
+        let (readback, row) = texture_readback(device, stage, size, 4);
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(stage) });
+        copy_texture_out(&mut encoder, texture, &readback, row, size);
+        gpu.queue.submit([encoder.finish()]);
+        (readback, row)
+    })?;
+    let bytes = read_buffer(device, &readback, stage)?;
+    Ok(unpad::<f32>(&bytes, row, size[0]))
+}

@@ -1,0 +1,194 @@
+//! What the ray caster binds in its group 2 beyond the core volume (group 0) and the
+//! clip shapes (group 1): live positional AO, the light volume of shadows and the
+//! rasterised surfaces, with stand-ins bound where a feature is off so one pipeline
+//! serves every case. Keep in sync with `struct Extras` and the group-2 bindings of
+//! `shaders/raycast.wgsl`.
+
+use crate::gpu::bind_group;
+use glam::Vec3;
+
+/// What the ray caster reads in its bind group 1 beyond the core volume: live positional
+/// AO and the light volume. Owned by [`crate::render::gpu::GpuVolume`]; `None` = off.
+#[derive(Debug, Default)]
+pub struct RayExtras {
+    pub live_vao: Option<crate::ao::vao::VaoInputs>,
+    pub light: Option<GpuLight>,
+    /// Geometry drawn inside the volume (rasterised per frame, see `render::surface`).
+    pub surfaces: Vec<crate::render::surface::Surface>,
+}
+
+/// A light volume on the GPU (R16Float) with its direction.
+#[derive(Debug)]
+pub struct GpuLight {
+    pub view: wgpu::TextureView,
+    /// Unit direction towards the light.
+    pub direction: Vec3,
+}
+
+/// Uniforms of the ray caster's group 1. Mirrors `struct Extras` in `raycast.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ExtrasParams {
+    /// Live positional AO on, shadows on, surfaces on (0/1).
+    pub flags: [u32; 4],
+    /// Unit direction towards the light.
+    pub light: [f32; 4],
+}
+
+const _: () = assert!(std::mem::size_of::<ExtrasParams>() == 32);
+
+impl RayExtras {
+    pub fn params(&self) -> ExtrasParams {
+        let d = self.light.as_ref().map_or(Vec3::Z, |l| l.direction);
+        ExtrasParams {
+            flags: [
+                u32::from(self.live_vao.is_some()),
+                u32::from(self.light.is_some()),
+                u32::from(!self.surfaces.is_empty()),
+                0,
+            ],
+            light: [d.x, d.y, d.z, 0.0],
+        }
+    }
+}
+
+/// Stand-ins bound when a feature of group 1 is off (so one pipeline serves all cases).
+#[derive(Debug)]
+pub struct Placeholders {
+    uniform: wgpu::Buffer,
+    texture: wgpu::TextureView,
+    storage: wgpu::Buffer,
+    layer: wgpu::TextureView,
+}
+
+impl Placeholders {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let buffer = |label, size, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("RayCaster::placeholder_3d"),
+            size: wgpu::Extent3d {
+                width: 1,
+                height: 1,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::R16Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        Placeholders {
+            uniform: buffer(
+                "RayCaster::placeholder_uniform",
+                std::mem::size_of::<crate::ao::vao::VaoParams>() as u64,
+                wgpu::BufferUsages::UNIFORM,
+            ),
+            texture: texture.create_view(&Default::default()),
+            storage: buffer(
+                "RayCaster::placeholder_storage",
+                16,
+                wgpu::BufferUsages::STORAGE,
+            ),
+            layer: device
+                .create_texture(&wgpu::TextureDescriptor {
+                    label: Some("RayCaster::placeholder_2d"),
+                    size: wgpu::Extent3d {
+                        width: 1,
+                        height: 1,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: crate::render::surface::LAYER_FORMAT,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                })
+                .create_view(&Default::default()),
+        }
+    }
+}
+
+/// Layout entries of the ray caster's group 1: positional AO (0–4), extras uniform (5),
+/// light volume (6), surface position and colour (7, 8).
+pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    let mut entries = crate::ao::vao::layout_entries();
+    entries.push(wgpu::BindGroupLayoutEntry {
+        binding: 5,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    });
+    entries.push(wgpu::BindGroupLayoutEntry {
+        binding: 6,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    });
+    for binding in [7, 8] {
+        entries.push(wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        });
+    }
+    entries
+}
+
+/// The ray caster's bind group 1 for `extras` (placeholders where a feature is off);
+/// `layer` is this frame's rasterised surfaces.
+pub fn bind_group_2(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    extras: &RayExtras,
+    uniforms: &wgpu::Buffer,
+    layer: Option<&crate::render::surface::SurfaceLayer>,
+    placeholders: &Placeholders,
+    sampler: &wgpu::Sampler,
+) -> wgpu::BindGroup {
+    let mut resources = match &extras.live_vao {
+        Some(v) => v.resources(),
+        None => vec![
+            placeholders.uniform.as_entire_binding(),
+            wgpu::BindingResource::TextureView(&placeholders.texture),
+            wgpu::BindingResource::Sampler(sampler),
+            placeholders.storage.as_entire_binding(),
+            placeholders.storage.as_entire_binding(),
+        ],
+    };
+    resources.push(uniforms.as_entire_binding());
+    resources.push(wgpu::BindingResource::TextureView(
+        extras
+            .light
+            .as_ref()
+            .map_or(&placeholders.texture, |l| &l.view),
+    ));
+    resources.push(wgpu::BindingResource::TextureView(
+        layer.map_or(&placeholders.layer, |l| &l.position),
+    ));
+    resources.push(wgpu::BindingResource::TextureView(
+        layer.map_or(&placeholders.layer, |l| &l.color),
+    ));
+    bind_group(device, "RayCaster::bind_group_2", layout, &resources)
+}

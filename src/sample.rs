@@ -1,0 +1,197 @@
+//! The CPU twins' shared vocabulary: trilinear sampling as a GPU sampler does it, the
+//! transfer-function table (baked, looked up with its own interpolation) and the f16
+//! copies and mip chains some passes sample instead of the volume texture.
+//!
+//! Every twin in `stage`-like modules (`ao::lao`, `render::shadow`, `ao::vao`, `ao::cao`,
+//! `render::cpu`, …) samples through these, so the GPU and CPU paths read the same values.
+
+use crate::render::texels::{TexelFormat, VolumeTexels};
+use crate::tf::{Lut, TransferFunction, correct_opacity};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Trilinear interpolation of `values` (x fastest) at texture coordinates `uvw` in
+/// [0, 1]³, texel centres at (i + ½)/n, clamped at the edges like a GPU sampler.
+pub fn trilinear(values: &[f32], dims: [usize; 3], uvw: Vec3) -> f32 {
+    let c = uvw * Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) - Vec3::splat(0.5);
+    let base = c.floor();
+    let f = c - base;
+    let idx = |axis: usize, off: i64| -> usize {
+        (base[axis] as i64 + off).clamp(0, dims[axis] as i64 - 1) as usize
+    };
+    let at = |x: usize, y: usize, z: usize| values[x + dims[0] * (y + dims[1] * z)];
+    let (x0, x1, y0, y1, z0, z1) = (
+        idx(0, 0),
+        idx(0, 1),
+        idx(1, 0),
+        idx(1, 1),
+        idx(2, 0),
+        idx(2, 1),
+    );
+    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+    let c00 = lerp(at(x0, y0, z0), at(x1, y0, z0), f.x);
+    let c10 = lerp(at(x0, y1, z0), at(x1, y1, z0), f.x);
+    let c01 = lerp(at(x0, y0, z1), at(x1, y0, z1), f.x);
+    let c11 = lerp(at(x0, y1, z1), at(x1, y1, z1), f.x);
+    lerp(lerp(c00, c10, f.y), lerp(c01, c11, f.y), f.z)
+}
+
+/// A table entry at fractional index `t = norm · map[0] + map[1]`, clamped to the table
+/// and linearly interpolated between neighbours, as the shaders' `lut_alpha` does
+/// (`map[2]` is the last index).
+pub fn lut_lerp(table: &[f32], map: [f32; 3], norm: f32) -> f32 {
+    let t = (norm * map[0] + map[1]).clamp(0.0, map[2]);
+    let i0 = t.floor() as usize;
+    let i1 = (i0 + 1).min(map[2] as usize);
+    table[i0] + (table[i1] - table[i0]) * (t - t.floor())
+}
+
+/// The alpha column of a baked table (what the compute passes upload).
+pub fn alpha_column(lut: &Lut) -> Vec<f32> {
+    lut.rgba.iter().map(|e| e[3]).collect()
+}
+
+/// Bakes `tf` over the texels' value range with opacity corrected for `step_voxels`.
+pub fn bake_lut(tf: &TransferFunction, texels: &VolumeTexels, step_voxels: f32) -> Lut {
+    let (a, b) = (
+        texels.value_offset,
+        texels.value_offset + texels.value_scale,
+    );
+    let (lo, hi) = (a.min(b), a.max(b));
+    // Unorm texels span [lo, hi] exactly; float texels use the TF's own span, widened.
+    let (lo, hi) = match texels.format {
+        TexelFormat::R32Float => {
+            let (mn, mx) = texels.norm_range();
+            let (mn, mx) = (mn as f64, mx as f64);
+            if mx > mn {
+                (mn, mx)
+            } else {
+                (mn - 0.5, mn + 0.5)
+            }
+        }
+        _ => (lo, hi),
+    };
+    let mut lut = tf.bake(lo, hi, crate::tf::LUT_ENTRIES);
+    for e in &mut lut.rgba {
+        e[3] = correct_opacity(e[3], step_voxels);
+    }
+    lut
+}
+
+/// The map from texel values to the f16 copy: `stored = (norm − lo) / scale`. Unorm
+/// texels are already in [0, 1] (identity); float texels hold physical values, which
+/// may exceed f16's range (65504), so they are normalised by their own range.
+pub fn f16_map(texels: &VolumeTexels) -> (f64, f64) {
+    match texels.format {
+        TexelFormat::R32Float => {
+            let (lo, hi) = texels.norm_range();
+            let (lo, hi) = (lo as f64, hi as f64);
+            if lo.is_finite() && hi > lo {
+                (lo, hi - lo)
+            } else {
+                (if lo.is_finite() { lo } else { 0.0 }, 1.0)
+            }
+        }
+        _ => (0.0, 1.0),
+    }
+}
+
+/// The LUT map `t = stored · a + b` for values of the f16 copy (see [`f16_map`]).
+pub fn f16_lut_map(texels: &VolumeTexels, lut: &Lut) -> (f32, f32) {
+    let (a, b) = texels.lut_map(lut);
+    let (lo, scale) = f16_map(texels);
+    ((a as f64 * scale) as f32, (b as f64 + a as f64 * lo) as f32)
+}
+
+/// Rounds to the nearest f16 (what an R16Float texel holds).
+fn to_f16(x: f32) -> u16 {
+    half::f16::from_f32(x).to_bits()
+}
+
+/// Mip levels 0..=`levels` of the texel values as R16Float bits: level 0 the texels
+/// mapped by [`f16_map`] and rounded to f16, each next one a 2×2×2 box filter of the one
+/// before (sizes halved and rounded down, as a GPU's mip chain is), each with its dims.
+///
+/// f16 rather than the volume's own texture: lavapipe filters 8-bit unorm textures in
+/// fixed point, which flips Eq. 4's comparisons of equal neighbours between GPU and CPU;
+/// float texels filter identically on both. 11 significant bits are plenty for AO.
+pub fn mip_chain(texels: &VolumeTexels, levels: u32) -> Vec<(Vec<u16>, [usize; 3])> {
+    let (lo, scale) = f16_map(texels);
+    let level0: Vec<u16> = (0..texels.dims.iter().product::<usize>())
+        .into_par_iter()
+        .map(|i| to_f16(((texels.norm_at(i) as f64 - lo) / scale) as f32))
+        .collect();
+    let mut chain = vec![(level0, texels.dims)];
+    for _ in 0..levels {
+        let Some((prev, prev_dims)) = chain.last() else {
+            break;
+        };
+        let prev_dims = *prev_dims;
+        let dims = prev_dims.map(|d| (d / 2).max(1));
+        let values: Vec<u16> = (0..dims[0] * dims[1] * dims[2])
+            .into_par_iter()
+            .map(|i| {
+                let v = [
+                    i % dims[0],
+                    (i / dims[0]) % dims[1],
+                    i / (dims[0] * dims[1]),
+                ];
+                let mut sum = 0.0f32;
+                for dz in 0..2 {
+                    for dy in 0..2 {
+                        for dx in 0..2 {
+                            let c: [usize; 3] = std::array::from_fn(|a| {
+                                (2 * v[a] + [dx, dy, dz][a]).min(prev_dims[a] - 1)
+                            });
+                            let bits = prev[c[0] + prev_dims[0] * (c[1] + prev_dims[1] * c[2])];
+                            sum += half::f16::from_bits(bits).to_f32();
+                        }
+                    }
+                }
+                to_f16(sum / 8.0)
+            })
+            .collect();
+        chain.push((values, dims));
+    }
+    chain
+}
+
+/// The texel values as an f16 pass samples them (level 0 of [`mip_chain`], as f32).
+pub fn f16_texels(texels: &VolumeTexels) -> Vec<f32> {
+    mip_chain(texels, 0)
+        .pop()
+        .map(|(bits, _)| {
+            bits.iter()
+                .map(|&b| half::f16::from_bits(b).to_f32())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Texture coordinates of the centre of `voxel` in a volume of `dims`.
+pub fn voxel_centre(voxel: [usize; 3], dims: [usize; 3]) -> Vec3 {
+    (Vec3::new(voxel[0] as f32, voxel[1] as f32, voxel[2] as f32) + Vec3::splat(0.5))
+        / Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32)
+}
+
+/// Runs `f` for every voxel (rayon over z-slices), x fastest, reporting progress in
+/// z-slices: the loop every per-voxel CPU twin shares.
+pub fn per_voxel(
+    dims: [usize; 3],
+    progress: &(dyn Fn(usize, usize) + Sync),
+    f: impl Fn([usize; 3]) -> f32 + Sync,
+) -> Vec<f32> {
+    let [nx, ny, nz] = dims;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    (0..nz)
+        .into_par_iter()
+        .flat_map_iter(|z| {
+            let slice: Vec<f32> = (0..nx * ny).map(|i| f([i % nx, i / nx, z])).collect();
+            progress(
+                done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
+                nz,
+            );
+            slice
+        })
+        .collect()
+}
