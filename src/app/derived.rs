@@ -2,13 +2,16 @@
 //! opacity modulation, the light volume of shadows — and the transfer function and
 //! clipping they are drawn with, kept in step with what the document says.
 
-use super::jobs::{Job, JobError, Polled};
+use super::ao_job::{AoData, AoInput, AoResult, compute_ao};
+use super::jobs::{Job, Keyed, Polled};
 use super::{Viewer, ao_panel};
+use crate::ao::cao::CaoStats;
 use crate::ao::filter::{OpacityModulation, StatisticSource};
 use crate::ao::{AoMethod, AoSettings};
+use crate::clip::ClipShape;
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
-use crate::volume;
+use crate::tf::TransferFunction;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -26,36 +29,46 @@ pub(super) struct AoKey {
     doc_generation: u64,
 }
 
-/// A finished AO computation.
+/// What the viewer derives from the document and keeps on the GPU, each keyed by what it
+/// was computed for, and the state of the transfer function and clipping they are drawn
+/// with.
 #[derive(Debug)]
-pub(super) struct AoResult {
-    kind: AoData,
-    device: String,
-    seconds: f64,
+pub(super) struct Derived {
+    /// The AO volume, CAO's state or live positional AO.
+    pub(super) ao: Keyed<AoKey, AoResult>,
+    /// Opacity modulation factors (Ruiz et al. §4.2).
+    pub(super) modulation: Keyed<ModulationKey, Vec<f32>>,
+    /// The light volume of shadows.
+    pub(super) light: Keyed<LightKey, Vec<f32>>,
+    /// The light volume last wanted, since when (a headlight's waits for the view to
+    /// rest).
+    light_wanted: Option<(LightKey, Instant)>,
+    /// When the transfer function last changed (AO waits for it to rest).
+    pub(super) tf_changed_at: Instant,
+    /// What the viewport's GPU volume has: view TF and step.
+    pub(super) uploaded_tf: Option<(TransferFunction, f32)>,
+    /// The last AO computation's seconds and device.
+    pub(super) ao_seconds: Option<(f64, String)>,
+    /// The shapes the GPU clips with (and CAO's V_AO was made for); `None`: out of date.
+    pub(super) synced_clip: Option<Vec<ClipShape>>,
+    /// The last CAO frame's figures.
+    pub(super) cao_stats: Option<CaoStats>,
 }
 
-/// A precomputed AO volume, or CAO with its `V_PAO` ready for per-frame updates.
-#[derive(Debug)]
-pub(super) enum AoData {
-    Volume(Vec<f32>),
-    Cao(Box<crate::ao::cao::CaoGpu>),
-}
-
-#[derive(Debug)]
-pub(super) enum AoState {
-    /// No AO on the GPU (A = 1).
-    Off,
-    Computing {
-        key: AoKey,
-        job: Job<AoResult>,
-    },
-    Ready {
-        key: AoKey,
-    },
-    Failed {
-        key: AoKey,
-        message: String,
-    },
+impl Default for Derived {
+    fn default() -> Self {
+        Derived {
+            ao: Keyed::default(),
+            modulation: Keyed::default(),
+            light: Keyed::default(),
+            light_wanted: None,
+            tf_changed_at: Instant::now(),
+            uploaded_tf: None,
+            ao_seconds: None,
+            synced_clip: None,
+            cao_stats: None,
+        }
+    }
 }
 
 /// What the opacity modulation factors on the GPU were computed for.
@@ -90,87 +103,54 @@ impl Viewer {
         })
     }
 
-    pub(super) fn ao_wanted_but_waiting(&self) -> bool {
-        let Some(want) = self.ao_key() else {
-            return false;
-        };
-        match &self.ao_state {
-            AoState::Off => true,
-            AoState::Computing { .. } => false,
-            AoState::Ready { key } | AoState::Failed { key, .. } => *key != want,
-        }
-    }
-
-    pub(super) fn cancel_ao(&mut self) {
-        if let AoState::Computing { job, .. } = &self.ao_state {
-            job.cancel();
-        }
-        self.ao_state = AoState::Off;
-    }
-
-    /// Keeps the AO volume on the GPU in step with the settings and the transfer
-    /// function; shows the volume without AO while a new one is computed.
+    /// Keeps the AO on the GPU in step with the settings and the transfer function;
+    /// shows the volume without AO while a new one is computed.
     pub(super) fn update_ao(&mut self) {
         let want = self.ao_key();
-        // Collect a finished job.
-        if let AoState::Computing { key, job } = &mut self.ao_state
-            && let Some(result) = job.poll()
-        {
-            let key = key.clone();
-            self.ao_state = match result {
-                Ok(r) => {
-                    let gpu = Arc::clone(&self.gpu);
-                    let applied = self
-                        .with_viewport(|v| match (r.kind, &mut v.volume) {
-                            (AoData::Volume(values), Some(g)) => {
-                                if values.len() != g.texels.dims.iter().product::<usize>() {
-                                    return Err("the AO volume does not match the uploaded \
-                                                volume (it was halved to fit the GPU); AO \
-                                                needs the full resolution"
-                                        .to_owned());
-                                }
-                                g.set_ambient_occlusion(&gpu, &values);
-                                v.cao = None;
-                                v.touch();
-                                Ok(())
+        match self.derived.ao.poll(want.as_ref()) {
+            Polled::Nothing => {}
+            Polled::Ready(key, r) => {
+                let gpu = Arc::clone(&self.gpu);
+                let applied = self
+                    .with_viewport(|v| match (r.kind, &mut v.volume) {
+                        (AoData::Volume(values), Some(g)) => {
+                            if values.len() != g.texels.dims.iter().product::<usize>() {
+                                return Err("the AO volume does not match the uploaded \
+                                            volume (it was halved to fit the GPU); AO \
+                                            needs the full resolution"
+                                    .to_owned());
                             }
-                            (AoData::Cao(cao), Some(_)) => {
-                                v.cao = Some(*cao);
-                                Ok(())
-                            }
-                            (_, None) => Err("no volume".to_owned()),
-                        })
-                        .unwrap_or_else(|| Err("no viewport".into()));
-                    match applied {
-                        Ok(()) => {
-                            // CAO's V_AO is made for the current shapes on the next sync.
-                            self.synced_clip = None;
-                            self.ao_seconds = Some((r.seconds, r.device));
-                            AoState::Ready { key }
+                            g.set_ambient_occlusion(&gpu, &values);
+                            v.cao = None;
+                            v.touch();
+                            Ok(())
                         }
-                        Err(message) => AoState::Failed { key, message },
+                        (AoData::Cao(cao), Some(_)) => {
+                            v.cao = Some(*cao);
+                            Ok(())
+                        }
+                        (_, None) => Err("no volume".to_owned()),
+                    })
+                    .unwrap_or_else(|| Err("no viewport".into()));
+                match applied {
+                    Ok(()) => {
+                        // CAO's V_AO is made for the current shapes on the next sync.
+                        self.derived.synced_clip = None;
+                        self.derived.ao_seconds = Some((r.seconds, r.device));
+                        self.derived.ao.uploaded(key);
                     }
+                    Err(message) => self.derived.ao.fail(key, message),
                 }
-                Err(JobError::Cancelled) => AoState::Off,
-                Err(JobError::Failed(message)) => {
-                    self.toast(format!("Ambient occlusion failed: {message}"), true);
-                    AoState::Failed { key, message }
-                }
-            };
+            }
+            Polled::Failed(message) => {
+                self.toast(format!("Ambient occlusion failed: {message}"), true)
+            }
         }
-        let current = match &self.ao_state {
-            AoState::Off => None,
-            AoState::Computing { key, .. }
-            | AoState::Ready { key }
-            | AoState::Failed { key, .. } => Some(key.clone()),
-        };
-        if current == want {
+        if self.derived.ao.settled(want.as_ref()) {
             return;
         }
         // The settings moved on: drop the stale AO at once (never show a wrong one).
-        let had_ao = matches!(self.ao_state, AoState::Ready { .. });
-        self.cancel_ao();
-        if had_ao {
+        if self.derived.ao.reset() {
             let gpu = Arc::clone(&self.gpu);
             let tf = self.doc.as_ref().map(|d| d.tf.clone());
             self.with_viewport(|v| {
@@ -184,7 +164,7 @@ impl Viewer {
                     v.touch();
                 }
             });
-            self.synced_clip = None;
+            self.derived.synced_clip = None;
         }
         let Some(key) = want else {
             return;
@@ -205,14 +185,14 @@ impl Viewer {
                 v.touch();
                 Some(r)
             });
-            self.ao_state = match applied.flatten() {
-                Some(Ok(())) => AoState::Ready { key },
+            match applied.flatten() {
+                Some(Ok(())) => self.derived.ao.uploaded(key),
                 Some(Err(message)) => {
                     self.toast(format!("Ambient occlusion failed: {message}"), true);
-                    AoState::Failed { key, message }
+                    self.derived.ao.fail(key, message);
                 }
-                None => AoState::Off,
-            };
+                None => {}
+            }
             return;
         }
         if !self.resting() {
@@ -221,70 +201,23 @@ impl Viewer {
         let Some(doc) = &self.doc else {
             return;
         };
-        let volume = Arc::clone(&doc.volume);
-        let tf = doc.tf.clone();
-        let settings = doc.ao;
-        let step = doc.render.step_voxels;
         let label = format!(
             "Ambient occlusion ({}{})",
-            ao_panel::method_name(settings.method),
+            ao_panel::method_name(doc.ao.method),
             if key.clipping { ", CAO" } else { "" }
         );
-        let job = if key.clipping {
+        let input = AoInput {
+            gpu: Arc::clone(&self.gpu),
+            volume: Arc::clone(&doc.volume),
             // CAO precomputes V_PAO on its own copy of the uploaded texels.
-            let texels = self
-                .with_viewport(|v| v.volume.as_ref().map(|g| g.texels.clone()))
-                .flatten();
-            let gpu = Arc::clone(&self.gpu);
-            Job::spawn(label, self.repaint_fn(), move |p| {
-                let start = Instant::now();
-                let texels = texels.ok_or("no volume uploaded")?;
-                let vol =
-                    GpuVolume::from_texels(&gpu, texels, &tf, step).map_err(|e| e.to_string())?;
-                let rays = crate::ao::lao::Rays::uniform(settings.rays.directions());
-                let cao = crate::ao::cao::CaoGpu::new(
-                    &gpu,
-                    &vol,
-                    &tf,
-                    &rays,
-                    settings.samples,
-                    settings.msaa,
-                    &|d, t| p.set(d as u64, t as u64),
-                )
-                .map_err(|e| e.to_string())?;
-                Ok(AoResult {
-                    kind: AoData::Cao(Box::new(cao)),
-                    device: gpu.describe(),
-                    seconds: start.elapsed().as_secs_f64(),
-                })
-            })
-        } else {
-            // The viewer's own device; a filter map on a CPU adapter goes to the twin.
-            let gpu = if crate::ao::fast::map_of(settings.method).is_some()
-                && crate::ao::fast::twin_is_faster(&self.gpu)
-            {
-                crate::gpu::GpuUse::Cpu
-            } else {
-                crate::gpu::GpuUse::Shared(Arc::clone(&self.gpu))
-            };
-            Job::spawn(label, self.repaint_fn(), move |p| {
-                let start = Instant::now();
-                let (ao, device) =
-                    crate::ao::compute_volume(&volume, &tf, &settings, &gpu, &|d, t| {
-                        p.set(d as u64, t as u64)
-                    })
-                    .map_err(|e| e.to_string())?;
-                let volume::VoxelData::F32(values) = ao.data else {
-                    return Err("the AO volume came back in an unexpected voxel type".into());
-                };
-                Ok(AoResult {
-                    kind: AoData::Volume(values),
-                    device,
-                    seconds: start.elapsed().as_secs_f64(),
-                })
-            })
+            texels: key.clipping.then(|| self.uploaded_texels()).flatten(),
+            tf: doc.tf.clone(),
+            settings: doc.ao,
+            step_voxels: doc.render.step_voxels,
+            clipping: key.clipping,
         };
-        self.ao_state = AoState::Computing { key, job };
+        let job = Job::spawn(label, self.repaint_fn(), move |p| compute_ao(input, p));
+        self.derived.ao.start(key, job);
     }
 
     pub(super) fn modulation_key(&self) -> Option<ModulationKey> {
@@ -303,7 +236,7 @@ impl Viewer {
     /// thread on the uploaded texels.
     pub(super) fn update_modulation(&mut self) {
         let want = self.modulation_key();
-        match self.modulation.poll(want.as_ref()) {
+        match self.derived.modulation.poll(want.as_ref()) {
             Polled::Nothing => {}
             Polled::Ready(key, values) => {
                 let gpu = Arc::clone(&self.gpu);
@@ -315,17 +248,17 @@ impl Viewer {
                     }
                     fit
                 }) {
-                    self.modulation.uploaded(key);
+                    self.derived.modulation.uploaded(key);
                 }
             }
             Polled::Failed(message) => {
                 self.toast(format!("Opacity modulation failed: {message}"), true)
             }
         }
-        if self.modulation.settled(want.as_ref()) {
+        if self.derived.modulation.settled(want.as_ref()) {
             return;
         }
-        if self.modulation.reset() {
+        if self.derived.modulation.reset() {
             let gpu = Arc::clone(&self.gpu);
             self.upload(|g| {
                 g.clear_opacity_modulation(&gpu);
@@ -354,7 +287,7 @@ impl Viewer {
             let vol = GpuVolume::from_texels(&gpu, texels, &tf, step).map_err(|e| e.to_string())?;
             crate::ao::fast::modulation_gpu(&gpu, &vol, &tf, &m).map_err(|e| e.to_string())
         });
-        self.modulation.start(key, job);
+        self.derived.modulation.start(key, job);
     }
 
     /// What the light volume of shadows must be computed for, if shadows are on.
@@ -374,7 +307,7 @@ impl Viewer {
     /// lag a moving camera or shape read better than shadows that blink off.
     pub(super) fn update_light(&mut self) {
         let want = self.light_key();
-        match self.light.poll(want.as_ref()) {
+        match self.derived.light.poll(want.as_ref()) {
             Polled::Nothing => {}
             Polled::Ready(key, values) => {
                 let gpu = Arc::clone(&self.gpu);
@@ -389,20 +322,20 @@ impl Viewer {
                         }
                     });
                 if uploaded {
-                    self.light.uploaded(key);
+                    self.derived.light.uploaded(key);
                 } else if let Some(e) = error {
                     self.toast(format!("Shadows failed: {e}"), true);
                 }
             }
             Polled::Failed(message) => self.toast(format!("Shadows failed: {message}"), true),
         }
-        if want != self.light_wanted.as_ref().map(|(k, _)| k.clone()) {
-            self.light_wanted = want.clone().map(|k| (k, Instant::now()));
+        if want != self.derived.light_wanted.as_ref().map(|(k, _)| k.clone()) {
+            self.derived.light_wanted = want.clone().map(|k| (k, Instant::now()));
         }
-        if self.light.settled(want.as_ref()) {
+        if self.derived.light.settled(want.as_ref()) {
             return;
         }
-        if self.light.reset() && want.is_none() {
+        if self.derived.light.reset() && want.is_none() {
             let gpu = Arc::clone(&self.gpu);
             self.upload(|g| g.set_light_volume(&gpu, None).is_ok());
         }
@@ -410,6 +343,7 @@ impl Viewer {
             return;
         };
         let still = self
+            .derived
             .light_wanted
             .as_ref()
             .is_some_and(|(_, since)| since.elapsed() >= AO_DEBOUNCE);
@@ -449,13 +383,14 @@ impl Viewer {
                 })
                 .map_err(|e| e.to_string())
         });
-        self.light.start(key, job);
+        self.derived.light.start(key, job);
     }
 
     /// Whether the transfer function has rested long enough to recompute what depends on
     /// it (asks for a repaint when it has not).
     fn resting(&self) -> bool {
-        let resting = self.tf_changed_at.elapsed() >= AO_DEBOUNCE && !self.tf_editor_dragging();
+        let resting =
+            self.derived.tf_changed_at.elapsed() >= AO_DEBOUNCE && !self.tf_editor_dragging();
         if !resting {
             self.ctx.request_repaint_after(AO_DEBOUNCE);
         }
@@ -489,7 +424,7 @@ impl Viewer {
             return;
         };
         let want = (doc.view_tf(), doc.render.step_voxels);
-        if self.uploaded_tf.as_ref() == Some(&want) {
+        if self.derived.uploaded_tf.as_ref() == Some(&want) {
             return;
         }
         let gpu = Arc::clone(&self.gpu);
@@ -499,7 +434,7 @@ impl Viewer {
                 v.touch();
             }
         });
-        self.uploaded_tf = Some(want);
+        self.derived.uploaded_tf = Some(want);
     }
 
     /// Brings the GPU's clipping up to date with the shapes: CAO's per-frame update (the
@@ -508,7 +443,7 @@ impl Viewer {
         let Some(doc) = &self.doc else {
             return;
         };
-        if self.synced_clip.as_ref() == Some(&doc.clip_shapes) {
+        if self.derived.synced_clip.as_ref() == Some(&doc.clip_shapes) {
             return;
         }
         let shapes = doc.clip_shapes.clone();
@@ -555,13 +490,13 @@ impl Viewer {
                 Ok(out)
             })
             .unwrap_or(Ok(None));
-        self.synced_clip = Some(shapes);
+        self.derived.synced_clip = Some(shapes);
         match result {
             Ok(stats) => {
                 if let Some(e) = stats.as_ref().and_then(|s| s.clip_errors.first()) {
                     self.toast(format!("Clip shape left out: {e}"), true);
                 }
-                self.cao_stats = stats;
+                self.derived.cao_stats = stats;
             }
             Err(e) => self.toast(format!("Clipping failed: {e}"), true),
         }

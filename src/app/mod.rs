@@ -16,6 +16,7 @@
 //! The UI thread never waits for the GPU or a file: loads and AO run on worker threads,
 //! screenshots are read back asynchronously and written by a worker.
 
+mod ao_job;
 pub mod ao_panel;
 pub mod camera_input;
 pub mod clip_panel;
@@ -35,10 +36,9 @@ pub use document::{
 use crate::gpu::Gpu;
 use crate::render::Frame;
 use crate::scene::Scene;
-use crate::tf::TransferFunction;
-use derived::{AoState, LightKey, ModulationKey};
-use jobs::{Derived, Job, JobError};
-use screenshot::{PendingShot, Shot};
+use derived::Derived;
+use jobs::{Job, JobError};
+use screenshot::{Screenshots, Shot};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -102,31 +102,13 @@ pub struct Viewer {
     /// The scene as last loaded or saved (for the unsaved-changes prompt).
     saved: Option<Scene>,
     load_job: Option<Job<LoadedDocument>>,
-    ao_state: AoState,
-    /// Opacity modulation (Ruiz et al. §4.2) and the light volume of shadows.
-    modulation: Derived<ModulationKey>,
-    light: Derived<LightKey>,
-    /// The light volume last wanted, since when (a headlight's waits for the view to
-    /// rest).
-    light_wanted: Option<(LightKey, Instant)>,
-    /// When the transfer function last changed (AO waits for it to rest).
-    tf_changed_at: Instant,
-    /// What the viewport's GPU volume has: view TF and step.
-    uploaded_tf: Option<(TransferFunction, f32)>,
-    ao_seconds: Option<(f64, String)>,
+    /// AO, opacity modulation and shadows, computed in the background.
+    derived: Derived,
     tf_editor: tf_editor::TfEditor,
     clip_editor: clip_panel::ClipEditor,
-    /// The shapes the GPU clips with (and CAO's V_AO was made for); `None`: out of date.
-    synced_clip: Option<Vec<crate::clip::ClipShape>>,
-    /// The last CAO frame's figures.
-    cao_stats: Option<crate::ao::cao::CaoStats>,
-    shot_size: ShotSize,
-    shot_transparent: bool,
     /// Draw the clip shapes' outlines over the viewport.
     pub show_outlines: bool,
-    shot_request: Option<(PathBuf, ShotSize)>,
-    pending_shot: Option<PendingShot>,
-    write_job: Option<Job<(PathBuf, PathBuf)>>,
+    shots: Screenshots,
     /// A screenshot whose write failed, kept for "Save elsewhere…".
     pub failed_shot: Option<Shot>,
     /// The viewport's size in physical pixels and its rectangle in points, as of the
@@ -141,12 +123,18 @@ pub struct Viewer {
     gpu_errors: Arc<Mutex<Vec<String>>>,
     frame_ms: Option<f32>,
     frames_seen: u64,
-    /// Frames shown with the volume (and its AO) ready, for `--exit-after-frames`.
-    ready_frames: u64,
-    exit_requested: bool,
+    scripted: Scripted,
     /// Set when a `--screenshot` could not be written (the process exits non-zero).
     pub exit_error: Arc<Mutex<Option<String>>>,
     last_title: String,
+}
+
+/// Where a scripted run stands: `--exit-after-frames` and `--bench-clip-drag`.
+#[derive(Debug, Default)]
+struct Scripted {
+    /// Frames shown with the volume (and its AO) ready, for `--exit-after-frames`.
+    ready_frames: u64,
+    exit_requested: bool,
     /// Frame times (s) and CAO shares (%) of `--bench-clip-drag`.
     bench: Vec<(f64, f64)>,
     bench_last: Option<Instant>,
@@ -264,23 +252,11 @@ impl Viewer {
             doc_generation: 0,
             saved: None,
             load_job: None,
-            ao_state: AoState::Off,
-            modulation: Derived::default(),
-            light: Derived::default(),
-            light_wanted: None,
-            tf_changed_at: Instant::now(),
-            uploaded_tf: None,
-            ao_seconds: None,
+            derived: Derived::default(),
             tf_editor: Default::default(),
             clip_editor: Default::default(),
-            synced_clip: None,
-            cao_stats: None,
-            shot_size: ShotSize::Window,
-            shot_transparent: false,
             show_outlines: true,
-            shot_request: None,
-            pending_shot: None,
-            write_job: None,
+            shots: Screenshots::default(),
             failed_shot: None,
             viewport_px: (0, 0),
             viewport_rect: egui::Rect::NOTHING,
@@ -291,13 +267,9 @@ impl Viewer {
             gpu_errors,
             frame_ms: None,
             frames_seen: 0,
-            ready_frames: 0,
-            exit_requested: false,
+            scripted: Scripted::default(),
             exit_error: Arc::default(),
             last_title: String::new(),
-            bench: Vec::new(),
-            bench_last: None,
-            bench_warmup: 0,
             options: options.clone(),
         };
         viewer.start_load(options.open);
@@ -323,51 +295,53 @@ impl Viewer {
 
     /// The document, for edits through the API (marks the transfer function as changed).
     pub fn document_mut(&mut self) -> Option<&mut Document> {
-        self.tf_changed_at = Instant::now();
+        self.derived.tf_changed_at = Instant::now();
         self.doc.as_mut()
     }
 
     /// Whether a load, an AO computation or a screenshot is still running.
     pub fn is_busy(&self) -> bool {
         self.load_job.is_some()
-            || matches!(self.ao_state, AoState::Computing { .. })
-            || self.ao_wanted_but_waiting()
-            || !self.modulation_ready() && self.modulation_error().is_none()
-            || !self.light_ready() && self.light_error().is_none()
-            || self.shot_request.is_some()
-            || self.pending_shot.is_some()
-            || self.write_job.is_some()
+            || self.derived.ao.pending(self.ao_key().as_ref())
+            || self
+                .derived
+                .modulation
+                .pending(self.modulation_key().as_ref())
+            || self.derived.light.pending(self.light_key().as_ref())
+            || self.shots.request.is_some()
+            || self.shots.pending.is_some()
+            || self.shots.write_job.is_some()
     }
 
     /// Whether the AO for the current settings is on the GPU (or none is wanted).
     pub fn ao_ready(&self) -> bool {
-        match (&self.ao_state, self.ao_key()) {
-            (_, None) => true,
-            (AoState::Ready { key }, Some(want)) => *key == want,
-            _ => false,
-        }
+        self.derived.ao.ready(self.ao_key().as_ref())
     }
 
     /// Whether the opacity modulation for the current settings is on the GPU (or none is
     /// wanted).
     pub fn modulation_ready(&self) -> bool {
-        self.modulation.ready(self.modulation_key().as_ref())
+        self.derived
+            .modulation
+            .ready(self.modulation_key().as_ref())
     }
 
     /// Why the opacity modulation for the current settings failed, if it did.
     pub fn modulation_error(&self) -> Option<&str> {
-        self.modulation.error(self.modulation_key().as_ref())
+        self.derived
+            .modulation
+            .error(self.modulation_key().as_ref())
     }
 
     /// Whether the light volume for the current shadows is on the GPU (or none is
     /// wanted).
     pub fn light_ready(&self) -> bool {
-        self.light.ready(self.light_key().as_ref())
+        self.derived.light.ready(self.light_key().as_ref())
     }
 
     /// Why the light volume for the current shadows failed, if it did.
     pub fn light_error(&self) -> Option<&str> {
-        self.light.error(self.light_key().as_ref())
+        self.derived.light.error(self.light_key().as_ref())
     }
 
     /// AO, modulation and shadows all computed for what the document says.
@@ -375,17 +349,17 @@ impl Viewer {
         self.ao_ready() && self.modulation_ready() && self.light_ready()
     }
 
-    /// The last AO error, if the current settings failed.
+    /// Why the AO for the current settings failed, if it did.
     pub fn ao_error(&self) -> Option<&str> {
-        match &self.ao_state {
-            AoState::Failed { message, .. } => Some(message),
-            _ => None,
-        }
+        self.derived.ao.error(self.ao_key().as_ref())
     }
 
     /// Voxels CAO recomputed in its last frame, in percent (`None` without CAO).
     pub fn cao_percent_recomputed(&self) -> Option<f64> {
-        self.cao_stats.as_ref().map(|c| c.percent_recomputed())
+        self.derived
+            .cao_stats
+            .as_ref()
+            .map(|c| c.percent_recomputed())
     }
 
     pub fn toasts(&self) -> &[Toast] {
@@ -441,7 +415,7 @@ impl Viewer {
     /// Asks for a screenshot: rendered offscreen at `size`, written to `path` with the
     /// scene beside it. Waits (without blocking) for loads and AO to finish first.
     pub fn request_screenshot(&mut self, path: PathBuf, size: ShotSize) {
-        self.shot_request = Some((path, size));
+        self.shots.request = Some((path, size));
         self.ctx.request_repaint();
     }
 
@@ -499,12 +473,13 @@ impl Viewer {
                 if let Some(p) = doc.scene_path.clone().or(doc.source.path.clone()) {
                     self.push_recent(p);
                 }
-                self.uploaded_tf = Some((doc.tf.clone(), doc.render.step_voxels));
+                self.derived.uploaded_tf = Some((doc.tf.clone(), doc.render.step_voxels));
                 self.with_viewport(|v| v.set_volume(loaded.gpu_volume));
                 self.doc = Some(doc);
                 self.doc_generation += 1;
-                self.cancel_ao();
-                self.ready_frames = 0;
+                // The new volume has no AO yet; what was computed for the old one is gone.
+                self.derived.ao.reset();
+                self.scripted.ready_frames = 0;
                 self.tf_editor = Default::default();
             }
             Err(JobError::Cancelled) => {}
@@ -536,7 +511,7 @@ impl Viewer {
         if let Ok(mut e) = self.exit_error.lock() {
             *e = Some(message);
         }
-        self.exit_requested = true;
+        self.scripted.exit_requested = true;
     }
 
     // ----- small state --------------------------------------------------------------------
@@ -621,7 +596,7 @@ impl Viewer {
             let message = format!("ambient occlusion failed: {e}");
             self.fail_exit(message);
         }
-        if self.exit_requested {
+        if self.scripted.exit_requested {
             self.quit_confirmed = true;
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             return;
@@ -631,17 +606,23 @@ impl Viewer {
         }
         let now = Instant::now();
         // The first two frames build the clip maps and warm up: not counted.
-        if let Some(last) = self.bench_last.filter(|_| self.bench_warmup >= 2) {
+        if let Some(last) = self
+            .scripted
+            .bench_last
+            .filter(|_| self.scripted.bench_warmup >= 2)
+        {
             let share = self.cao_percent_recomputed().unwrap_or(0.0);
-            self.bench.push(((now - last).as_secs_f64(), share));
+            self.scripted
+                .bench
+                .push(((now - last).as_secs_f64(), share));
         }
-        self.bench_last = Some(now);
-        self.bench_warmup += 1;
-        if self.bench.len() as u64 >= n {
-            let mut t: Vec<f64> = self.bench.iter().map(|b| b.0).collect();
+        self.scripted.bench_last = Some(now);
+        self.scripted.bench_warmup += 1;
+        if self.scripted.bench.len() as u64 >= n {
+            let mut t: Vec<f64> = self.scripted.bench.iter().map(|b| b.0).collect();
             t.sort_by(f64::total_cmp);
             let mean = t.iter().sum::<f64>() / t.len() as f64;
-            let share = self.bench.iter().map(|b| b.1).sum::<f64>() / t.len() as f64;
+            let share = self.scripted.bench.iter().map(|b| b.1).sum::<f64>() / t.len() as f64;
             println!(
                 "viewport {}×{}: {} frames dragging a clip shape, mean {:.0} ms, median {:.0} ms, \
                  min {:.0} ms; CAO recomputed {:.2} % of voxels per frame; {}",
@@ -654,14 +635,14 @@ impl Viewer {
                 share,
                 self.gpu.describe()
             );
-            self.exit_requested = true;
+            self.scripted.exit_requested = true;
             return;
         }
         if let Some(doc) = &mut self.doc
             && let Some(s) = doc.clip_shapes.first_mut()
         {
             // Back and forth by 1 mm, as a slow drag.
-            let dir = if (self.bench.len() / 8).is_multiple_of(2) {
+            let dir = if (self.scripted.bench.len() / 8).is_multiple_of(2) {
                 1.0
             } else {
                 -1.0
@@ -674,7 +655,7 @@ impl Viewer {
     /// `--exit-after-frames N [--screenshot PNG]`: count frames that show the volume with
     /// its AO, then take the screenshot and close once it is written.
     fn exit_logic(&mut self, ctx: &egui::Context) {
-        if self.exit_requested {
+        if self.scripted.exit_requested {
             self.quit_confirmed = true;
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             return;
@@ -688,16 +669,16 @@ impl Viewer {
             return;
         }
         if self.doc.is_some() && self.load_job.is_none() && self.derived_ready() {
-            self.ready_frames += 1;
+            self.scripted.ready_frames += 1;
         }
-        if self.ready_frames < n {
+        if self.scripted.ready_frames < n {
             ctx.request_repaint();
             return;
         }
-        if self.ready_frames == n {
+        if self.scripted.ready_frames == n {
             match self.options.screenshot.clone() {
                 Some(path) => self.request_screenshot(path, ShotSize::Window),
-                None => self.exit_requested = true,
+                None => self.scripted.exit_requested = true,
             }
         }
         ctx.request_repaint();

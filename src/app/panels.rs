@@ -1,7 +1,6 @@
 //! The UI around the viewport: menu bar, control panel, status bar, the viewport's
 //! input and paint callback, file dialogs, the unsaved-changes prompt and toasts.
 
-use super::derived::AoState;
 use super::document::file_name;
 use super::{Document, OpenRequest, Pending, ShotSize, Viewer};
 use super::{ao_panel, camera_input, screenshot, tf_editor, viewport};
@@ -39,7 +38,7 @@ impl Viewer {
         }
         if shot {
             let path = self.next_screenshot_path();
-            self.request_screenshot(path, self.shot_size);
+            self.request_screenshot(path, self.shots.size);
         }
         if ctx.input(|i| i.viewport().close_requested())
             && self.has_unsaved_changes()
@@ -104,7 +103,7 @@ impl Viewer {
             .add_filter("PNG image", &["png"])
             .save_file();
         if let Some(p) = picked {
-            self.request_screenshot(p, self.shot_size);
+            self.request_screenshot(p, self.shots.size);
         }
     }
 
@@ -163,12 +162,12 @@ impl Viewer {
         let ao_stats = self.ao_stats();
         let light_status = match self.light_error() {
             Some(e) => format!("failed: {e}"),
-            None if self.light.computing() => "computing the light volume…".to_owned(),
+            None if self.derived.light.computing() => "computing the light volume…".to_owned(),
             None => String::new(),
         };
         let modulation_status = match self.modulation_error() {
             Some(e) => format!("failed: {e}"),
-            None if self.modulation.computing() => "computing…".to_owned(),
+            None if self.derived.modulation.computing() => "computing…".to_owned(),
             None => String::new(),
         };
         let Some(doc) = &mut self.doc else {
@@ -203,7 +202,7 @@ impl Viewer {
                     .tf_editor
                     .show(ui, &mut doc.tf, &doc.histogram, &doc.stats)
                 {
-                    self.tf_changed_at = Instant::now();
+                    self.derived.tf_changed_at = Instant::now();
                 }
                 tf_editor::modulation_controls(
                     ui,
@@ -263,19 +262,19 @@ impl Viewer {
                     ShotSize::Fixed(w, h) => format!("{w}×{h}"),
                 };
                 egui::ComboBox::from_label("Size")
-                    .selected_text(label(self.shot_size))
+                    .selected_text(label(self.shots.size))
                     .show_ui(ui, |ui| {
                         ui.selectable_value(
-                            &mut self.shot_size,
+                            &mut self.shots.size,
                             ShotSize::Window,
                             label(ShotSize::Window),
                         );
                         for (w, h) in screenshot::PRESET_SIZES {
                             let s = ShotSize::Fixed(w, h);
-                            ui.selectable_value(&mut self.shot_size, s, label(s));
+                            ui.selectable_value(&mut self.shots.size, s, label(s));
                         }
                     });
-                if let ShotSize::Fixed(w, h) = &mut self.shot_size {
+                if let ShotSize::Fixed(w, h) = &mut self.shots.size {
                     ui.horizontal(|ui| {
                         ui.label("Width");
                         ui.add(egui::DragValue::new(w).range(1..=screenshot::MAX_SIDE))
@@ -285,7 +284,7 @@ impl Viewer {
                             .accessible_name("Height");
                     });
                 }
-                ui.checkbox(&mut self.shot_transparent, "Transparent background");
+                ui.checkbox(&mut self.shots.transparent, "Transparent background");
                 ui.horizontal(|ui| {
                     if ui.button("Screenshot…").clicked() {
                         self.screenshot_dialog();
@@ -296,11 +295,11 @@ impl Viewer {
                         .clicked()
                     {
                         let path = self.next_screenshot_path();
-                        self.request_screenshot(path, self.shot_size);
+                        self.request_screenshot(path, self.shots.size);
                     }
                 });
                 if let Some(shot) = &self.failed_shot
-                    && self.write_job.is_none()
+                    && self.shots.write_job.is_none()
                 {
                     let name = file_name(&shot.path);
                     if ui
@@ -318,17 +317,18 @@ impl Viewer {
     }
 
     fn ao_stats(&self) -> ao_panel::AoStats {
-        let status = match &self.ao_state {
-            AoState::Off if self.ao_key().is_some() => {
-                "waiting for the transfer function to rest".into()
-            }
-            AoState::Off => "off".into(),
-            AoState::Computing { job, .. } => match job.fraction() {
+        let (ao, want) = (&self.derived.ao, self.ao_key());
+        let status = match ao.job() {
+            Some(job) => match job.fraction() {
                 Some(f) => format!("computing… {:.0} %", f * 100.0),
                 None => "computing…".into(),
             },
-            AoState::Ready { .. } => "ready".into(),
-            AoState::Failed { message, .. } => format!("failed: {message}"),
+            None if want.is_none() => "off".into(),
+            None if ao.ready(want.as_ref()) => "ready".into(),
+            None => match ao.error(want.as_ref()) {
+                Some(message) => format!("failed: {message}"),
+                None => "waiting for the transfer function to rest".into(),
+            },
         };
         let frames = self
             .with_viewport(|v| v.frames_rendered)
@@ -336,15 +336,16 @@ impl Viewer {
         ao_panel::AoStats {
             frame_ms: self.frame_ms,
             frames,
-            ao_seconds: self.ao_seconds.as_ref().map(|(s, _)| *s),
-            ao_device: self.ao_seconds.as_ref().map(|(_, d)| d.clone()),
+            ao_seconds: self.derived.ao_seconds.as_ref().map(|(s, _)| *s),
+            ao_device: self.derived.ao_seconds.as_ref().map(|(_, d)| d.clone()),
             // Precomputed AO: a frame recomputes no voxel; CAO reports its own share.
-            recomputed_percent: match (&self.ao_state, &self.cao_stats) {
-                (AoState::Ready { key }, Some(c)) if key.clipping => Some(c.percent_recomputed()),
-                (AoState::Ready { .. }, _) => Some(0.0),
+            recomputed_percent: match (ao.on_gpu(), &self.derived.cao_stats) {
+                (Some(key), Some(c)) if key.clipping => Some(c.percent_recomputed()),
+                (Some(_), _) => Some(0.0),
                 _ => None,
             },
             stages: self
+                .derived
                 .cao_stats
                 .as_ref()
                 .filter(|_| self.ao_key().is_some_and(|k| k.clipping))
@@ -369,16 +370,16 @@ impl Viewer {
                 progress_bar(ui, job.fraction());
                 cancel_load = ui.button("Cancel").clicked();
             }
-            if let AoState::Computing { job, .. } = &self.ao_state {
+            if let Some(job) = self.derived.ao.job() {
                 ui.label(&job.label);
                 progress_bar(ui, job.fraction());
                 cancel_ao = ui.button("Cancel").clicked();
             }
-            if let Some(shot) = &self.pending_shot {
+            if let Some(shot) = &self.shots.pending {
                 ui.label(format!("Rendering {}", file_name(shot.path())));
                 progress_bar(ui, Some(shot.fraction()));
             }
-            if let Some(job) = &self.write_job {
+            if let Some(job) = &self.shots.write_job {
                 ui.label(&job.label);
                 ui.spinner();
             }
@@ -387,13 +388,10 @@ impl Viewer {
                 self.toast("Loading cancelled".into(), false);
             }
             if cancel_ao {
-                self.cancel_ao();
+                self.derived.ao.cancel();
                 // Keep the method but stop retrying until something changes.
                 if let Some(key) = self.ao_key() {
-                    self.ao_state = AoState::Failed {
-                        key,
-                        message: "cancelled".into(),
-                    };
+                    self.derived.ao.fail(key, "cancelled".into());
                 }
             }
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {

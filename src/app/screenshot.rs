@@ -246,14 +246,37 @@ impl PendingShot {
 
 // ----- the viewer's screenshots ---------------------------------------------------------
 
+/// The viewer's screenshots: the choices in the panel, a request waiting for the view to
+/// be ready, the shot being rendered and the one being written.
+#[derive(Debug)]
+pub(super) struct Screenshots {
+    pub(super) size: ShotSize,
+    pub(super) transparent: bool,
+    pub(super) request: Option<(PathBuf, ShotSize)>,
+    pub(super) pending: Option<PendingShot>,
+    pub(super) write_job: Option<Job<(PathBuf, PathBuf)>>,
+}
+
+impl Default for Screenshots {
+    fn default() -> Self {
+        Screenshots {
+            size: ShotSize::Window,
+            transparent: false,
+            request: None,
+            pending: None,
+            write_job: None,
+        }
+    }
+}
+
 impl Viewer {
     /// Advances screenshots: starts a requested one when the view is ready, pumps the
     /// tiles of the one in flight, collects the write.
     pub(super) fn update_screenshots(&mut self) {
-        if let Some(job) = &mut self.write_job
+        if let Some(job) = &mut self.shots.write_job
             && let Some(result) = job.poll()
         {
-            self.write_job = None;
+            self.shots.write_job = None;
             match result {
                 Ok((png, scene)) => {
                     self.failed_shot = None;
@@ -267,7 +290,7 @@ impl Viewer {
                     );
                     if self.options.screenshot.is_some() && self.options.exit_after_frames.is_some()
                     {
-                        self.exit_requested = true;
+                        self.scripted.exit_requested = true;
                     }
                 }
                 Err(e) => {
@@ -282,11 +305,11 @@ impl Viewer {
                 }
             }
         }
-        if self.pending_shot.is_none()
+        if self.shots.pending.is_none()
             && self.load_job.is_none()
             && self.derived_ready()
             && self.doc.is_some()
-            && let Some((path, size)) = self.shot_request.take()
+            && let Some((path, size)) = self.shots.request.take()
             && let Some(doc) = &self.doc
         {
             {
@@ -304,7 +327,7 @@ impl Viewer {
                     );
                 } else {
                     let mut scene = doc.scene(w, h, true);
-                    if self.shot_transparent {
+                    if self.shots.transparent {
                         scene.render.background = [0.0; 4];
                     }
                     let frame = Frame {
@@ -313,11 +336,11 @@ impl Viewer {
                         width: w,
                         height: h,
                     };
-                    self.pending_shot = Some(PendingShot::new(frame, scene, path));
+                    self.shots.pending = Some(PendingShot::new(frame, scene, path));
                 }
             }
         }
-        if let Some(shot) = &mut self.pending_shot {
+        if let Some(shot) = &mut self.shots.pending {
             let gpu = Arc::clone(&self.gpu);
             let renderer = self.render_state.renderer.read();
             let result = match renderer.callback_resources.get::<ViewportGpu>() {
@@ -332,11 +355,11 @@ impl Viewer {
             match result {
                 Ok(None) => self.ctx.request_repaint_after(Duration::from_millis(5)),
                 Ok(Some(done)) => {
-                    self.pending_shot = None;
+                    self.shots.pending = None;
                     self.start_write(done);
                 }
                 Err(e) => {
-                    self.pending_shot = None;
+                    self.shots.pending = None;
                     self.toast(format!("Screenshot failed: {e}"), true);
                     if self.options.exit_after_frames.is_some() {
                         self.fail_exit(e);
@@ -350,7 +373,7 @@ impl Viewer {
         let label = format!("Saving {}", file_name(&shot.path));
         let kept = shot.clone();
         self.failed_shot = None;
-        self.write_job = Some(Job::spawn(label, self.repaint_fn(), move |_| shot.write()));
+        self.shots.write_job = Some(Job::spawn(label, self.repaint_fn(), move |_| shot.write()));
         // Kept until the write succeeds: a failure loses nothing.
         self.failed_shot = Some(kept);
     }

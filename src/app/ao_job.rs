@@ -1,0 +1,104 @@
+//! The viewer's AO computation, as one function of its inputs: no UI state, run on a
+//! worker thread by [`super::derived`]. It chooses CAO (exact under clipping, on a copy of
+//! the uploaded texels) or a precomputed AO volume (on the viewer's device, or the CPU
+//! twin for a filter map on a CPU adapter).
+
+use super::jobs::Progress;
+use crate::ao::AoSettings;
+use crate::gpu::{Gpu, GpuUse};
+use crate::render::gpu::GpuVolume;
+use crate::render::texels::VolumeTexels;
+use crate::tf::TransferFunction;
+use crate::volume::{self, Volume};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// What one AO computation needs, owned so that it can move to a worker thread.
+#[derive(Debug)]
+pub struct AoInput {
+    /// The viewer's device (the viewport draws with it too).
+    pub gpu: Arc<Gpu>,
+    /// The volume as loaded (RAS order): the input of a precomputed AO volume.
+    pub volume: Arc<Volume>,
+    /// A copy of the texels the viewport's volume was made from: CAO's input (only
+    /// with `clipping`; `None` when no volume was uploaded).
+    pub texels: Option<VolumeTexels>,
+    pub tf: TransferFunction,
+    pub settings: AoSettings,
+    /// The ray caster's step in voxels (CAO builds its own [`GpuVolume`] with it).
+    pub step_voxels: f32,
+    /// CAO (the AO stays exact while clip shapes move) instead of an AO volume.
+    pub clipping: bool,
+}
+
+/// A finished AO computation.
+#[derive(Debug)]
+pub struct AoResult {
+    pub kind: AoData,
+    /// What ran it ("llvmpipe (Vulkan)", "CPU twin …").
+    pub device: String,
+    pub seconds: f64,
+}
+
+/// A precomputed AO volume, or CAO with its `V_PAO` ready for per-frame updates.
+#[derive(Debug)]
+pub enum AoData {
+    Volume(Vec<f32>),
+    Cao(Box<crate::ao::cao::CaoGpu>),
+}
+
+/// Computes the AO `input` asks for, reporting through `progress` (which also stops the
+/// work when the job is cancelled).
+pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, String> {
+    let start = Instant::now();
+    let AoInput {
+        gpu,
+        volume,
+        texels,
+        tf,
+        settings,
+        step_voxels,
+        clipping,
+    } = input;
+    let report = |d: usize, t: usize| progress.set(d as u64, t as u64);
+    if clipping {
+        // CAO precomputes V_PAO on its own copy of the uploaded texels.
+        let texels = texels.ok_or("no volume uploaded")?;
+        let vol =
+            GpuVolume::from_texels(&gpu, texels, &tf, step_voxels).map_err(|e| e.to_string())?;
+        let rays = crate::ao::lao::Rays::uniform(settings.rays.directions());
+        let cao = crate::ao::cao::CaoGpu::new(
+            &gpu,
+            &vol,
+            &tf,
+            &rays,
+            settings.samples,
+            settings.msaa,
+            &report,
+        )
+        .map_err(|e| e.to_string())?;
+        return Ok(AoResult {
+            kind: AoData::Cao(Box::new(cao)),
+            device: gpu.describe(),
+            seconds: start.elapsed().as_secs_f64(),
+        });
+    }
+    // The viewer's own device; a filter map on a CPU adapter goes to the twin.
+    let use_gpu = if crate::ao::fast::map_of(settings.method).is_some()
+        && crate::ao::fast::twin_is_faster(&gpu)
+    {
+        GpuUse::Cpu
+    } else {
+        GpuUse::Shared(gpu)
+    };
+    let (ao, device) = crate::ao::compute_volume(&volume, &tf, &settings, &use_gpu, &report)
+        .map_err(|e| e.to_string())?;
+    let volume::VoxelData::F32(values) = ao.data else {
+        return Err("the AO volume came back in an unexpected voxel type".into());
+    };
+    Ok(AoResult {
+        kind: AoData::Volume(values),
+        device,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
