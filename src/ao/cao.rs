@@ -268,11 +268,7 @@ impl CaoGpu {
         let lao_params = LaoParams {
             dims,
             z0: 0,
-            mm_to_uvw: [
-                STEP_MM / extent[0],
-                STEP_MM / extent[1],
-                STEP_MM / extent[2],
-            ],
+            mm_to_uvw: super::lao::mm_to_uvw(texels),
             _pad0: 0.0,
             rays: rays.directions.len() as u32,
             samples: samples.max(1),

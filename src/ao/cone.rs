@@ -17,7 +17,7 @@
 
 use crate::gpu::dispatch::{Grid, SlabDispatch};
 use crate::gpu::{
-    ComputeStage, Gpu, GpuError, bind_group, copy_texture_out, read_buffer, storage_buffer,
+ Gpu, GpuError, bind_group, copy_texture_out, read_buffer, storage_buffer,
     submit_compute, texture_readback, uniform_buffer, unpad, validated,
 };
 use crate::render::texels::VolumeTexels;
@@ -180,15 +180,12 @@ pub fn cone_cpu(
         .collect()
 }
 
-/// Long-lived cone-tracing state.
-#[derive(Debug)]
-pub struct ConeGpu(ComputeStage);
-
-impl crate::gpu::Stage for ConeGpu {
-    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
-        ComputeStage::new(device, "Cone", "cone.wgsl").map(ConeGpu)
-    }
-}
+crate::gpu::compute_stage!(
+    /// Long-lived cone-tracing state.
+    ConeGpu,
+    "Cone",
+    "cone.wgsl"
+);
 
 impl ConeGpu {
     /// Uploads the pyramid (R32Float, one mip level per pyramid level), traces the cones

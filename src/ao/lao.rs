@@ -9,7 +9,7 @@
 
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
 use crate::gpu::{
-    ComputeStage, Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer,
+ Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer,
     uniform_buffer, validated,
 };
 use crate::render::gpu::GpuVolume;
@@ -84,17 +84,18 @@ const _: () = assert!(std::mem::size_of::<LaoParams>() == 64);
 
 slab_fields!(LaoParams, linear);
 
-fn params(texels: &VolumeTexels, lut: &Lut, rays: &Rays, samples: u32) -> LaoParams {
+/// One LAO step ([`STEP_MM`]) in texture coordinates along each axis.
+pub fn mm_to_uvw(texels: &VolumeTexels) -> [f32; 3] {
     let extent = texels.extent();
+    [STEP_MM / extent[0], STEP_MM / extent[1], STEP_MM / extent[2]]
+}
+
+fn params(texels: &VolumeTexels, lut: &Lut, rays: &Rays, samples: u32) -> LaoParams {
     let (a, b) = texels.lut_map(lut);
     LaoParams {
         dims: texels.dims.map(|d| d as u32),
         z0: 0,
-        mm_to_uvw: [
-            STEP_MM / extent[0],
-            STEP_MM / extent[1],
-            STEP_MM / extent[2],
-        ],
+        mm_to_uvw: mm_to_uvw(texels),
         _pad0: 0.0,
         lut_scale: a,
         lut_offset: b,
@@ -164,15 +165,12 @@ pub fn lao_cpu(
 /// watchdog (about a second on a mid-range GPU), large enough to keep it busy.
 pub const SAMPLES_PER_SUBMISSION: u64 = 1 << 30;
 
-/// Long-lived LAO compute state.
-#[derive(Debug)]
-pub struct LaoGpu(ComputeStage);
-
-impl crate::gpu::Stage for LaoGpu {
-    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
-        ComputeStage::new(device, "Lao", "lao.wgsl").map(LaoGpu)
-    }
-}
+crate::gpu::compute_stage!(
+    /// Long-lived LAO compute state.
+    LaoGpu,
+    "Lao",
+    "lao.wgsl"
+);
 
 impl LaoGpu {
     /// `V_PAO` of an uploaded volume, computed in z-slabs (one submission each) and read

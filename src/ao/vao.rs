@@ -263,38 +263,14 @@ pub fn vao_cpu(
 
 /// Layout entries of bind group 1 (`vao_common.wgsl`), bindings 0–4, for compute.
 pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
-    let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty,
-        count: None,
-    };
-    let tex = wgpu::BindingType::Texture {
-        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-        view_dimension: wgpu::TextureViewDimension::D3,
-        multisampled: false,
-    };
-    let storage = wgpu::BindingType::Buffer {
-        ty: wgpu::BufferBindingType::Storage { read_only: true },
-        has_dynamic_offset: false,
-        min_binding_size: None,
-    };
+    use crate::gpu::entry;
+    let c = wgpu::ShaderStages::COMPUTE;
     vec![
-        entry(
-            0,
-            wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-        ),
-        entry(1, tex),
-        entry(
-            2,
-            wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-        ),
-        entry(3, storage),
-        entry(4, storage),
+        entry::uniform(0, c),
+        entry::texture(1, c, wgpu::TextureViewDimension::D3, Some(true)),
+        entry::sampler(2, c),
+        entry::storage(3, c, true),
+        entry::storage(4, c, true),
     ]
 }
 
@@ -435,29 +411,12 @@ impl crate::gpu::Stage for VaoGpu {
     fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
         let module = shaders::module(device, "vao.wgsl")?;
         validated(device, "Vao::new", || {
+            let c = wgpu::ShaderStages::COMPUTE;
             let slab_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("Vao::slab_layout"),
                 entries: &[
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 0,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Uniform,
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    },
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 1,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Storage { read_only: false },
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    },
+                    crate::gpu::entry::uniform(0, c),
+                    crate::gpu::entry::storage(1, c, false),
                 ],
             });
             let vao_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {

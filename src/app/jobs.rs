@@ -5,6 +5,9 @@
 //! repaint so the progress bar moves. Cancel is cooperative: the next progress report
 //! after [`Job::cancel`] unwinds the worker with a private payload (no panic message),
 //! so loaders and AO code that only take a progress callback stop at their next report.
+//!
+//! [`Keyed`] is the one mechanism for results kept on the GPU and recomputed when what
+//! they depend on changes (AO, opacity modulation, the light volume of shadows).
 
 use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
 use std::sync::Arc;
@@ -167,6 +170,144 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
         .unwrap_or_else(|| "a worker thread panicked".into())
 }
 
+/// What [`Keyed::poll`] found.
+#[derive(Debug)]
+pub enum Polled<K, T> {
+    /// Nothing finished (or a result for a key since left, dropped).
+    Nothing,
+    /// The result for `K`, still wanted: apply it, then [`Keyed::uploaded`] (or
+    /// [`Keyed::fail`] when it cannot be applied).
+    Ready(K, T),
+    /// The computation failed; the message is kept for [`Keyed::error`].
+    Failed(String),
+}
+
+/// Something the viewer derives from the document in the background and keeps on the GPU
+/// (the AO volume or CAO's state, the opacity modulation factors, the light volume),
+/// keyed by what it is computed for: the key of what the GPU has, the job computing the
+/// next one, and a failure, kept (not retried) until the wanted key changes.
+///
+/// Each frame the owner [`poll`](Self::poll)s with the key it wants now and applies a
+/// `Ready` result. While the state is not [`settled`](Self::settled) for that key it
+/// [`reset`](Self::reset)s (clearing the GPU's copy, or keeping it on screen until the
+/// next one arrives) and [`start`](Self::start)s a job; a value made at once on the UI
+/// thread is simply [`uploaded`](Self::uploaded).
+#[derive(Debug)]
+pub struct Keyed<K, T> {
+    on_gpu: Option<K>,
+    job: Option<(K, Job<T>)>,
+    failed: Option<(K, String)>,
+}
+
+impl<K, T> Default for Keyed<K, T> {
+    fn default() -> Self {
+        Keyed {
+            on_gpu: None,
+            job: None,
+            failed: None,
+        }
+    }
+}
+
+impl<K: Clone + PartialEq, T: Send + 'static> Keyed<K, T> {
+    /// Whether the GPU has what `want` asks for (`None`: nothing wanted, nothing there).
+    pub fn ready(&self, want: Option<&K>) -> bool {
+        self.on_gpu.as_ref() == want
+    }
+
+    /// What the GPU has.
+    pub fn on_gpu(&self) -> Option<&K> {
+        self.on_gpu.as_ref()
+    }
+
+    /// Why the computation for `want` failed, if it did.
+    pub fn error(&self, want: Option<&K>) -> Option<&str> {
+        let (key, message) = self.failed.as_ref()?;
+        (Some(key) == want).then_some(message.as_str())
+    }
+
+    /// The job running, if any (its label and progress for the status bar).
+    pub fn job(&self) -> Option<&Job<T>> {
+        self.job.as_ref().map(|(_, job)| job)
+    }
+
+    /// Whether a job is running.
+    pub fn computing(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// Whether work for `want` remains: a job runs, or `want` is neither on the GPU nor
+    /// failed.
+    pub fn pending(&self, want: Option<&K>) -> bool {
+        self.computing() || !self.ready(want) && self.error(want).is_none()
+    }
+
+    /// Whether nothing more is to be done for `want`: ready, being computed or failed;
+    /// with nothing wanted, nothing on the GPU, running or failed.
+    pub fn settled(&self, want: Option<&K>) -> bool {
+        match want {
+            None => self.on_gpu.is_none() && self.job.is_none() && self.failed.is_none(),
+            Some(_) => {
+                self.ready(want)
+                    || self.job.as_ref().is_some_and(|(k, _)| Some(k) == want)
+                    || self.error(want).is_some()
+            }
+        }
+    }
+
+    /// Collects a finished job.
+    pub fn poll(&mut self, want: Option<&K>) -> Polled<K, T> {
+        let Some((key, job)) = &mut self.job else {
+            return Polled::Nothing;
+        };
+        let Some(result) = job.poll() else {
+            return Polled::Nothing;
+        };
+        let key = key.clone();
+        self.job = None;
+        match result {
+            Ok(_) if Some(&key) != want => Polled::Nothing,
+            Ok(value) => Polled::Ready(key, value),
+            Err(JobError::Cancelled) => Polled::Nothing,
+            Err(JobError::Failed(message)) => {
+                self.failed = Some((key, message.clone()));
+                Polled::Failed(message)
+            }
+        }
+    }
+
+    /// Records that the result for `key` is on the GPU.
+    pub fn uploaded(&mut self, key: K) {
+        self.on_gpu = Some(key);
+    }
+
+    /// Records that `key` failed (a result that could not be applied, a job the user
+    /// cancelled): not retried until the wanted key changes.
+    pub fn fail(&mut self, key: K, message: String) {
+        self.failed = Some((key, message));
+    }
+
+    /// Stops the running job, if any.
+    pub fn cancel(&mut self) {
+        if let Some((_, job)) = self.job.take() {
+            job.cancel();
+        }
+    }
+
+    /// Cancels the job and forgets the failure and what the GPU has; true when the GPU
+    /// had something (which the caller clears, or keeps on screen until the next result).
+    pub fn reset(&mut self) -> bool {
+        self.cancel();
+        self.failed = None;
+        self.on_gpu.take().is_some()
+    }
+
+    /// Runs `job` for `key`.
+    pub fn start(&mut self, key: K, job: Job<T>) {
+        self.job = Some((key, job));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -213,5 +354,46 @@ mod tests {
             endless.wait(Duration::from_secs(10)),
             Some(Err(JobError::Cancelled))
         );
+    }
+
+    /// Polls until the job ends.
+    fn finish<T: Send + 'static>(k: &mut Keyed<u32, T>, want: Option<&u32>) -> Polled<u32, T> {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            let polled = k.poll(want);
+            if !k.computing() || Instant::now() > deadline {
+                return polled;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    #[test]
+    fn keyed_drops_stale_results_and_keeps_a_failure_until_the_key_changes() {
+        let mut k: Keyed<u32, u32> = Keyed::default();
+        assert!(k.settled(None) && !k.pending(None));
+        assert!(!k.settled(Some(&1)) && k.pending(Some(&1)));
+
+        k.start(1, Job::spawn("one", || {}, |_| Err("bad file".into())));
+        assert!(k.settled(Some(&1)), "being computed");
+        assert!(matches!(finish(&mut k, Some(&1)), Polled::Failed(m) if m == "bad file"));
+        assert_eq!(k.error(Some(&1)), Some("bad file"));
+        assert!(k.settled(Some(&1)) && !k.pending(Some(&1)), "not retried");
+        assert!(!k.settled(None), "nothing wanted: the failure goes");
+        assert!(!k.reset(), "nothing was on the GPU");
+        assert_eq!(k.error(Some(&1)), None);
+
+        // A result for a key since left is dropped.
+        k.start(2, Job::spawn("two", || {}, |_| Ok(2)));
+        assert!(matches!(finish(&mut k, Some(&3)), Polled::Nothing));
+        assert!(!k.computing() && !k.ready(Some(&2)));
+
+        k.start(3, Job::spawn("three", || {}, |_| Ok(30)));
+        assert!(matches!(finish(&mut k, Some(&3)), Polled::Ready(3, 30)));
+        k.uploaded(3);
+        assert!(k.ready(Some(&3)) && k.settled(Some(&3)) && !k.pending(Some(&3)));
+        assert_eq!(k.on_gpu(), Some(&3));
+        assert!(!k.settled(None) && k.reset(), "the GPU had something");
+        assert!(k.settled(None));
     }
 }

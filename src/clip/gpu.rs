@@ -190,27 +190,15 @@ pub fn block_size(r_xy: f32) -> u32 {
 /// The bind group layout entries of `@group(1)` in `clip_common.wgsl`, for pipelines
 /// with explicit layouts.
 pub fn layout_entries(visibility: wgpu::ShaderStages) -> [wgpu::BindGroupLayoutEntry; 2] {
+    use crate::gpu::entry;
     [
-        wgpu::BindGroupLayoutEntry {
-            binding: 0,
+        entry::uniform(0, visibility),
+        entry::texture(
+            1,
             visibility,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        },
-        wgpu::BindGroupLayoutEntry {
-            binding: 1,
-            visibility,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                view_dimension: wgpu::TextureViewDimension::D2Array,
-                multisampled: false,
-            },
-            count: None,
-        },
+            wgpu::TextureViewDimension::D2Array,
+            Some(false),
+        ),
     ]
 }
 

@@ -211,14 +211,7 @@ async fn request_device_async() -> Result<Gpu, GpuError> {
             name: info.name.clone(),
             source,
         })?;
-    Ok(Gpu {
-        instance,
-        adapter,
-        device,
-        queue,
-        info,
-        stages: StageCache::default(),
-    })
+    Ok(Gpu::new(instance, adapter, device, queue))
 }
 
 /// Default bound on any single wait for the GPU (a hung driver fails instead of hanging).

@@ -49,6 +49,82 @@ pub fn linear_sampler(device: &wgpu::Device, label: &str) -> wgpu::Sampler {
     })
 }
 
+/// Bind group layout entries by kind (visible to `visibility`).
+pub mod entry {
+    use wgpu::{
+        BindGroupLayoutEntry, BindingType, ShaderStages, TextureSampleType, TextureViewDimension,
+    };
+
+    fn entry(binding: u32, visibility: ShaderStages, ty: BindingType) -> BindGroupLayoutEntry {
+        BindGroupLayoutEntry {
+            binding,
+            visibility,
+            ty,
+            count: None,
+        }
+    }
+
+    pub fn uniform(binding: u32, visibility: ShaderStages) -> BindGroupLayoutEntry {
+        let ty = wgpu::BufferBindingType::Uniform;
+        entry(binding, visibility, buffer(ty))
+    }
+
+    pub fn storage(
+        binding: u32,
+        visibility: ShaderStages,
+        read_only: bool,
+    ) -> BindGroupLayoutEntry {
+        let ty = wgpu::BufferBindingType::Storage { read_only };
+        entry(binding, visibility, buffer(ty))
+    }
+
+    fn buffer(ty: wgpu::BufferBindingType) -> BindingType {
+        BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        }
+    }
+
+    /// A sampled texture; `filterable` float, or unsigned integers for `None`.
+    pub fn texture(
+        binding: u32,
+        visibility: ShaderStages,
+        view_dimension: TextureViewDimension,
+        filterable: Option<bool>,
+    ) -> BindGroupLayoutEntry {
+        let sample_type = match filterable {
+            Some(filterable) => TextureSampleType::Float { filterable },
+            None => TextureSampleType::Uint,
+        };
+        let ty = BindingType::Texture {
+            sample_type,
+            view_dimension,
+            multisampled: false,
+        };
+        entry(binding, visibility, ty)
+    }
+
+    pub fn sampler(binding: u32, visibility: ShaderStages) -> BindGroupLayoutEntry {
+        let ty = BindingType::Sampler(wgpu::SamplerBindingType::Filtering);
+        entry(binding, visibility, ty)
+    }
+
+    pub fn storage_texture(
+        binding: u32,
+        visibility: ShaderStages,
+        format: wgpu::TextureFormat,
+        view_dimension: TextureViewDimension,
+    ) -> BindGroupLayoutEntry {
+        let ty = BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format,
+            view_dimension,
+        };
+        entry(binding, visibility, ty)
+    }
+}
+
 /// A compute pipeline of one shader's `main` with the linear sampler its volumes are
 /// read with: the long-lived state of most stages.
 #[derive(Debug)]
@@ -83,6 +159,23 @@ impl ComputeStage {
         )
     }
 }
+
+/// Declares a stage that is one [`ComputeStage`] (a shader's pipeline and sampler),
+/// built once per device by [`crate::gpu::Gpu::stage`].
+macro_rules! compute_stage {
+    ($(#[$doc:meta])* $name:ident, $label:literal, $shader:literal) => {
+        $(#[$doc])*
+        #[derive(Debug)]
+        pub struct $name($crate::gpu::ComputeStage);
+
+        impl $crate::gpu::Stage for $name {
+            fn create(device: &wgpu::Device) -> Result<Self, $crate::gpu::GpuError> {
+                $crate::gpu::ComputeStage::new(device, $label, $shader).map($name)
+            }
+        }
+    };
+}
+pub(crate) use compute_stage;
 
 /// A 3-D texture of `dims` with one mip level.
 pub fn texture_3d(
@@ -201,6 +294,25 @@ pub fn f16_texture(
     texture
 }
 
+/// A buffer of `usage | COPY_DST` initialised with `bytes` (`min_size` bytes at least).
+fn filled_buffer(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    bytes: &[u8],
+    min_size: usize,
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.len().max(min_size) as u64,
+        usage: usage | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    queue.write_buffer(&buffer, 0, bytes);
+    buffer
+}
+
 /// A storage buffer initialised with `bytes` (at least 16 bytes, so an empty table
 /// still binds), with `extra` usages besides `STORAGE | COPY_DST`.
 pub fn storage_buffer(
@@ -209,14 +321,8 @@ pub fn storage_buffer(
     bytes: &[u8],
     extra: wgpu::BufferUsages,
 ) -> wgpu::Buffer {
-    let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes.len().max(16) as u64,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
-        mapped_at_creation: false,
-    });
-    gpu.queue.write_buffer(&buffer, 0, bytes);
-    buffer
+    let usage = wgpu::BufferUsages::STORAGE | extra;
+    filled_buffer(&gpu.device, &gpu.queue, label, bytes, 16, usage)
 }
 
 /// A storage buffer of `size` bytes a compute pass writes and the host copies out.
@@ -236,14 +342,7 @@ pub fn uniform_buffer(
     label: &str,
     bytes: &[u8],
 ) -> wgpu::Buffer {
-    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes.len() as u64,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    queue.write_buffer(&buffer, 0, bytes);
-    buffer
+    filled_buffer(device, queue, label, bytes, 0, wgpu::BufferUsages::UNIFORM)
 }
 
 /// A host-readable buffer to copy results into.

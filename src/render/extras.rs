@@ -71,20 +71,23 @@ impl Placeholders {
                 mapped_at_creation: false,
             })
         };
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("RayCaster::placeholder_3d"),
-            size: wgpu::Extent3d {
-                width: 1,
-                height: 1,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D3,
-            format: wgpu::TextureFormat::R16Float,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        });
+        let texel = |label, dimension, format| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: crate::gpu::extent([1, 1, 1]),
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+        };
+        let texture = texel(
+            "RayCaster::placeholder_3d",
+            wgpu::TextureDimension::D3,
+            wgpu::TextureFormat::R16Float,
+        );
         Placeholders {
             uniform: buffer(
                 "RayCaster::placeholder_uniform",
@@ -97,22 +100,12 @@ impl Placeholders {
                 16,
                 wgpu::BufferUsages::STORAGE,
             ),
-            layer: device
-                .create_texture(&wgpu::TextureDescriptor {
-                    label: Some("RayCaster::placeholder_2d"),
-                    size: wgpu::Extent3d {
-                        width: 1,
-                        height: 1,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: crate::render::surface::LAYER_FORMAT,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                })
-                .create_view(&Default::default()),
+            layer: texel(
+                "RayCaster::placeholder_2d",
+                wgpu::TextureDimension::D2,
+                crate::render::surface::LAYER_FORMAT,
+            )
+            .create_view(&Default::default()),
         }
     }
 }
@@ -120,39 +113,14 @@ impl Placeholders {
 /// Layout entries of the ray caster's group 1: positional AO (0–4), extras uniform (5),
 /// light volume (6), surface position and colour (7, 8).
 pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    use crate::gpu::entry;
+    use wgpu::TextureViewDimension::{D2, D3};
+    let c = wgpu::ShaderStages::COMPUTE;
     let mut entries = crate::ao::vao::layout_entries();
-    entries.push(wgpu::BindGroupLayoutEntry {
-        binding: 5,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    });
-    entries.push(wgpu::BindGroupLayoutEntry {
-        binding: 6,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-            view_dimension: wgpu::TextureViewDimension::D3,
-            multisampled: false,
-        },
-        count: None,
-    });
-    for binding in [7, 8] {
-        entries.push(wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        });
-    }
+    entries.push(entry::uniform(5, c));
+    entries.push(entry::texture(6, c, D3, Some(true)));
+    entries.push(entry::texture(7, c, D2, Some(false)));
+    entries.push(entry::texture(8, c, D2, Some(false)));
     entries
 }
 

@@ -326,52 +326,20 @@ impl RayCaster {
         let module = shaders::module(device, "raycast.wgsl")?;
         let surfaces = super::surface::SurfaceRenderer::new(device)?;
         validated(device, "RayCaster::new", || {
-            let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
-                binding,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty,
-                count: None,
-            };
-            let tex = |sample_type| wgpu::BindingType::Texture {
-                sample_type,
-                view_dimension: wgpu::TextureViewDimension::D3,
-                multisampled: false,
-            };
+            use crate::gpu::entry;
+            use wgpu::TextureViewDimension::{D2, D3};
+            let c = wgpu::ShaderStages::COMPUTE;
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("RayCaster::layout"),
                 entries: &[
-                    entry(
-                        0,
-                        wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Uniform,
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                    ),
-                    entry(1, tex(wgpu::TextureSampleType::Float { filterable: true })),
-                    entry(
-                        2,
-                        wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    ),
-                    entry(
-                        3,
-                        wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Storage { read_only: true },
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                    ),
-                    entry(4, tex(wgpu::TextureSampleType::Float { filterable: true })),
-                    entry(5, tex(wgpu::TextureSampleType::Uint)),
-                    entry(
-                        6,
-                        wgpu::BindingType::StorageTexture {
-                            access: wgpu::StorageTextureAccess::WriteOnly,
-                            format: wgpu::TextureFormat::Rgba8Unorm,
-                            view_dimension: wgpu::TextureViewDimension::D2,
-                        },
-                    ),
-                    entry(7, tex(wgpu::TextureSampleType::Float { filterable: true })),
+                    entry::uniform(0, c),
+                    entry::texture(1, c, D3, Some(true)),
+                    entry::sampler(2, c),
+                    entry::storage(3, c, true),
+                    entry::texture(4, c, D3, Some(true)),
+                    entry::texture(5, c, D3, None),
+                    entry::storage_texture(6, c, wgpu::TextureFormat::Rgba8Unorm, D2),
+                    entry::texture(7, c, D3, Some(true)),
                 ],
             });
             let clip_layout = crate::clip::gpu::bind_group_layout(device);

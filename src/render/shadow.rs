@@ -9,7 +9,7 @@
 
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
 use crate::gpu::{
-    ComputeStage, Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer,
+ Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer,
     uniform_buffer, validated,
 };
 use crate::render::jitter;
@@ -151,15 +151,12 @@ pub fn light_cpu(
 /// Samples per submission: keeps each dispatch well inside the 60 s readback bound.
 pub const SAMPLES_PER_SUBMISSION: u64 = 1 << 27;
 
-/// Long-lived light-volume compute state.
-#[derive(Debug)]
-pub struct LightGpu(ComputeStage);
-
-impl crate::gpu::Stage for LightGpu {
-    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
-        ComputeStage::new(device, "Light", "light.wgsl").map(LightGpu)
-    }
-}
+crate::gpu::compute_stage!(
+    /// Long-lived light-volume compute state.
+    LightGpu,
+    "Light",
+    "light.wgsl"
+);
 
 impl LightGpu {
     /// The light volume of `texels` (uploaded as f16 for this pass), in z-slabs, read

@@ -1,0 +1,111 @@
+//! The viewer's AO computation, as one function of its inputs: no UI state, run on a
+//! worker thread by [`super::derived`]. [`crate::ao::AoEngine`] computes CAO (exact under
+//! clipping, on a copy of the uploaded texels) or a precomputed AO volume (on the
+//! viewer's device, or the CPU twin where that is faster or the volume does not fit).
+
+use super::jobs::Progress;
+use crate::ao::{AoEngine, AoMethod, AoRequest, AoSettings, Ambient};
+use crate::gpu::Gpu;
+use crate::render::gpu::GpuVolume;
+use crate::render::texels::{UploadLimits, VolumeTexels};
+use crate::tf::TransferFunction;
+use crate::volume::Volume;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// What one AO computation needs, owned so that it can move to a worker thread.
+#[derive(Debug)]
+pub struct AoInput {
+    /// The viewer's device (the viewport draws with it too).
+    pub gpu: Arc<Gpu>,
+    /// The volume as loaded (RAS order): the input of a precomputed AO volume.
+    pub volume: Arc<Volume>,
+    /// A copy of the texels the viewport's volume was made from: CAO's input (only
+    /// with `clipping`; `None` when no volume was uploaded).
+    pub texels: Option<VolumeTexels>,
+    pub tf: TransferFunction,
+    pub settings: AoSettings,
+    /// The ray caster's step in voxels (CAO builds its own [`GpuVolume`] with it).
+    pub step_voxels: f32,
+    /// CAO (the AO stays exact while clip shapes move) instead of an AO volume.
+    pub clipping: bool,
+}
+
+/// A finished AO computation.
+#[derive(Debug)]
+pub struct AoResult {
+    pub kind: AoData,
+    /// What ran it ("llvmpipe (Vulkan)", "CPU twin …").
+    pub device: String,
+    pub seconds: f64,
+}
+
+/// A precomputed AO volume, or CAO with its `V_PAO` ready for per-frame updates.
+#[derive(Debug)]
+pub enum AoData {
+    Volume(Vec<f32>),
+    Cao(Box<crate::ao::cao::CaoGpu>),
+}
+
+/// Computes the AO `input` asks for, reporting through `progress` (which also stops the
+/// work when the job is cancelled).
+pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, String> {
+    let start = Instant::now();
+    let AoInput {
+        gpu,
+        volume,
+        texels,
+        tf,
+        settings,
+        step_voxels,
+        clipping,
+    } = input;
+    let report = |d: usize, t: usize| progress.set(d as u64, t as u64);
+    let engine = AoEngine::on(Some(Arc::clone(&gpu)));
+    if clipping {
+        // CAO precomputes V_PAO on its own copy of the uploaded texels; V_AO follows the
+        // clip shapes from the next sync. With clip shapes LAO runs as CAO.
+        let texels = texels.ok_or("no volume uploaded")?;
+        let vol =
+            GpuVolume::from_texels(&gpu, texels, &tf, step_voxels).map_err(|e| e.to_string())?;
+        let mut cao = settings;
+        if !cao.method.is_clipped() {
+            cao.method = AoMethod::Cao;
+        }
+        let request = AoRequest {
+            tf: &tf,
+            settings: &cao,
+            clip: None,
+        };
+        let computed = engine
+            .compute(crate::ao::AoInput::Uploaded(&vol), &request, &report)
+            .map_err(|e| e.to_string())?;
+        let Ambient::Cao(cao) = computed.ambient else {
+            return Err("CAO came back without its volumes".into());
+        };
+        return Ok(AoResult {
+            kind: AoData::Cao(cao),
+            device: computed.device,
+            seconds: start.elapsed().as_secs_f64(),
+        });
+    }
+    // The viewer's own device (the engine sends a filter map on a CPU adapter to the
+    // twin), on the volume at full resolution.
+    let texels = VolumeTexels::new(&volume, UploadLimits::NONE);
+    let request = AoRequest {
+        tf: &tf,
+        settings: &settings,
+        clip: None,
+    };
+    let computed = engine
+        .compute(crate::ao::AoInput::Texels(&texels), &request, &report)
+        .map_err(|e| e.to_string())?;
+    let Ambient::Values(values) = computed.ambient else {
+        return Err("the AO volume came back in an unexpected form".into());
+    };
+    Ok(AoResult {
+        kind: AoData::Volume(values),
+        device: computed.device,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
