@@ -16,9 +16,6 @@
 
 pub mod ao;
 pub mod app;
-pub mod bench;
-pub mod bench_cao;
-pub mod bench_filter;
 pub mod clip;
 pub mod gpu;
 pub mod render;
