@@ -41,7 +41,3 @@ pub mod clip;
 pub mod render;
 
 pub mod app;
-
-pub mod bench;
-pub mod bench_cao;
-pub mod bench_filter;

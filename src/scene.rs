@@ -1,12 +1,12 @@
 //! Scene files: versioned JSON holding everything needed to reproduce a rendering —
 //! the volume (path relative to the scene file where possible), transfer function,
-//! camera, light, render settings, image size, the ambient-occlusion method and its
-//! parameters, the clip shapes with their poses and modes, and meshes drawn inside.
+//! camera, light, render settings, image size, the ambient-occlusion method, clip shapes
+//! and meshes. [`Scene::load_options`] says how to read its volume.
 
 use crate::ao::AoSettings;
 use crate::render::{Camera, RenderSettings};
 use crate::tf::TransferFunction;
-use crate::volume::{Endian, RawOverrides, VoxelType};
+use crate::volume::{Endian, LoadOptions, RawOverrides, VoxelType};
 use std::path::{Path, PathBuf};
 
 /// The scene format this volao writes and the newest it reads.
@@ -74,6 +74,31 @@ pub struct VolumeSource {
     pub frame: usize,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub raw: Option<RawLayout>,
+}
+
+impl VolumeSource {
+    /// The source that reads `path` (`None`: the demo volume) with `options`' 4-D frame and
+    /// raw layout; an empty layout is left out.
+    pub fn from_load_options(path: Option<PathBuf>, options: &LoadOptions) -> VolumeSource {
+        VolumeSource {
+            path,
+            frame: options.frame,
+            raw: (!options.raw.is_empty()).then(|| RawLayout::from(&options.raw)),
+        }
+    }
+
+    /// How to read this volume: its 4-D frame and raw layout (default memory budget).
+    pub fn load_options(&self) -> LoadOptions {
+        LoadOptions {
+            frame: self.frame,
+            raw: self
+                .raw
+                .as_ref()
+                .map(RawOverrides::from)
+                .unwrap_or_default(),
+            max_bytes: None,
+        }
+    }
 }
 
 /// The light: a headlight, or a directional light (which volumetric shadows use).
@@ -192,6 +217,20 @@ impl Scene {
             path: path.to_owned(),
             message: e.to_string(),
         })
+    }
+
+    /// How to read the scene's volume: its 4-D frame and raw layout (the path is
+    /// [`Scene::volume_path`]).
+    pub fn load_options(&self) -> LoadOptions {
+        self.volume.load_options()
+    }
+
+    /// Resolves the paths of the volume, the clip meshes and the meshes against the scene
+    /// file's folder, so the scene can be used (and saved elsewhere) without it.
+    pub fn resolve_paths(&mut self, scene_path: &Path) {
+        self.volume.path = self.volume_path(scene_path);
+        self.clip_shapes = self.clip_shapes_resolved(scene_path);
+        self.meshes = self.meshes_resolved(scene_path);
     }
 
     /// The clip shapes with mesh paths resolved against the scene file's folder.
@@ -377,6 +416,29 @@ mod tests {
             back.volume_path(&scene_path)
                 .map(|p| p.canonicalize().expect("exists")),
             Some(volume.canonicalize().expect("exists"))
+        );
+    }
+
+    #[test]
+    fn load_options_carry_the_frame_and_raw_layout() {
+        let mut s = scene();
+        s.volume.frame = 2;
+        let o = s.load_options();
+        assert_eq!(o.frame, 2);
+        assert_eq!(o.raw.dims, Some([4, 4, 4]));
+        assert_eq!(o.raw.ty, Some(VoxelType::I16));
+        assert_eq!(o.max_bytes, None);
+        assert_eq!(
+            VolumeSource::from_load_options(s.volume.path.clone(), &o),
+            s.volume
+        );
+        s.volume.raw = Some(RawLayout::default());
+        let o = s.load_options();
+        assert!(o.raw.is_empty());
+        assert_eq!(
+            VolumeSource::from_load_options(None, &o).raw,
+            None,
+            "empty layouts are left out"
         );
     }
 

@@ -17,8 +17,8 @@
 
 use crate::gpu::dispatch::{Grid, SlabDispatch};
 use crate::gpu::{
- Gpu, GpuError, bind_group, copy_texture_out, read_buffer, storage_buffer,
-    submit_compute, texture_readback, uniform_buffer, unpad, validated,
+    Gpu, GpuError, bind_group, copy_texture_out, read_buffer, storage_buffer, submit_compute,
+    texture_readback, uniform_buffer, unpad, validated,
 };
 use crate::render::texels::VolumeTexels;
 use crate::sample::trilinear;

@@ -9,8 +9,8 @@
 
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
 use crate::gpu::{
- Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer,
-    uniform_buffer, validated,
+    Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer, uniform_buffer,
+    validated,
 };
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
@@ -87,7 +87,11 @@ slab_fields!(LaoParams, linear);
 /// One LAO step ([`STEP_MM`]) in texture coordinates along each axis.
 pub fn mm_to_uvw(texels: &VolumeTexels) -> [f32; 3] {
     let extent = texels.extent();
-    [STEP_MM / extent[0], STEP_MM / extent[1], STEP_MM / extent[2]]
+    [
+        STEP_MM / extent[0],
+        STEP_MM / extent[1],
+        STEP_MM / extent[2],
+    ]
 }
 
 fn params(texels: &VolumeTexels, lut: &Lut, rays: &Rays, samples: u32) -> LaoParams {

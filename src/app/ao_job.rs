@@ -4,7 +4,7 @@
 //! viewer's device, or the CPU twin where that is faster or the volume does not fit).
 
 use super::jobs::Progress;
-use crate::ao::{AoEngine, AoMethod, AoRequest, AoSettings, Ambient};
+use crate::ao::{Ambient, AoEngine, AoMethod, AoRequest, AoSettings};
 use crate::gpu::Gpu;
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::{UploadLimits, VolumeTexels};

@@ -7,9 +7,9 @@ use crate::gpu::Gpu;
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::{UploadLimits, VolumeTexels};
 use crate::render::{Camera, RenderSettings, Shading};
-use crate::scene::{Light, MeshSource, RawLayout, SCENE_VERSION, Scene, VolumeSource};
+use crate::scene::{Light, MeshSource, SCENE_VERSION, Scene, VolumeSource};
 use crate::tf::{Preset, TransferFunction};
-use crate::volume::{self, Histogram, LoadOptions, RawOverrides, Stats, Volume};
+use crate::volume::{self, Histogram, LoadOptions, Stats, Volume};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -213,19 +213,7 @@ pub fn load_document(
     };
     let (path, options) = match (request, &scene, &scene_path) {
         (OpenRequest::Volume { path, options }, _, _) => (Some(path.clone()), options.clone()),
-        (OpenRequest::Scene(_), Some(s), Some(sp)) => (
-            s.volume_path(sp),
-            LoadOptions {
-                frame: s.volume.frame,
-                raw: s
-                    .volume
-                    .raw
-                    .as_ref()
-                    .map(RawOverrides::from)
-                    .unwrap_or_default(),
-                max_bytes: None,
-            },
-        ),
+        (OpenRequest::Scene(_), Some(s), Some(sp)) => (s.volume_path(sp), s.load_options()),
         _ => (None, LoadOptions::default()),
     };
     let mut warnings = Vec::new();
@@ -304,11 +292,7 @@ pub fn load_document(
         Some(p) => file_name(p),
         None => "demo head phantom".into(),
     };
-    let source = VolumeSource {
-        path: path.clone(),
-        frame: options.frame,
-        raw: (!options.raw.is_empty()).then(|| RawLayout::from(&options.raw)),
-    };
+    let source = VolumeSource::from_load_options(path.clone(), &options);
     let doc = Document {
         source,
         scene_path,

@@ -9,8 +9,8 @@
 
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
 use crate::gpu::{
- Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer,
-    uniform_buffer, validated,
+    Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer, uniform_buffer,
+    validated,
 };
 use crate::render::jitter;
 use crate::render::texels::VolumeTexels;

@@ -2,18 +2,18 @@
 //! volumetric shadows, on the Engine. Results go to `docs/benchmarks.md`.
 
 use super::{median, rms};
-use crate::ao::lao::{LaoGpu, Rays, lao_lut};
-use crate::ao::rays::RaySet;
-use crate::ao::vao::{VaoGpu, VaoInputs, VaoSettings};
-use crate::render::gpu::{GpuVolume, RayCaster};
-use crate::render::shadow::{LightGpu, light_direction, light_lut};
-use crate::render::texels::{UploadLimits, VolumeTexels};
-use crate::render::{Camera, Frame, RenderSettings};
-use crate::tf::{Preset, TransferFunction};
-use crate::volume::{self, LoadOptions};
 use anyhow::Result;
 use std::path::PathBuf;
 use std::time::Instant;
+use volao::ao::lao::{LaoGpu, Rays, lao_lut};
+use volao::ao::rays::RaySet;
+use volao::ao::vao::{VaoGpu, VaoInputs, VaoSettings};
+use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::shadow::{LightGpu, light_direction, light_lut};
+use volao::render::texels::{UploadLimits, VolumeTexels};
+use volao::render::{Camera, Frame, RenderSettings};
+use volao::tf::{Preset, TransferFunction};
+use volao::volume::{self, LoadOptions};
 
 /// Arguments of `volao bench raymarch`.
 #[derive(Debug, clap::Args)]
@@ -38,7 +38,7 @@ pub struct RaymarchBenchArgs {
 
 /// `volao bench raymarch`.
 pub fn raymarch_bench(args: &RaymarchBenchArgs) -> Result<()> {
-    let gpu = crate::gpu::request_device()?;
+    let gpu = volao::gpu::request_device()?;
     println!("adapter: {}", gpu.describe());
     let path = args.data.join("raw/engine.raw");
     let volume = volume::load(&path, &LoadOptions::default())?
@@ -55,9 +55,9 @@ pub fn raymarch_bench(args: &RaymarchBenchArgs) -> Result<()> {
 
 /// Accuracy: positional AO (1 − A_P) against 512-ray LAO (A), on a halved engine.
 fn accuracy(
-    gpu: &crate::gpu::Gpu,
+    gpu: &volao::gpu::Gpu,
     kernel: &VaoGpu,
-    volume: &crate::volume::Volume,
+    volume: &volao::volume::Volume,
     tf: &TransferFunction,
     args: &RaymarchBenchArgs,
 ) -> Result<()> {
@@ -76,7 +76,7 @@ fn accuracy(
         &small_vol,
         &lao_lut(tf, &small),
         &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
-        crate::ao::lao::DEFAULT_SAMPLES,
+        volao::ao::lao::DEFAULT_SAMPLES,
         &|_, _| {},
     )?;
     let t_truth = start.elapsed().as_secs_f64();
@@ -87,7 +87,7 @@ fn accuracy(
         small.dims,
         small.spacing[0],
         tf.name,
-        crate::ao::lao::DEFAULT_SAMPLES,
+        volao::ao::lao::DEFAULT_SAMPLES,
         t_truth
     );
     println!();
@@ -132,9 +132,9 @@ fn accuracy(
 
 /// Frame times on the full engine: no AO, precomputed and live positional AO, shadows.
 fn frames(
-    gpu: &crate::gpu::Gpu,
+    gpu: &volao::gpu::Gpu,
     kernel: &VaoGpu,
-    volume: &crate::volume::Volume,
+    volume: &volao::volume::Volume,
     tf: &TransferFunction,
     args: &RaymarchBenchArgs,
 ) -> Result<()> {
@@ -198,7 +198,7 @@ fn frames(
         t_live_setup,
         live * 1e3
     );
-    let dir = light_direction(crate::render::shadow::DEFAULT_LIGHT).map_err(anyhow::Error::msg)?;
+    let dir = light_direction(volao::render::shadow::DEFAULT_LIGHT).map_err(anyhow::Error::msg)?;
     let start = Instant::now();
     let light = gpu.stage::<LightGpu>()?.compute(
         gpu,

@@ -1,19 +1,19 @@
 //! `volao bench cao`: the CAO paper's evaluation (Titov et al. §4, Tables 2–4, Fig. 10)
 //! with a clip shape moving along a fixed path every frame.
 
-use crate::ao::cao::{CaoGpu, CaoMode, CaoStats};
-use crate::ao::lao::Rays;
-use crate::ao::rays::RaySet;
-use crate::clip::{ClipShape, Shape};
-use crate::render::gpu::{GpuVolume, RayCaster};
-use crate::render::texels::{UploadLimits, VolumeTexels};
-use crate::render::{Camera, Frame, RenderSettings, Shading};
-use crate::tf::{Preset, TransferFunction};
-use crate::volume::{self, LoadOptions, RawOverrides, VoxelType};
 use anyhow::Result;
 use glam::Vec3;
 use std::path::PathBuf;
 use std::time::Instant;
+use volao::ao::cao::{CaoGpu, CaoMode, CaoStats};
+use volao::ao::lao::Rays;
+use volao::ao::rays::RaySet;
+use volao::clip::{ClipShape, Shape};
+use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::texels::{UploadLimits, VolumeTexels};
+use volao::render::{Camera, Frame, RenderSettings, Shading};
+use volao::tf::{Preset, TransferFunction};
+use volao::volume::{self, LoadOptions, RawOverrides, VoxelType};
 
 #[derive(clap::Args, Debug)]
 pub struct CaoBenchArgs {
@@ -35,7 +35,7 @@ pub struct CaoBenchArgs {
     #[arg(long, default_value_t = 512)]
     pub size: u32,
     /// Depth/dilation map size.
-    #[arg(long, default_value_t = crate::clip::gpu::DEFAULT_RESOLUTION)]
+    #[arg(long, default_value_t = volao::clip::gpu::DEFAULT_RESOLUTION)]
     pub clip_resolution: u32,
 }
 
@@ -43,7 +43,7 @@ pub struct CaoBenchArgs {
 const PAPER_SPEEDUP: [f64; 4] = [1.66, 2.29, 2.95, 3.79];
 
 struct Bench {
-    gpu: crate::gpu::Gpu,
+    gpu: volao::gpu::Gpu,
     rc: RayCaster,
     vol: GpuVolume,
     tf: TransferFunction,
@@ -65,7 +65,7 @@ impl Timed {
 
 impl Bench {
     fn new(
-        gpu: crate::gpu::Gpu,
+        gpu: volao::gpu::Gpu,
         volume: &volume::Volume,
         max_dim: usize,
         size: u32,
@@ -81,7 +81,7 @@ impl Bench {
             volume,
             UploadLimits {
                 max_dim,
-                max_bytes: crate::render::gpu::MAX_VOLUME_BYTES,
+                max_bytes: volao::render::gpu::MAX_VOLUME_BYTES,
             },
         );
         let vol = GpuVolume::from_texels(&gpu, texels, &tf, settings.step_voxels)?;
@@ -112,7 +112,7 @@ impl Bench {
             &self.tf,
             &Rays::uniform(set.directions()),
             samples,
-            crate::ao::cao::DEFAULT_MSAA,
+            volao::ao::cao::DEFAULT_MSAA,
             &|_, _| {},
         )?)
     }
@@ -162,7 +162,7 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
 
 /// `volao bench cao`.
 pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
-    let adapter = crate::gpu::request_device()?.describe();
+    let adapter = volao::gpu::request_device()?.describe();
     println!("adapter: {adapter}");
     let load = |rel: &str, raw: RawOverrides| -> Result<volume::Volume> {
         Ok(volume::load(
@@ -223,7 +223,7 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
     for (name, rel, raw, shape, samples, paper) in scenes {
         let volume = load(rel, raw)?;
         let mut b = Bench::new(
-            crate::gpu::request_device()?,
+            volao::gpu::request_device()?,
             &volume,
             args.table2_max_dim,
             args.size,
@@ -263,7 +263,7 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
         );
         if name == "Engine" {
             let b = Bench::new(
-                crate::gpu::request_device()?,
+                volao::gpu::request_device()?,
                 &volume,
                 args.max_dim,
                 args.size,
@@ -359,13 +359,13 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
     );
 
     let texel = b.vol.texels.format.bytes();
-    let maps = crate::clip::gpu::LAYERS_PER_SHAPE as u64 * 4 * (args.clip_resolution as u64).pow(2);
+    let maps = volao::clip::gpu::LAYERS_PER_SHAPE as u64 * 4 * (args.clip_resolution as u64).pow(2);
     println!(
         "\nGPU memory: {} B per voxel for CAO (V_o, V_m, V_PAO, V_AO as f32) + {texel} B for the density V \
          (the paper keeps 5 full-size volumes); clip maps {:.0} MiB per shape ({} layers of {}² f32).",
         memory,
         maps as f64 / (1 << 20) as f64,
-        crate::clip::gpu::LAYERS_PER_SHAPE,
+        volao::clip::gpu::LAYERS_PER_SHAPE,
         args.clip_resolution
     );
     println!("Times are wall-clock per stage with a wait after each, on {adapter}.");

@@ -2,17 +2,17 @@
 //! for the CPU twin and the GPU, and a quality/time table of every cheap AO method
 //! against 512-ray LAO. Results go to `docs/benchmarks.md`, never into test assertions.
 
-use crate::ao::cone::{ConeGpu, ConePreset, ConeSet, MipPyramid, cone_cpu, opacity};
-use crate::ao::filter::{self, AmbientMap, FilterCpu, FilterGpu, Source, StatisticSource};
-use crate::ao::lao::{LaoGpu, Rays, lao_lut};
-use crate::ao::rays::RaySet;
-use crate::render::gpu::GpuVolume;
-use crate::render::texels::{UploadLimits, VolumeTexels};
-use crate::tf::{Preset, TransferFunction};
-use crate::volume::{self, LoadOptions, RawOverrides};
 use anyhow::Result;
 use std::path::PathBuf;
 use std::time::Instant;
+use volao::ao::cone::{ConeGpu, ConePreset, ConeSet, MipPyramid, cone_cpu, opacity};
+use volao::ao::filter::{self, AmbientMap, FilterCpu, FilterGpu, Source, StatisticSource};
+use volao::ao::lao::{LaoGpu, Rays, lao_lut};
+use volao::ao::rays::RaySet;
+use volao::render::gpu::GpuVolume;
+use volao::render::texels::{UploadLimits, VolumeTexels};
+use volao::tf::{Preset, TransferFunction};
+use volao::volume::{self, LoadOptions, RawOverrides};
 
 /// Arguments of `volao bench filter`.
 #[derive(Debug, clap::Args)]
@@ -28,7 +28,7 @@ pub struct FilterBenchArgs {
     #[arg(long, default_value_t = 128)]
     pub engine_max_dim: usize,
     /// LAO samples per ray (1 mm apart) for the ground truth and the cones' reach.
-    #[arg(long, default_value_t = crate::ao::lao::DEFAULT_SAMPLES)]
+    #[arg(long, default_value_t = volao::ao::lao::DEFAULT_SAMPLES)]
     pub samples: u32,
     /// Cache of the 512-ray ground truth (raw little-endian f32): read if it exists and
     /// has the right size, else computed and written there.
@@ -104,7 +104,7 @@ fn rms(a: &[f32], b: &[f32], mask: Option<&[bool]>) -> f64 {
 
 /// `volao bench filter`.
 pub fn filter_bench(args: &FilterBenchArgs) -> Result<()> {
-    let gpu = crate::gpu::request_device()?;
+    let gpu = volao::gpu::request_device()?;
     let fg = gpu.stage::<FilterGpu>()?;
     let cg = gpu.stage::<ConeGpu>()?;
     println!("adapter: {}", gpu.describe());
@@ -120,7 +120,7 @@ pub fn filter_bench(args: &FilterBenchArgs) -> Result<()> {
 }
 
 /// Ruiz et al.'s Table 1 on the cranium CT, density statistics as in the paper.
-fn table_1(args: &FilterBenchArgs, gpu: &crate::gpu::Gpu, fg: &FilterGpu) -> Result<()> {
+fn table_1(args: &FilterBenchArgs, gpu: &volao::gpu::Gpu, fg: &FilterGpu) -> Result<()> {
     let opts = LoadOptions {
         raw: RawOverrides {
             dims: Some([256, 256, 108]),
@@ -213,7 +213,7 @@ fn in_turns(
 /// Every cheap method's RMS against 512-ray LAO on a downsampled engine, with its time.
 fn quality(
     args: &FilterBenchArgs,
-    gpu: &crate::gpu::Gpu,
+    gpu: &volao::gpu::Gpu,
     fg: &FilterGpu,
     cg: &ConeGpu,
 ) -> Result<()> {
@@ -321,7 +321,7 @@ fn quality(
             Ok(())
         })?;
         let c = median_ms(1, || {
-            crate::ao::lao::lao_cpu(&et, &lut, &rays, m, &|_, _| {});
+            volao::ao::lao::lao_cpu(&et, &lut, &rays, m, &|_, _| {});
             Ok(())
         })?;
         row("LAO", format!("{} rays × {m}", set.name()), &a, g, c);
@@ -346,7 +346,7 @@ fn quality(
             }
         }
     }
-    let reach = m as f32 * crate::ao::lao::STEP_MM;
+    let reach = m as f32 * volao::ao::lao::STEP_MM;
     for cones in [ConeSet::Six, ConeSet::Fourteen, ConeSet::TwentySix] {
         for preset in [ConePreset::Low, ConePreset::Medium, ConePreset::High] {
             // Timed from the opacity volume on: pyramid (CPU) + cones (GPU or CPU).

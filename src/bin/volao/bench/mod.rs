@@ -1,0 +1,63 @@
+//! `volao bench …`: measurements recorded in `docs/benchmarks.md`, never asserted in tests.
+
+mod cao;
+mod filter;
+mod lao;
+mod load;
+mod raymarch;
+mod render;
+
+use anyhow::Result;
+use clap::Subcommand;
+use std::path::PathBuf;
+
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Load time and peak memory of volao vs Python nibabel on the same files.
+    Load(load::LoadBenchArgs),
+    /// Frame times of the GPU ray caster (engine and cranium CT, 512² and 1024²).
+    Render(render::RenderBenchArgs),
+    /// The CAO paper's Tables 5–6 (LAO accuracy vs rays) on the Engine, and LAO throughput.
+    Lao(lao::LaoBenchArgs),
+    /// The CAO paper's Tables 2–4: voxels recomputed, LAO every frame vs CAO, one vs
+    /// two meshes, per-stage times and GPU memory.
+    Cao(cao::CaoBenchArgs),
+    /// Positional AO by ray marching (time and RMS vs 512-ray LAO, live vs precomputed
+    /// frame times) and the cost of volumetric shadows, on the Engine.
+    Raymarch(raymarch::RaymarchBenchArgs),
+    /// Ruiz et al.'s Table 1 (filter maps on the cranium CT) and every cheap AO method's
+    /// RMS against 512-ray LAO with its compute time.
+    Filter(filter::FilterBenchArgs),
+    /// (internal) load one file and print time and peak memory as JSON.
+    #[command(hide = true)]
+    LoadOne { file: PathBuf },
+}
+
+/// Runs one benchmark.
+pub fn run(command: &BenchCommand) -> Result<()> {
+    match command {
+        BenchCommand::Render(args) => render::render_bench(args),
+        BenchCommand::Lao(args) => lao::lao_bench(args),
+        BenchCommand::Raymarch(args) => raymarch::raymarch_bench(args),
+        BenchCommand::Filter(args) => filter::filter_bench(args),
+        BenchCommand::Load(args) => load::load_bench(args),
+        BenchCommand::Cao(args) => cao::cao_bench(args),
+        BenchCommand::LoadOne { file } => load::load_one(file),
+    }
+}
+
+/// The median of `xs` (the upper one of an even count).
+pub fn median(mut xs: Vec<f64>) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    xs[xs.len() / 2]
+}
+
+/// Root-mean-square difference of two AO volumes.
+pub fn rms(a: &[f32], b: &[f32]) -> f64 {
+    (a.iter()
+        .zip(b)
+        .map(|(x, y)| ((x - y) as f64).powi(2))
+        .sum::<f64>()
+        / a.len().max(1) as f64)
+        .sqrt()
+}

@@ -1,0 +1,151 @@
+//! `volao info`: a volume's format, size, spacing, type, value range, orientation and
+//! histogram, as text or JSON.
+
+use crate::args::InfoArgs;
+use crate::progress::load_with_bar;
+use anyhow::{Context, Result};
+use std::path::Path;
+use volao::volume::{self, Loaded, Volume, VoxelType, fmt_bytes, fmt_dims};
+
+/// `volao info`.
+pub fn run(args: &InfoArgs) -> Result<()> {
+    let report = match &args.file {
+        Some(path) => {
+            let loaded = load_with_bar(path, &args.load.options())?;
+            describe_loaded(path, &loaded, args.bins)
+        }
+        None => describe_demo(&volume::demo::head_phantom(128), args.bins),
+    };
+    print_info(&report, args.json)
+}
+
+/// Everything `volao info` reports, in the shape its JSON takes.
+#[derive(serde::Serialize)]
+struct Report {
+    file: String,
+    format: String,
+    dims: [usize; 3],
+    spacing_mm: [f32; 3],
+    voxel_type: VoxelType,
+    payload_bytes: usize,
+    scaling: volume::Scaling,
+    stats: volume::Stats,
+    orientation: String,
+    orientation_source: volume::orient::AffineSource,
+    affine: [[f64; 4]; 3],
+    descriptions: Vec<(String, String)>,
+    warnings: Vec<String>,
+    histogram: volume::Histogram,
+}
+
+fn describe(file: String, format: String, v: &Volume, warnings: &[String], bins: usize) -> Report {
+    let stats = v.stats();
+    Report {
+        file,
+        format,
+        dims: v.dims,
+        spacing_mm: v.spacing,
+        voxel_type: v.data.voxel_type(),
+        payload_bytes: v.data.byte_len(),
+        scaling: v.scaling,
+        histogram: v.histogram(bins, &stats),
+        stats,
+        orientation: v.orientation.axis_codes(),
+        orientation_source: v.orientation.source,
+        affine: v.orientation.rows(),
+        descriptions: v.descriptions.clone(),
+        warnings: warnings.to_vec(),
+    }
+}
+
+fn describe_loaded(path: &Path, loaded: &Loaded, bins: usize) -> Report {
+    describe(
+        path.display().to_string(),
+        loaded.format.to_string(),
+        &loaded.volume,
+        &loaded.warnings,
+        bins,
+    )
+}
+
+fn describe_demo(v: &Volume, bins: usize) -> Report {
+    describe(
+        "(built-in demo)".into(),
+        volume::Format::Demo.to_string(),
+        v,
+        &[],
+        bins,
+    )
+}
+
+/// Integers as integers, other values to 6 decimals without trailing zeros.
+fn fmt_value(x: f64) -> String {
+    if x.fract() == 0.0 && x.abs() < 1e15 {
+        format!("{x:.0}")
+    } else {
+        let s = format!("{x:.6}");
+        s.trim_end_matches('0').trim_end_matches('.').to_owned()
+    }
+}
+
+fn print_info(r: &Report, json: bool) -> Result<()> {
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(r).context("encoding the report as JSON")?
+        );
+        return Ok(());
+    }
+    let [nx, ny, nz] = r.dims;
+    let s = &r.stats;
+    println!("file:         {}", r.file);
+    println!("format:       {}", r.format);
+    println!(
+        "dimensions:   {} ({} voxels)",
+        fmt_dims(r.dims),
+        nx * ny * nz
+    );
+    println!(
+        "spacing:      {} × {} × {} mm",
+        r.spacing_mm[0], r.spacing_mm[1], r.spacing_mm[2]
+    );
+    println!(
+        "type:         {} ({})",
+        r.voxel_type,
+        fmt_bytes(r.payload_bytes as u64)
+    );
+    if !r.scaling.is_identity() {
+        println!(
+            "scaling:      value = {} · stored + {}",
+            r.scaling.slope, r.scaling.inter
+        );
+    }
+    println!("value range:  {} … {}", fmt_value(s.min), fmt_value(s.max));
+    println!("mean:         {:.4}", s.mean);
+    if s.non_finite > 0 {
+        println!(
+            "non-finite:   {} voxels are NaN or ±Inf (treated as empty)",
+            s.non_finite
+        );
+    }
+    let source = match r.orientation_source {
+        volume::orient::AffineSource::Sform => "from sform",
+        volume::orient::AffineSource::Qform => "from qform",
+        volume::orient::AffineSource::Assumed => "assumed: the file has no orientation",
+    };
+    println!("orientation:  {} ({source})", r.orientation);
+    for row in &r.affine {
+        println!(
+            "              [{:>10.4} {:>10.4} {:>10.4} {:>10.4}]",
+            row[0], row[1], row[2], row[3]
+        );
+    }
+    for (label, text) in &r.descriptions {
+        // Continuation lines of multi-line strings (PVM courtesy lines) stay in the column.
+        let text = text.trim_end().replace('\n', "\n              ");
+        println!("{:<13} {text}", format!("{label}:"));
+    }
+    println!("histogram ({} bins, log scale):", r.histogram.counts.len());
+    print!("{}", r.histogram.to_text(48));
+    Ok(())
+}

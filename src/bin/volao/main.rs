@@ -1,0 +1,78 @@
+//! The `volao` command line: `volao` (viewer), `view`, `info`, `convert`, `render`, `ao`,
+//! `gpu`, `bench`. One module per command; the flags are in `args`.
+
+mod ao;
+mod args;
+mod bench;
+mod convert;
+mod gpu;
+mod info;
+mod progress;
+mod render;
+mod view;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "volao",
+    version,
+    about = "Direct volume rendering with exact, clip-aware ambient occlusion"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Open the viewer on a volume file or a scene (.json). `volao` alone opens it on the
+    /// built-in demo volume.
+    View(Box<args::ViewArgs>),
+    /// Describe a volume: format, size, spacing, type, value range, orientation, histogram.
+    /// Without FILE, describes the built-in demo volume.
+    Info(args::InfoArgs),
+    /// Convert between formats, chosen by the output's extension (.nii, .nii.gz, .pvm, .raw).
+    Convert(args::ConvertArgs),
+    /// Render a volume or a scene file to PNG, headless.
+    Render(Box<args::RenderArgs>),
+    /// Compute an ambient-occlusion volume in the input's geometry and write it.
+    Ao(args::AoArgs),
+    /// Show the GPU adapter volao will use and run a compute self-test on it.
+    Gpu,
+    /// Benchmarks (results go to docs/benchmarks.md).
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    if let Err(e) = run(cli) {
+        // One line: the error and its causes, joined.
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        None => Ok(volao::app::run(volao::app::ViewerOptions::default())?),
+        Some(Command::View(args)) => view::run(&args),
+        Some(Command::Info(args)) => info::run(&args),
+        Some(Command::Convert(args)) => convert::run(&args),
+        Some(Command::Gpu) => gpu::run(),
+        Some(Command::Render(args)) => render::run(&args),
+        Some(Command::Ao(args)) => ao::run(&args),
+        Some(Command::Bench(command)) => bench::run(&command),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn cli_definition_is_consistent() {
+        use clap::CommandFactory;
+        super::Cli::command().debug_assert();
+    }
+}

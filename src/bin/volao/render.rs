@@ -1,0 +1,314 @@
+//! `volao render`: a volume or a scene file to PNG, headless.
+//!
+//! The image is rendered from a [`Scene`]: the scene file's, or a default one for a plain
+//! volume file. Flags given on the command line are applied onto it (they override the
+//! scene; flags left out keep it), and `--save-scene` writes exactly the scene rendered.
+
+use crate::args::{RenderArgs, parse_background};
+use crate::progress::{load_with_bar, slice_bar};
+use anyhow::{Result, bail};
+use volao::ao::{AoMethod, AoSettings};
+use volao::render::offscreen::{RenderJob, Rendered};
+use volao::render::surface::Surface;
+use volao::render::{Frame, RenderSettings};
+use volao::scene::{Light, MeshSource, SCENE_VERSION, Scene, VolumeSource};
+use volao::tf::{Preset, TransferFunction};
+use volao::volume::{self, Stats, Volume};
+
+/// Image side when neither a flag nor a scene gives one.
+const DEFAULT_SIZE: u32 = 800;
+
+/// `volao render`.
+pub fn run(args: &RenderArgs) -> Result<()> {
+    let file = args.scene_file()?;
+    let source = args.volume_source(file.as_ref());
+    let volume = match &source.path {
+        Some(p) => load_with_bar(p, &source.load_options())?.volume,
+        None => volume::demo::head_phantom(128),
+    }
+    .to_ras();
+    let stats = volume.stats();
+    let mut scene = file.unwrap_or_else(|| default_scene(&stats));
+    scene.volume = source;
+    args.apply_to(&mut scene, &stats)?;
+    let meshes = scene
+        .meshes
+        .iter()
+        .map(|m| volao::render::surface::load_obj(&m.path, m.rgba))
+        .collect::<Result<Vec<_>, _>>()?;
+
+    let start = std::time::Instant::now();
+    let out = render_scene(&scene, &volume, &meshes, !args.cpu)?;
+    for e in &out.clip_errors {
+        eprintln!("warning: {e} (rendered without it)");
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    if out.downsampled > 0 {
+        eprintln!(
+            "note: the volume was halved {}× to fit the adapter's 3-D texture limits",
+            out.downsampled
+        );
+    }
+    out.image.save_png(&args.output)?;
+    println!(
+        "{}: {}×{} in {:.0} ms on {}{}",
+        args.output.display(),
+        scene.width,
+        scene.height,
+        seconds * 1e3,
+        out.device,
+        ao_note(&scene.ambient_occlusion, out.ao_seconds)
+    );
+    if let Some(stats) = &out.cao {
+        crate::ao::print_cao(stats);
+    }
+    if let Some(path) = &args.save_scene {
+        scene.save(path)?;
+        println!("scene: {}", path.display());
+    }
+    Ok(())
+}
+
+/// The scene of a plain volume file (its volume is set by the caller): the TF preset for
+/// the data's range, default camera, headlight, settings and AO, 800×800.
+fn default_scene(stats: &Stats) -> Scene {
+    Scene {
+        version: SCENE_VERSION,
+        volume: VolumeSource {
+            path: None,
+            frame: 0,
+            raw: None,
+        },
+        transfer_function: TransferFunction::preset(Preset::default_for(stats), stats),
+        camera: Default::default(),
+        light: Light::Headlight,
+        render: RenderSettings::default(),
+        width: DEFAULT_SIZE,
+        height: DEFAULT_SIZE,
+        ambient_occlusion: AoSettings::default(),
+        clip_shapes: Vec::new(),
+        meshes: Vec::new(),
+    }
+}
+
+impl RenderArgs {
+    /// The scene file the input names (a `.json`), with its paths resolved against it.
+    fn scene_file(&self) -> Result<Option<Scene>> {
+        let Some(path) = self.input.as_ref().filter(|p| {
+            p.extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+        }) else {
+            return Ok(None);
+        };
+        let mut scene = Scene::load(path)?;
+        scene.resolve_paths(path);
+        // What is saved is this volao's format.
+        scene.version = SCENE_VERSION;
+        Ok(Some(scene))
+    }
+
+    /// Which volume, and how to read it: the scene's (a raw layout given by flags
+    /// replaces the scene's; its frame stays), else the input file and the flags.
+    fn volume_source(&self, scene: Option<&Scene>) -> VolumeSource {
+        let flags = self.load.options();
+        match scene {
+            Some(s) => {
+                let mut options = s.load_options();
+                if !flags.raw.is_empty() {
+                    options.raw = flags.raw;
+                }
+                VolumeSource::from_load_options(s.volume.path.clone(), &options)
+            }
+            None => VolumeSource::from_load_options(self.input.clone(), &flags),
+        }
+    }
+
+    /// Applies the flags given onto `scene` and checks the values; flags left out keep
+    /// the scene's. `stats` (the loaded volume's) place a `--tf` preset.
+    pub fn apply_to(&self, scene: &mut Scene, stats: &Stats) -> Result<()> {
+        self.apply_view(scene, stats)?;
+        self.apply_render_settings(&mut scene.render)?;
+        if let Some(direction) = self.light {
+            scene.light = Light::Directional { direction };
+        }
+        scene.render.light_direction = match scene.light {
+            Light::Directional { direction } => direction,
+            // Shadows of a headlight fall behind what casts them, from the eye's direction.
+            Light::Headlight => scene.camera.backward().to_array(),
+        };
+        if scene.render.shadows {
+            volao::render::shadow::light_direction(scene.render.light_direction)
+                .map_err(anyhow::Error::msg)?;
+        }
+        if self.opacity_modulation.is_some() {
+            scene.render.opacity_modulation = self.opacity_modulation;
+        }
+        if self.show_clip.is_some() {
+            scene.render.clip_surface = self.show_clip;
+        }
+        scene.width = self.width.unwrap_or(scene.width);
+        scene.height = self.height.unwrap_or(scene.height);
+        let (width, height) = (scene.width, scene.height);
+        if width == 0 || height == 0 || width > 32768 || height > 32768 {
+            bail!("image size {width}×{height}: each side must be 1 to 32768 pixels");
+        }
+        self.apply_ao(scene)
+    }
+
+    /// The transfer function and the camera.
+    fn apply_view(&self, scene: &mut Scene, stats: &Stats) -> Result<()> {
+        if let Some(name) = &self.tf {
+            scene.transfer_function = TransferFunction::preset(Preset::from_name(name)?, stats);
+        }
+        if let Some((w, l)) = self.window_level {
+            scene.transfer_function = scene.transfer_function.with_window_level(w, l);
+        }
+        let camera = &mut scene.camera;
+        if let Some(c) = &self.camera {
+            (camera.azimuth_deg, camera.elevation_deg, camera.distance) = (c[0], c[1], c[2]);
+            if camera.distance <= 0.0 {
+                bail!(
+                    "--camera: the distance must be positive (it is in bounding-sphere radii; {} is the default)",
+                    volao::render::camera::DEFAULT_DISTANCE
+                );
+            }
+        }
+        camera.orthographic |= self.ortho;
+        Ok(())
+    }
+
+    /// Background, ambient coefficient, shading, step and shadows.
+    fn apply_render_settings(&self, settings: &mut RenderSettings) -> Result<()> {
+        if let Some(b) = &self.background {
+            settings.background = parse_background(b)?;
+        }
+        if let Some(k) = self.ambient {
+            if !(0.0..=1.0).contains(&k) {
+                bail!("--ambient must be between 0 and 1");
+            }
+            settings.ambient = k;
+        }
+        if let Some(sh) = self.shading {
+            settings.shading = sh;
+        }
+        if let Some(step) = self.step {
+            if step.is_nan() || step <= 0.0 || step.is_infinite() {
+                bail!("--step must be positive (voxels between samples)");
+            }
+            settings.step_voxels = step;
+        }
+        settings.shadows |= self.shadows;
+        Ok(())
+    }
+
+    /// The AO method and its parameters, the clip shapes and the meshes.
+    fn apply_ao(&self, scene: &mut Scene) -> Result<()> {
+        let ao = &mut scene.ambient_occlusion;
+        if let Some(m) = self.ao {
+            ao.method = m;
+        }
+        if let Some(r) = self.rays {
+            ao.rays = r;
+        }
+        if let Some(m) = self.samples {
+            if m == 0 {
+                bail!("--samples must be at least 1");
+            }
+            ao.samples = m;
+        }
+        self.vao.apply(&mut ao.vao)?;
+        self.clip.apply(ao)?;
+        scene.clip_shapes = self.clip.shapes_or(std::mem::take(&mut scene.clip_shapes));
+        if !self.mesh.is_empty() {
+            scene.meshes = self
+                .mesh
+                .iter()
+                .map(|p| MeshSource {
+                    path: p.clone(),
+                    rgba: self.mesh_rgba,
+                })
+                .collect();
+        }
+        self.fast_ao.apply(&mut scene.ambient_occlusion)
+    }
+}
+
+/// Renders `scene` (its volume already loaded, its meshes in `surfaces`), with a progress
+/// bar while the AO is computed.
+fn render_scene(
+    scene: &Scene,
+    volume: &Volume,
+    surfaces: &[Surface],
+    gpu: bool,
+) -> Result<Rendered> {
+    let frame = Frame {
+        camera: scene.camera,
+        settings: scene.render,
+        width: scene.width,
+        height: scene.height,
+    };
+    let ao = &scene.ambient_occlusion;
+    let bar = slice_bar("ambient occlusion", ao.method != AoMethod::None);
+    let needs_gpu = !scene.clip_shapes.is_empty() || ao.method.is_clipped();
+    let device = match gpu {
+        false => None,
+        true => match volao::gpu::request_device() {
+            Ok(g) => Some(std::sync::Arc::new(g)),
+            Err(e) if needs_gpu => return Err(e.into()),
+            Err(e) => {
+                eprintln!("warning: {e}\nwarning: rendering on the CPU instead (slow)");
+                None
+            }
+        },
+    };
+    let job = RenderJob {
+        volume,
+        tf: &scene.transfer_function,
+        frame: &frame,
+        ao,
+        clip: &scene.clip_shapes,
+        surfaces,
+    };
+    let out = volao::render::offscreen::render(device.as_ref(), &job, &|done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    for note in &out.notes {
+        eprintln!("warning: {note}");
+    }
+    bar.finish_and_clear();
+    Ok(out)
+}
+
+/// What the summary line says about the AO: method, parameters and time.
+fn ao_note(ao: &AoSettings, seconds: f64) -> String {
+    if ao.method == AoMethod::None {
+        String::new()
+    } else if matches!(ao.method, AoMethod::Vao | AoMethod::VaoLive) {
+        format!(
+            " (positional AO{}, {} directions × {} samples, r_max {} mm: {:.0} ms)",
+            if ao.method == AoMethod::VaoLive {
+                " live"
+            } else {
+                ""
+            },
+            ao.vao.directions,
+            ao.vao.samples,
+            ao.vao.r_max_mm,
+            seconds * 1e3
+        )
+    } else if volao::ao::fast::handles(ao.method) {
+        format!(
+            " (AO {}: {:.0} ms)",
+            volao::ao::fast::describe(ao),
+            seconds * 1e3
+        )
+    } else {
+        format!(
+            " (AO {} rays × {} samples: {:.0} ms)",
+            ao.rays.name(),
+            ao.samples,
+            seconds * 1e3
+        )
+    }
+}

@@ -1,0 +1,49 @@
+//! `volao view` (and `volao` alone): the viewer.
+
+use crate::args::ViewArgs;
+use anyhow::{Result, bail};
+
+/// `volao view`.
+pub fn run(args: &ViewArgs) -> Result<()> {
+    use volao::app::{OpenRequest, ViewerOptions};
+    let open = match &args.file {
+        None => OpenRequest::Demo,
+        Some(p)
+            if p.extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("json")) =>
+        {
+            OpenRequest::Scene(p.clone())
+        }
+        Some(p) => OpenRequest::Volume {
+            path: p.clone(),
+            options: args.load.options(),
+        },
+    };
+    if let Some(p) = &args.file
+        && !p.exists()
+    {
+        bail!("{}: no such file", p.display());
+    }
+    let mut options = ViewerOptions {
+        open,
+        screenshot: args.screenshot.clone(),
+        exit_after_frames: args.exit_after_frames,
+        bench_clip_drag: args.bench_clip_drag,
+        ..Default::default()
+    };
+    if let Some(size) = args.size {
+        options.window_size = size;
+    }
+    if let Some(n) = args.clip_maps {
+        options.clip_resolution = n;
+    }
+    // A scripted run must not touch the user's recent-files list.
+    if args.exit_after_frames.is_some() || args.bench_clip_drag.is_some() {
+        options.recent_file = None;
+    }
+    volao::app::run(options)?;
+    if let Some(p) = &args.screenshot {
+        println!("{}", p.display());
+    }
+    Ok(())
+}
