@@ -25,8 +25,8 @@ use crate::clip::cpu::ClipMapsCpu;
 use crate::clip::gpu::{ClipMaps, ClipUpdate};
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, compute_pipeline, read_buffer, read_texture_f32, readback_buffer,
-    shaders, storage_buffer, uniform_buffer, validated,
+    Gpu, GpuError, compute_pipeline, read_buffer, read_texture_f32, readback_buffer, shaders,
+    storage_buffer, uniform_group, validated,
 };
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
@@ -293,25 +293,13 @@ impl CaoGpu {
                 &[0u8; 16],
                 wgpu::BufferUsages::COPY_SRC,
             );
-            let clip_uniforms = uniform_buffer(
-                device,
-                &gpu.queue,
-                "Cao::clip_params",
-                bytemuck::bytes_of(&clip_params),
-            );
-            let lao_uniforms = uniform_buffer(
-                device,
-                &gpu.queue,
-                "Cao::lao_params",
-                bytemuck::bytes_of(&lao_params),
-            );
             let volume_view = vol.volume_view();
-            let clip_group = bind_group(
-                device,
+            let (clip_uniforms, clip_group) = uniform_group(
+                gpu,
                 "Cao::clip",
-                &pipelines.clip.get_bind_group_layout(0),
+                &pipelines.clip,
+                &clip_params,
                 &[
-                    clip_uniforms.as_entire_binding(),
                     wgpu::BindingResource::TextureView(volume_view),
                     lut_buffer.as_entire_binding(),
                     msaa_buffer.as_entire_binding(),
@@ -320,12 +308,12 @@ impl CaoGpu {
                     counters.as_entire_binding(),
                 ],
             );
-            let lao_group = bind_group(
-                device,
+            let (lao_uniforms, lao_group) = uniform_group(
+                gpu,
                 "Cao::lao",
-                &pipelines.lao.get_bind_group_layout(0),
+                &pipelines.lao,
+                &lao_params,
                 &[
-                    lao_uniforms.as_entire_binding(),
                     wgpu::BindingResource::TextureView(&views[0]),
                     wgpu::BindingResource::Sampler(&pipelines.sampler),
                     ray_buffer.as_entire_binding(),

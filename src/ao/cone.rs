@@ -17,8 +17,8 @@
 
 use crate::gpu::dispatch::{Grid, SlabDispatch};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, copy_texture_out, read_buffer, storage_buffer, submit_compute,
-    texture_readback, uniform_buffer, unpad, validated,
+    Gpu, GpuError, copy_texture_out, read_buffer, storage_buffer, submit_compute, texture_readback,
+    uniform_group, unpad, validated,
 };
 use crate::render::texels::VolumeTexels;
 use crate::sample::trilinear;
@@ -227,16 +227,14 @@ impl ConeGpu {
             let sphere_buf = storage("Cone::spheres", bytemuck::cast_slice(&packed_spheres));
             let out = crate::gpu::output_volume(device, "Cone::ambient", dims);
             let (readback, row) = texture_readback(device, "Cone::readback", dims, 4);
-            let uniforms =
-                uniform_buffer(device, &gpu.queue, "Cone::params", bytemuck::bytes_of(&p));
             let mip_view = mip.create_view(&Default::default());
             let out_view = out.create_view(&Default::default());
-            let group = bind_group(
-                device,
-                "Cone::bind_group",
-                &self.0.pipeline.get_bind_group_layout(0),
+            let (_uniforms, group) = uniform_group(
+                gpu,
+                "Cone",
+                &self.0.pipeline,
+                &p,
                 &[
-                    uniforms.as_entire_binding(),
                     wgpu::BindingResource::TextureView(&mip_view),
                     wgpu::BindingResource::Sampler(&self.0.sampler),
                     dir_buf.as_entire_binding(),

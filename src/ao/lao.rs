@@ -9,8 +9,7 @@
 
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer, uniform_buffer,
-    validated,
+    Gpu, GpuError, output_buffer, readback_buffer, storage_buffer, uniform_group, validated,
 };
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
@@ -217,14 +216,12 @@ impl LaoGpu {
             let size = slabs.max_slab_voxels() * 4;
             let out = output_buffer(device, "Lao::v_pao", size);
             let readback = readback_buffer(device, "Lao::readback", size);
-            let uniforms =
-                uniform_buffer(device, &gpu.queue, "Lao::params", bytemuck::bytes_of(&base));
-            let group = bind_group(
-                device,
-                "Lao::bind_group",
-                &self.0.pipeline.get_bind_group_layout(0),
+            let (uniforms, group) = uniform_group(
+                gpu,
+                "Lao",
+                &self.0.pipeline,
+                &base,
                 &[
-                    uniforms.as_entire_binding(),
                     wgpu::BindingResource::TextureView(vol.volume_view()),
                     wgpu::BindingResource::Sampler(&self.0.sampler),
                     lut_buf.as_entire_binding(),

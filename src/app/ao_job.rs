@@ -62,49 +62,44 @@ pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, Strin
     } = input;
     let report = |d: usize, t: usize| progress.set(d as u64, t as u64);
     let engine = AoEngine::on(Some(Arc::clone(&gpu)));
-    if clipping {
+    let mut settings = settings;
+    let (uploaded, texels) = if clipping {
         // CAO precomputes V_PAO on its own copy of the uploaded texels; V_AO follows the
         // clip shapes from the next sync. With clip shapes LAO runs as CAO.
         let texels = texels.ok_or("no volume uploaded")?;
         let vol =
             GpuVolume::from_texels(&gpu, texels, &tf, step_voxels).map_err(|e| e.to_string())?;
-        let mut cao = settings;
-        if !cao.method.is_clipped() {
-            cao.method = AoMethod::Cao;
+        if !settings.method.is_clipped() {
+            settings.method = AoMethod::Cao;
         }
-        let request = AoRequest {
-            tf: &tf,
-            settings: &cao,
-            clip: None,
-        };
-        let computed = engine
-            .compute(crate::ao::AoInput::Uploaded(&vol), &request, &report)
-            .map_err(|e| e.to_string())?;
-        let Ambient::Cao(cao) = computed.ambient else {
-            return Err("CAO came back without its volumes".into());
-        };
-        return Ok(AoResult {
-            kind: AoData::Cao(cao),
-            device: computed.device,
-            seconds: start.elapsed().as_secs_f64(),
-        });
-    }
-    // The viewer's own device (the engine sends a filter map on a CPU adapter to the
-    // twin), on the volume at full resolution.
-    let texels = VolumeTexels::new(&volume, UploadLimits::NONE);
+        (Some(vol), None)
+    } else {
+        // The viewer's own device (the engine sends a filter map on a CPU adapter to the
+        // twin), on the volume at full resolution.
+        (None, Some(VolumeTexels::new(&volume, UploadLimits::NONE)))
+    };
+    let input = match (&uploaded, &texels) {
+        (Some(vol), _) => crate::ao::AoInput::Uploaded(vol),
+        (None, Some(t)) => crate::ao::AoInput::Texels(t),
+        (None, None) => return Err("nothing to compute AO for".into()),
+    };
     let request = AoRequest {
         tf: &tf,
         settings: &settings,
         clip: None,
     };
     let computed = engine
-        .compute(crate::ao::AoInput::Texels(&texels), &request, &report)
+        .compute(input, &request, &report)
         .map_err(|e| e.to_string())?;
-    let Ambient::Values(values) = computed.ambient else {
-        return Err("the AO volume came back in an unexpected form".into());
+    let kind = match computed.ambient {
+        Ambient::Cao(cao) => AoData::Cao(cao),
+        Ambient::Values(values) => AoData::Volume(values),
+        Ambient::One | Ambient::Live => {
+            return Err("the AO came back in an unexpected form".into());
+        }
     };
     Ok(AoResult {
-        kind: AoData::Volume(values),
+        kind,
         device: computed.device,
         seconds: start.elapsed().as_secs_f64(),
     })

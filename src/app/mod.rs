@@ -25,6 +25,8 @@ mod document;
 pub mod jobs;
 mod panels;
 pub mod screenshot;
+mod shots;
+mod sync;
 pub mod tf_editor;
 pub mod viewport;
 
@@ -32,6 +34,7 @@ pub use document::{
     DEMO_SIZE, Document, LoadedDocument, OpenRequest, ViewerOptions, default_recent_file,
     load_document,
 };
+pub use screenshot::ShotSize;
 
 use crate::gpu::Gpu;
 use crate::render::Frame;
@@ -81,14 +84,6 @@ pub struct Toast {
 enum Pending {
     Quit,
     Open(OpenRequest),
-}
-
-/// Screenshot size choice.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ShotSize {
-    /// The viewport's size in pixels.
-    Window,
-    Fixed(u32, u32),
 }
 
 /// The viewer application.

@@ -8,10 +8,7 @@
 //! (a request waits for the volume and its derived volumes, then pumps and writes) is at
 //! the end of this file.
 
-use super::document::file_name;
 use super::jobs::Job;
-use super::viewport::ViewportGpu;
-use super::{ShotSize, Viewer};
 use crate::clip::gpu::ClipMaps;
 use crate::gpu::{Gpu, padded_row_bytes, readback_buffer};
 use crate::render::gpu::{GpuVolume, RayCaster, TILE};
@@ -19,7 +16,14 @@ use crate::render::{Frame, Image};
 use crate::scene::Scene;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+
+/// Screenshot size choice.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShotSize {
+    /// The viewport's size in pixels.
+    Window,
+    Fixed(u32, u32),
+}
 
 /// Sizes offered besides the window's own.
 pub const PRESET_SIZES: [(u32, u32); 4] = [(1920, 1080), (2560, 1440), (3840, 2160), (7680, 4320)];
@@ -156,20 +160,13 @@ impl PendingShot {
             (self.image.height - y0).min(TILE),
         );
         let device = &gpu.device;
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("Screenshot::tile"),
-            size: wgpu::Extent3d {
-                width: size.0,
-                height: size.1,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba8Unorm,
-            usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
+        let texture = crate::gpu::image_texture(
+            device,
+            "Screenshot::tile",
+            size,
+            wgpu::TextureFormat::Rgba8Unorm,
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        );
         let row = padded_row_bytes(size.0 * 4);
         let buffer = readback_buffer(device, "Screenshot::readback", row as u64 * size.1 as u64);
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -266,124 +263,6 @@ impl Default for Screenshots {
             pending: None,
             write_job: None,
         }
-    }
-}
-
-impl Viewer {
-    /// Advances screenshots: starts a requested one when the view is ready, pumps the
-    /// tiles of the one in flight, collects the write.
-    pub(super) fn update_screenshots(&mut self) {
-        if let Some(job) = &mut self.shots.write_job
-            && let Some(result) = job.poll()
-        {
-            self.shots.write_job = None;
-            match result {
-                Ok((png, scene)) => {
-                    self.failed_shot = None;
-                    self.toast(
-                        format!(
-                            "Screenshot saved: {} (scene: {})",
-                            png.display(),
-                            scene.display()
-                        ),
-                        false,
-                    );
-                    if self.options.screenshot.is_some() && self.options.exit_after_frames.is_some()
-                    {
-                        self.scripted.exit_requested = true;
-                    }
-                }
-                Err(e) => {
-                    let message = e.to_string();
-                    self.toast(
-                        format!("Screenshot not saved: {message} — use “Save elsewhere…”, the image is kept"),
-                        true,
-                    );
-                    if self.options.exit_after_frames.is_some() {
-                        self.fail_exit(message);
-                    }
-                }
-            }
-        }
-        if self.shots.pending.is_none()
-            && self.load_job.is_none()
-            && self.derived_ready()
-            && self.doc.is_some()
-            && let Some((path, size)) = self.shots.request.take()
-            && let Some(doc) = &self.doc
-        {
-            {
-                let (w, h) = match size {
-                    ShotSize::Window => (self.viewport_px.0.max(1), self.viewport_px.1.max(1)),
-                    ShotSize::Fixed(w, h) => (w, h),
-                };
-                if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
-                    self.toast(
-                        format!(
-                            "Screenshot size {w}×{h}: each side must be 1 to {}",
-                            MAX_SIDE
-                        ),
-                        true,
-                    );
-                } else {
-                    let mut scene = doc.scene(w, h, true);
-                    if self.shots.transparent {
-                        scene.render.background = [0.0; 4];
-                    }
-                    let frame = Frame {
-                        camera: scene.camera,
-                        settings: scene.render,
-                        width: w,
-                        height: h,
-                    };
-                    self.shots.pending = Some(PendingShot::new(frame, scene, path));
-                }
-            }
-        }
-        if let Some(shot) = &mut self.shots.pending {
-            let gpu = Arc::clone(&self.gpu);
-            let renderer = self.render_state.renderer.read();
-            let result = match renderer.callback_resources.get::<ViewportGpu>() {
-                Some(
-                    v @ ViewportGpu {
-                        volume: Some(vol), ..
-                    },
-                ) => shot.pump(&gpu, &v.ray_caster, vol, v.clip_maps()),
-                _ => Err("no volume to render".into()),
-            };
-            drop(renderer);
-            match result {
-                Ok(None) => self.ctx.request_repaint_after(Duration::from_millis(5)),
-                Ok(Some(done)) => {
-                    self.shots.pending = None;
-                    self.start_write(done);
-                }
-                Err(e) => {
-                    self.shots.pending = None;
-                    self.toast(format!("Screenshot failed: {e}"), true);
-                    if self.options.exit_after_frames.is_some() {
-                        self.fail_exit(e);
-                    }
-                }
-            }
-        }
-    }
-
-    pub(super) fn start_write(&mut self, shot: Shot) {
-        let label = format!("Saving {}", file_name(&shot.path));
-        let kept = shot.clone();
-        self.failed_shot = None;
-        self.shots.write_job = Some(Job::spawn(label, self.repaint_fn(), move |_| shot.write()));
-        // Kept until the write succeeds: a failure loses nothing.
-        self.failed_shot = Some(kept);
-    }
-
-    /// The next free `volao-N.png` in the screenshot folder (F12).
-    pub fn next_screenshot_path(&self) -> PathBuf {
-        (1..)
-            .map(|n| self.options.screenshot_dir.join(format!("volao-{n}.png")))
-            .find(|p| !p.exists() && !scene_path(p).exists())
-            .unwrap_or_else(|| self.options.screenshot_dir.join("volao.png"))
     }
 }
 

@@ -150,20 +150,13 @@ impl ViewportGpu {
             .as_ref()
             .is_some_and(|t| (t.texture.width(), t.texture.height()) == size);
         if !same_size {
-            let texture = device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("Viewport::image"),
-                size: wgpu::Extent3d {
-                    width: size.0,
-                    height: size.1,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: IMAGE_FORMAT,
-                usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            });
+            let texture = crate::gpu::image_texture(
+                device,
+                "Viewport::image",
+                size,
+                IMAGE_FORMAT,
+                wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
+            );
             let view = texture.create_view(&Default::default());
             let bind_group = crate::gpu::bind_group(
                 device,

@@ -251,6 +251,26 @@ pub fn sampled_volume(
     texture
 }
 
+/// A 2-D texture of `size` (an image, a tile, a render target).
+pub fn image_texture(
+    device: &wgpu::Device,
+    label: &str,
+    (width, height): (u32, u32),
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: extent([width, height, 1]),
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
 /// An R32Float 3-D texture of `dims` that a compute pass writes (storage) and the host
 /// reads back (copy source).
 pub fn output_volume(device: &wgpu::Device, label: &str, dims: [u32; 3]) -> wgpu::Texture {
@@ -325,14 +345,25 @@ pub fn storage_buffer(
     filled_buffer(&gpu.device, &gpu.queue, label, bytes, 16, usage)
 }
 
-/// A storage buffer of `size` bytes a compute pass writes and the host copies out.
-pub fn output_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+/// An uninitialised buffer of `size` bytes.
+fn buffer(
+    device: &wgpu::Device,
+    label: &str,
+    size: u64,
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        usage,
         mapped_at_creation: false,
     })
+}
+
+/// A storage buffer of `size` bytes a compute pass writes and the host copies out.
+pub fn output_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+    let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+    buffer(device, label, size, usage)
 }
 
 /// A uniform buffer initialised with `bytes`.
@@ -347,12 +378,8 @@ pub fn uniform_buffer(
 
 /// A host-readable buffer to copy results into.
 pub fn readback_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
+    let usage = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+    buffer(device, label, size, usage)
 }
 
 /// A bind group whose entries are `resources` at bindings 0, 1, 2, … in order.
@@ -375,6 +402,25 @@ pub fn bind_group(
         layout,
         entries: &entries,
     })
+}
+
+/// A uniform buffer holding `params` and bind group 0 of `pipeline` with it at binding
+/// 0 and `resources` at 1, 2, …, labelled `"{name}::params"` and `"{name}::bind_group"`.
+pub fn uniform_group<P: bytemuck::Pod>(
+    gpu: &Gpu,
+    name: &str,
+    pipeline: &wgpu::ComputePipeline,
+    params: &P,
+    resources: &[wgpu::BindingResource<'_>],
+) -> (wgpu::Buffer, wgpu::BindGroup) {
+    let device = &gpu.device;
+    let bytes = bytemuck::bytes_of(params);
+    let uniforms = uniform_buffer(device, &gpu.queue, &format!("{name}::params"), bytes);
+    let mut all = vec![uniforms.as_entire_binding()];
+    all.extend(resources.iter().cloned());
+    let layout = pipeline.get_bind_group_layout(0);
+    let group = bind_group(device, &format!("{name}::bind_group"), &layout, &all);
+    (uniforms, group)
 }
 
 /// Encodes one compute dispatch of `groups` workgroups with bind groups 0, 1, … set from

@@ -7,42 +7,31 @@ use super::GpuError;
 
 /// Every shader in `shaders/`, embedded at build time. A test checks this list against
 /// the directory so a new file cannot be forgotten.
+/// `(name, source)` of `shaders/name`, embedded at compile time.
+macro_rules! shader {
+    ($name:literal) => {
+        ($name, include_str!(concat!("../../shaders/", $name)))
+    };
+}
+
 pub const SOURCES: &[(&str, &str)] = &[
-    (
-        "ambient_maps.wgsl",
-        include_str!("../../shaders/ambient_maps.wgsl"),
-    ),
-    (
-        "box_stats.wgsl",
-        include_str!("../../shaders/box_stats.wgsl"),
-    ),
-    ("cao_clip.wgsl", include_str!("../../shaders/cao_clip.wgsl")),
-    ("cao_lao.wgsl", include_str!("../../shaders/cao_lao.wgsl")),
-    (
-        "clip_common.wgsl",
-        include_str!("../../shaders/clip_common.wgsl"),
-    ),
-    (
-        "clip_depth.wgsl",
-        include_str!("../../shaders/clip_depth.wgsl"),
-    ),
-    (
-        "clip_maps.wgsl",
-        include_str!("../../shaders/clip_maps.wgsl"),
-    ),
-    ("common.wgsl", include_str!("../../shaders/common.wgsl")),
-    ("cone.wgsl", include_str!("../../shaders/cone.wgsl")),
-    ("lao.wgsl", include_str!("../../shaders/lao.wgsl")),
-    ("light.wgsl", include_str!("../../shaders/light.wgsl")),
-    ("raycast.wgsl", include_str!("../../shaders/raycast.wgsl")),
-    ("smoke.wgsl", include_str!("../../shaders/smoke.wgsl")),
-    ("viewport.wgsl", include_str!("../../shaders/viewport.wgsl")),
-    ("surface.wgsl", include_str!("../../shaders/surface.wgsl")),
-    ("vao.wgsl", include_str!("../../shaders/vao.wgsl")),
-    (
-        "vao_common.wgsl",
-        include_str!("../../shaders/vao_common.wgsl"),
-    ),
+    shader!("ambient_maps.wgsl"),
+    shader!("box_stats.wgsl"),
+    shader!("cao_clip.wgsl"),
+    shader!("cao_lao.wgsl"),
+    shader!("clip_common.wgsl"),
+    shader!("clip_depth.wgsl"),
+    shader!("clip_maps.wgsl"),
+    shader!("common.wgsl"),
+    shader!("cone.wgsl"),
+    shader!("lao.wgsl"),
+    shader!("light.wgsl"),
+    shader!("raycast.wgsl"),
+    shader!("smoke.wgsl"),
+    shader!("viewport.wgsl"),
+    shader!("surface.wgsl"),
+    shader!("vao.wgsl"),
+    shader!("vao_common.wgsl"),
 ];
 
 const DIRECTIVE: &str = "//!include ";

@@ -597,16 +597,13 @@ impl RayCaster {
             return Ok(t.clone());
         }
         let t = validated(device, "RayCaster::tile", || {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("RayCaster::tile"),
-                size: crate::gpu::extent([tw, th, 1]),
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba8Unorm,
-                usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-                view_formats: &[],
-            })
+            crate::gpu::image_texture(
+                device,
+                "RayCaster::tile",
+                (tw, th),
+                wgpu::TextureFormat::Rgba8Unorm,
+                wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+            )
         })?;
         if tiles.len() >= BOUND_TARGETS - 1 {
             tiles.remove(0);

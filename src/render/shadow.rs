@@ -9,8 +9,7 @@
 
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, output_buffer, readback_buffer, storage_buffer, uniform_buffer,
-    validated,
+    Gpu, GpuError, output_buffer, readback_buffer, storage_buffer, uniform_group, validated,
 };
 use crate::render::jitter;
 use crate::render::texels::VolumeTexels;
@@ -199,18 +198,12 @@ impl LightGpu {
             );
             let out = output_buffer(device, "Light::transmittance", size);
             let readback = readback_buffer(device, "Light::readback", size);
-            let uniforms = uniform_buffer(
-                device,
-                &gpu.queue,
-                "Light::params",
-                bytemuck::bytes_of(&base),
-            );
-            let group = bind_group(
-                device,
-                "Light::bind_group",
-                &self.0.pipeline.get_bind_group_layout(0),
+            let (uniforms, group) = uniform_group(
+                gpu,
+                "Light",
+                &self.0.pipeline,
+                &base,
                 &[
-                    uniforms.as_entire_binding(),
                     wgpu::BindingResource::TextureView(&volume),
                     wgpu::BindingResource::Sampler(&self.0.sampler),
                     lut_buf.as_entire_binding(),

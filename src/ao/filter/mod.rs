@@ -26,8 +26,8 @@
 
 use crate::gpu::dispatch::{Grid, SlabDispatch, fold_linear};
 use crate::gpu::{
-    Gpu, GpuError, bind_group, compute_pipeline, copy_texture_out, read_buffer, shaders,
-    storage_buffer, submit_compute, texture_3d, texture_readback, uniform_buffer, unpad, validated,
+    Gpu, GpuError, compute_pipeline, copy_texture_out, read_buffer, shaders, storage_buffer,
+    submit_compute, texture_3d, texture_readback, uniform_group, unpad, validated,
 };
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
@@ -563,18 +563,12 @@ impl FilterGpu {
                 _pad: 0,
             };
             validated(device, "Filter::box_stats", || {
-                let uniforms = uniform_buffer(
-                    device,
-                    &gpu.queue,
-                    "Filter::box_params",
-                    bytemuck::bytes_of(&p),
-                );
-                let group = bind_group(
-                    device,
-                    "Filter::box_bind_group",
-                    &self.box_pipeline.get_bind_group_layout(0),
+                let (_uniforms, group) = uniform_group(
+                    gpu,
+                    "Filter::box",
+                    &self.box_pipeline,
+                    &p,
                     &[
-                        uniforms.as_entire_binding(),
                         wgpu::BindingResource::TextureView(vol.volume_view()),
                         lut.as_entire_binding(),
                         wgpu::BindingResource::TextureView(input),
@@ -629,18 +623,12 @@ impl FilterGpu {
                 source: source.params,
             };
             validated(device, "Filter::ambient_map", || {
-                let uniforms = uniform_buffer(
-                    device,
-                    &gpu.queue,
-                    "Filter::map_params",
-                    bytemuck::bytes_of(&p),
-                );
-                let group = bind_group(
-                    device,
-                    "Filter::map_bind_group",
-                    &self.map_pipeline.get_bind_group_layout(0),
+                let (_uniforms, group) = uniform_group(
+                    gpu,
+                    "Filter::map",
+                    &self.map_pipeline,
+                    &p,
                     &[
-                        uniforms.as_entire_binding(),
                         wgpu::BindingResource::TextureView(vol.volume_view()),
                         st.lut.as_entire_binding(),
                         wgpu::BindingResource::TextureView(&stats_view),

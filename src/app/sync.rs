@@ -1,0 +1,427 @@
+//! The viewer's per-frame bookkeeping of the volumes it derives from the document in
+//! the background ([`super::derived`]): start, collect and upload AO, opacity
+//! modulation and the light volume, and keep the transfer function and clip shapes on
+//! the GPU in step with the document.
+
+use super::ao_job::{AoData, AoInput, compute_ao};
+use super::derived::*;
+use super::jobs::{Job, Polled};
+use super::{Viewer, ao_panel};
+use crate::ao::AoMethod;
+use crate::ao::filter::StatisticSource;
+use crate::render::gpu::GpuVolume;
+use crate::render::texels::VolumeTexels;
+use std::sync::Arc;
+use std::time::Instant;
+
+impl Viewer {
+    pub(super) fn ao_key(&self) -> Option<AoKey> {
+        let doc = self.doc.as_ref()?;
+        (doc.ao.method != AoMethod::None).then(|| AoKey {
+            settings: doc.ao,
+            // CAO and its baseline keep the AO exact under clipping, as in `volao render`.
+            clipping: matches!(doc.ao.method, AoMethod::Cao | AoMethod::LaoFull),
+            opacity: doc.tf.opacity.clone(),
+            doc_generation: self.doc_generation,
+        })
+    }
+
+    /// Keeps the AO on the GPU in step with the settings and the transfer function;
+    /// shows the volume without AO while a new one is computed.
+    pub(super) fn update_ao(&mut self) {
+        let want = self.ao_key();
+        match self.derived.ao.poll(want.as_ref()) {
+            Polled::Nothing => {}
+            Polled::Ready(key, r) => {
+                let gpu = Arc::clone(&self.gpu);
+                let applied = self
+                    .with_viewport(|v| match (r.kind, &mut v.volume) {
+                        (AoData::Volume(values), Some(g)) => {
+                            if values.len() != g.texels.dims.iter().product::<usize>() {
+                                return Err("the AO volume does not match the uploaded \
+                                            volume (it was halved to fit the GPU); AO \
+                                            needs the full resolution"
+                                    .to_owned());
+                            }
+                            g.set_ambient_occlusion(&gpu, &values);
+                            v.cao = None;
+                            v.touch();
+                            Ok(())
+                        }
+                        (AoData::Cao(cao), Some(_)) => {
+                            v.cao = Some(*cao);
+                            Ok(())
+                        }
+                        (_, None) => Err("no volume".to_owned()),
+                    })
+                    .unwrap_or_else(|| Err("no viewport".into()));
+                match applied {
+                    Ok(()) => {
+                        // CAO's V_AO is made for the current shapes on the next sync.
+                        self.derived.synced_clip = None;
+                        self.derived.ao_seconds = Some((r.seconds, r.device));
+                        self.derived.ao.uploaded(key);
+                    }
+                    Err(message) => self.derived.ao.fail(key, message),
+                }
+            }
+            Polled::Failed(message) => {
+                self.toast(format!("Ambient occlusion failed: {message}"), true)
+            }
+        }
+        if self.derived.ao.settled(want.as_ref()) {
+            return;
+        }
+        // The settings moved on: drop the stale AO at once (never show a wrong one).
+        if self.derived.ao.reset() {
+            let gpu = Arc::clone(&self.gpu);
+            let tf = self.doc.as_ref().map(|d| d.tf.clone());
+            self.with_viewport(|v| {
+                v.cao = None;
+                if let Some(g) = &mut v.volume {
+                    g.clear_ambient_occlusion(&gpu);
+                    if let Some(tf) = &tf {
+                        // Turning live positional AO off cannot fail (nothing is uploaded).
+                        let _ = g.set_live_vao(&gpu, tf, None);
+                    }
+                    v.touch();
+                }
+            });
+            self.derived.synced_clip = None;
+        }
+        let Some(key) = want else {
+            return;
+        };
+        // Live positional AO needs no precomputation: the ray caster evaluates it at every
+        // sample, so it follows the transfer function and the clip shapes at once.
+        if key.settings.method == AoMethod::VaoLive {
+            let gpu = Arc::clone(&self.gpu);
+            let Some(tf) = self.doc.as_ref().map(|d| d.tf.clone()) else {
+                return;
+            };
+            let vao = key.settings.vao;
+            let applied = self.with_viewport(|v| {
+                let g = v.volume.as_mut()?;
+                let r = g
+                    .set_live_vao(&gpu, &tf, Some(&vao))
+                    .map_err(|e| e.to_string());
+                v.touch();
+                Some(r)
+            });
+            match applied.flatten() {
+                Some(Ok(())) => self.derived.ao.uploaded(key),
+                Some(Err(message)) => {
+                    self.toast(format!("Ambient occlusion failed: {message}"), true);
+                    self.derived.ao.fail(key, message);
+                }
+                None => {}
+            }
+            return;
+        }
+        if !self.resting() {
+            return;
+        }
+        let Some(doc) = &self.doc else {
+            return;
+        };
+        let label = format!(
+            "Ambient occlusion ({}{})",
+            ao_panel::method_name(doc.ao.method),
+            if key.clipping { ", CAO" } else { "" }
+        );
+        let input = AoInput {
+            gpu: Arc::clone(&self.gpu),
+            volume: Arc::clone(&doc.volume),
+            // CAO precomputes V_PAO on its own copy of the uploaded texels.
+            texels: key.clipping.then(|| self.uploaded_texels()).flatten(),
+            tf: doc.tf.clone(),
+            settings: doc.ao,
+            step_voxels: doc.render.step_voxels,
+            clipping: key.clipping,
+        };
+        let job = Job::spawn(label, self.repaint_fn(), move |p| compute_ao(input, p));
+        self.derived.ao.start(key, job);
+    }
+
+    pub(super) fn modulation_key(&self) -> Option<ModulationKey> {
+        let doc = self.doc.as_ref()?;
+        let settings = doc.render.opacity_modulation?;
+        Some(ModulationKey {
+            settings,
+            opacity: (settings.source == StatisticSource::Opacity).then(|| doc.tf.opacity.clone()),
+            doc_generation: self.doc_generation,
+        })
+    }
+
+    /// Keeps the opacity modulation on the GPU in step with its settings (and with the
+    /// transfer function when the variance is the opacity's), as [`Self::update_ao`] does
+    /// for AO: a stale modulation is dropped at once, the new one computed off the UI
+    /// thread on the uploaded texels.
+    pub(super) fn update_modulation(&mut self) {
+        let want = self.modulation_key();
+        match self.derived.modulation.poll(want.as_ref()) {
+            Polled::Nothing => {}
+            Polled::Ready(key, values) => {
+                let gpu = Arc::clone(&self.gpu);
+                let fits = |g: &GpuVolume| values.len() == g.texels.dims.iter().product::<usize>();
+                if self.upload(|g| {
+                    let fit = fits(g);
+                    if fit {
+                        g.set_opacity_modulation(&gpu, &values);
+                    }
+                    fit
+                }) {
+                    self.derived.modulation.uploaded(key);
+                }
+            }
+            Polled::Failed(message) => {
+                self.toast(format!("Opacity modulation failed: {message}"), true)
+            }
+        }
+        if self.derived.modulation.settled(want.as_ref()) {
+            return;
+        }
+        if self.derived.modulation.reset() {
+            let gpu = Arc::clone(&self.gpu);
+            self.upload(|g| {
+                g.clear_opacity_modulation(&gpu);
+                true
+            });
+        }
+        let Some(key) = want else {
+            return;
+        };
+        if !self.resting() {
+            return;
+        }
+        let (Some(doc), Some(texels)) = (&self.doc, self.uploaded_texels()) else {
+            return;
+        };
+        let (gpu, tf, step, m) = (
+            Arc::clone(&self.gpu),
+            doc.tf.clone(),
+            doc.render.step_voxels,
+            key.settings,
+        );
+        let job = Job::spawn("Opacity modulation", self.repaint_fn(), move |_| {
+            if crate::ao::fast::twin_is_faster(&gpu) {
+                return Ok(crate::ao::fast::modulation_cpu(&texels, &tf, &m));
+            }
+            let vol = GpuVolume::from_texels(&gpu, texels, &tf, step).map_err(|e| e.to_string())?;
+            crate::ao::fast::modulation_gpu(&gpu, &vol, &tf, &m).map_err(|e| e.to_string())
+        });
+        self.derived.modulation.start(key, job);
+    }
+
+    /// What the light volume of shadows must be computed for, if shadows are on.
+    pub(super) fn light_key(&self) -> Option<LightKey> {
+        let doc = self.doc.as_ref()?;
+        doc.render.shadows.then(|| LightKey {
+            direction: doc.view_settings().light_direction,
+            opacity: doc.tf.opacity.clone(),
+            clip: doc.clip_shapes.clone(),
+            doc_generation: self.doc_generation,
+        })
+    }
+
+    /// Keeps the light volume of shadows in step with the light (a headlight follows the
+    /// camera), the transfer function's opacity and the clip shapes, recomputed once they
+    /// rest. Unlike AO, the previous light volume stays on screen meanwhile: shadows that
+    /// lag a moving camera or shape read better than shadows that blink off.
+    pub(super) fn update_light(&mut self) {
+        let want = self.light_key();
+        match self.derived.light.poll(want.as_ref()) {
+            Polled::Nothing => {}
+            Polled::Ready(key, values) => {
+                let gpu = Arc::clone(&self.gpu);
+                let dir = glam::Vec3::from(key.direction);
+                let mut error = None;
+                let uploaded =
+                    self.upload(|g| match g.set_light_volume(&gpu, Some((&values, dir))) {
+                        Ok(_) => true,
+                        Err(e) => {
+                            error = Some(e.to_string());
+                            false
+                        }
+                    });
+                if uploaded {
+                    self.derived.light.uploaded(key);
+                } else if let Some(e) = error {
+                    self.toast(format!("Shadows failed: {e}"), true);
+                }
+            }
+            Polled::Failed(message) => self.toast(format!("Shadows failed: {message}"), true),
+        }
+        if want != self.derived.light_wanted.as_ref().map(|(k, _)| k.clone()) {
+            self.derived.light_wanted = want.clone().map(|k| (k, Instant::now()));
+        }
+        if self.derived.light.settled(want.as_ref()) {
+            return;
+        }
+        if self.derived.light.reset() && want.is_none() {
+            let gpu = Arc::clone(&self.gpu);
+            self.upload(|g| g.set_light_volume(&gpu, None).is_ok());
+        }
+        let Some(key) = want else {
+            return;
+        };
+        let still = self
+            .derived
+            .light_wanted
+            .as_ref()
+            .is_some_and(|(_, since)| since.elapsed() >= AO_DEBOUNCE);
+        if !self.resting() || !still {
+            self.ctx.request_repaint_after(AO_DEBOUNCE);
+            return;
+        }
+        let (Some(doc), Some(texels)) = (&self.doc, self.uploaded_texels()) else {
+            return;
+        };
+        let (gpu, tf) = (Arc::clone(&self.gpu), doc.tf.clone());
+        let (shapes, radius, resolution) =
+            (key.clip.clone(), doc.radius, self.options.clip_resolution);
+        let dir = match crate::render::shadow::light_direction(key.direction) {
+            Ok(d) => d,
+            Err(message) => {
+                self.toast(format!("Shadows: {message}"), true);
+                return;
+            }
+        };
+        let job = Job::spawn("Shadows", self.repaint_fn(), move |p| {
+            let lut = crate::render::shadow::light_lut(&tf, &texels);
+            // Its own clip maps, as `volao render` makes them (the margin is unused).
+            let maps = match shapes.is_empty() {
+                true => None,
+                false => {
+                    let mut m = crate::clip::gpu::ClipMaps::new(&gpu).map_err(|e| e.to_string())?;
+                    m.update(&gpu, &shapes, radius, 1.0, resolution)
+                        .map_err(|e| e.to_string())?;
+                    Some(m)
+                }
+            };
+            gpu.stage::<crate::render::shadow::LightGpu>()
+                .and_then(|l| {
+                    let progress = |d: usize, t: usize| p.set(d as u64, t as u64);
+                    l.compute(&gpu, &texels, &lut, dir, maps.as_ref(), &progress)
+                })
+                .map_err(|e| e.to_string())
+        });
+        self.derived.light.start(key, job);
+    }
+
+    /// Whether the transfer function has rested long enough to recompute what depends on
+    /// it (asks for a repaint when it has not).
+    fn resting(&self) -> bool {
+        let resting =
+            self.derived.tf_changed_at.elapsed() >= AO_DEBOUNCE && !self.tf_editor_dragging();
+        if !resting {
+            self.ctx.request_repaint_after(AO_DEBOUNCE);
+        }
+        resting
+    }
+
+    /// A copy of the texels the viewport's volume was made from.
+    fn uploaded_texels(&self) -> Option<VolumeTexels> {
+        self.with_viewport(|v| v.volume.as_ref().map(|g| g.texels.clone()))
+            .flatten()
+    }
+
+    /// Runs `f` on the viewport's volume and redraws; false when there is none or `f`
+    /// says the values did not fit.
+    fn upload(&self, f: impl FnOnce(&mut GpuVolume) -> bool) -> bool {
+        self.with_viewport(|v| {
+            let done = v.volume.as_mut().is_some_and(f);
+            v.touch();
+            done
+        })
+        .unwrap_or(false)
+    }
+
+    fn tf_editor_dragging(&self) -> bool {
+        self.ctx.input(|i| i.pointer.any_down())
+    }
+
+    /// Sends the transfer function and step to the GPU volume when they changed.
+    pub(super) fn sync_transfer_function(&mut self) {
+        let Some(doc) = &self.doc else {
+            return;
+        };
+        let want = (doc.view_tf(), doc.render.step_voxels);
+        if self.derived.uploaded_tf.as_ref() == Some(&want) {
+            return;
+        }
+        let gpu = Arc::clone(&self.gpu);
+        self.with_viewport(|v| {
+            if let Some(g) = &mut v.volume {
+                g.set_transfer_function(&gpu, &want.0, want.1);
+                v.touch();
+            }
+        });
+        self.derived.uploaded_tf = Some(want);
+    }
+
+    /// Brings the GPU's clipping up to date with the shapes: CAO's per-frame update (the
+    /// AO stays exact while a shape moves) or, without CAO, the clip maps alone.
+    pub(super) fn sync_clip(&mut self) {
+        let Some(doc) = &self.doc else {
+            return;
+        };
+        if self.derived.synced_clip.as_ref() == Some(&doc.clip_shapes) {
+            return;
+        }
+        let shapes = doc.clip_shapes.clone();
+        let (radius, samples) = (doc.radius, doc.ao.samples);
+        let cao_mode = if doc.ao.method == AoMethod::LaoFull {
+            crate::ao::cao::CaoMode::Full
+        } else {
+            crate::ao::cao::CaoMode::Selective
+        };
+        let gpu = Arc::clone(&self.gpu);
+        let resolution = self.options.clip_resolution;
+        let result = self
+            .with_viewport(|v| -> Result<Option<crate::ao::cao::CaoStats>, String> {
+                let Some(vol) = &mut v.volume else {
+                    return Ok(None);
+                };
+                let out = if let Some(cao) = &mut v.cao {
+                    let reach = cao.reach_mm(&vol.texels);
+                    let stats = cao
+                        .update(&gpu, &vol.texels, &shapes, resolution, reach, cao_mode)
+                        .map_err(|e| e.to_string())?;
+                    vol.set_ambient_occlusion_view(cao.ao_view());
+                    Some(stats)
+                } else if shapes.is_empty() {
+                    v.clip = None;
+                    None
+                } else {
+                    if v.clip.is_none() {
+                        v.clip =
+                            Some(crate::clip::gpu::ClipMaps::new(&gpu).map_err(|e| e.to_string())?);
+                    }
+                    let reach = crate::ao::cao::reach_mm(samples, vol.texels.spacing);
+                    if let Some(clip) = &mut v.clip {
+                        let report = clip
+                            .update(&gpu, &shapes, radius, reach, resolution)
+                            .map_err(|e| e.to_string())?;
+                        if let Some(e) = report.errors.first() {
+                            return Err(e.to_string());
+                        }
+                    }
+                    None
+                };
+                v.touch();
+                Ok(out)
+            })
+            .unwrap_or(Ok(None));
+        self.derived.synced_clip = Some(shapes);
+        match result {
+            Ok(stats) => {
+                if let Some(e) = stats.as_ref().and_then(|s| s.clip_errors.first()) {
+                    self.toast(format!("Clip shape left out: {e}"), true);
+                }
+                self.derived.cao_stats = stats;
+            }
+            Err(e) => self.toast(format!("Clipping failed: {e}"), true),
+        }
+    }
+}
