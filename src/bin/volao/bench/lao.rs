@@ -5,7 +5,6 @@ use super::rms;
 use anyhow::{Result, bail};
 use std::path::PathBuf;
 use std::time::Instant;
-use volao::volume::{self, LoadOptions};
 
 /// Arguments of `volao bench lao`.
 #[derive(Debug, clap::Args)]
@@ -45,17 +44,12 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     use volao::render::gpu::{GpuVolume, RayCaster};
     use volao::render::texels::{UploadLimits, VolumeTexels};
     use volao::render::{Camera, Frame, RenderSettings, Shading};
-    use volao::tf::{Preset, TransferFunction};
 
     let gpu = volao::gpu::request_device()?;
     let lao = gpu.stage::<LaoGpu>()?;
     let rc = RayCaster::new(&gpu.device)?;
     println!("adapter: {}", gpu.describe());
-    let path = args.data.join("raw/engine.raw");
-    let volume = volume::load(&path, &LoadOptions::default())?
-        .volume
-        .to_ras();
-    let tf = TransferFunction::preset(Preset::CaoSingleColor, &volume.stats());
+    let (volume, tf) = super::engine_volume(&args.data)?;
     let mut vol = GpuVolume::new(&gpu, &volume, &tf, RenderSettings::default().step_voxels)?;
     let lut = lao_lut(&tf, &vol.texels);
     let m = args.samples;

@@ -47,6 +47,20 @@ pub fn run(command: &BenchCommand) -> Result<()> {
 }
 
 /// The median of `xs` (the upper one of an even count).
+/// The Engine (`raw/engine.raw` under `data`) in RAS order with the CAO paper's
+/// single-colour transfer function: the volume of the paper's tables.
+pub fn engine_volume(
+    data: &std::path::Path,
+) -> Result<(volao::volume::Volume, volao::tf::TransferFunction)> {
+    use volao::tf::{Preset, TransferFunction};
+    let path = data.join("raw/engine.raw");
+    let volume = volao::volume::load(&path, &volao::volume::LoadOptions::default())?
+        .volume
+        .to_ras();
+    let tf = TransferFunction::preset(Preset::CaoSingleColor, &volume.stats());
+    Ok((volume, tf))
+}
+
 pub fn median(mut xs: Vec<f64>) -> f64 {
     xs.sort_by(f64::total_cmp);
     xs[xs.len() / 2]

@@ -12,8 +12,7 @@ use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::shadow::{LightGpu, light_direction, light_lut};
 use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, RenderSettings};
-use volao::tf::{Preset, TransferFunction};
-use volao::volume::{self, LoadOptions};
+use volao::tf::TransferFunction;
 
 /// Arguments of `volao bench raymarch`.
 #[derive(Debug, clap::Args)]
@@ -40,11 +39,7 @@ pub struct RaymarchBenchArgs {
 pub fn raymarch_bench(args: &RaymarchBenchArgs) -> Result<()> {
     let gpu = volao::gpu::request_device()?;
     println!("adapter: {}", gpu.describe());
-    let path = args.data.join("raw/engine.raw");
-    let volume = volume::load(&path, &LoadOptions::default())?
-        .volume
-        .to_ras();
-    let tf = TransferFunction::preset(Preset::CaoSingleColor, &volume.stats());
+    let (volume, tf) = super::engine_volume(&args.data)?;
 
     let kernel = gpu.stage::<VaoGpu>()?;
     if !args.frames_only {
