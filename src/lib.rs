@@ -2,7 +2,7 @@
 //!
 //! How data flows from a file to a pixel:
 //!
-//! 1. [`volume`] loads a file (NIfTI, PVM/DDS, raw) into a [`volume::Volume`]: voxels in
+//! 1. [`volume`] loads a file (NIfTI, Analyze, NRRD, DICOM series, PVM/DDS, raw) into a [`volume::Volume`]: voxels in
 //!    their stored type and units, spacing in mm, orientation in RAS.
 //! 2. `tf` maps values to colour and opacity (transfer function, in the data's units).
 //! 3. `ao` computes ambient occlusion volumes (LAO, CAO, filter-based, cone-traced,
@@ -21,6 +21,7 @@ pub mod bench_cao;
 pub mod bench_filter;
 pub mod clip;
 pub mod gpu;
+pub mod process;
 pub mod render;
 pub mod scene;
 pub mod tf;

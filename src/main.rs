@@ -509,6 +509,10 @@ struct LoadArgs {
     /// Raw: bytes to skip before the first voxel.
     #[arg(long)]
     offset: Option<u64>,
+    /// DICOM folder: which series, by number (from 0, as `volao info` lists them) or
+    /// SeriesInstanceUID; default: the one with the most slices.
+    #[arg(long, value_name = "N|UID")]
+    series: Option<String>,
 }
 
 fn parse_type(s: &str) -> Result<VoxelType, String> {
@@ -537,6 +541,7 @@ impl LoadArgs {
                 offset: self.offset,
             },
             max_bytes: None,
+            series: self.series.clone(),
         }
     }
 }
@@ -563,7 +568,14 @@ enum BenchCommand {
     LoadOne { file: PathBuf },
 }
 
+#[allow(unsafe_code, reason = "set_var before any thread exists; see SAFETY")]
 fn main() {
+    if let Some(dir) = volao::process::private_runtime_dir() {
+        // SAFETY: first statement of main: no other thread exists yet that could read
+        // the environment concurrently.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", dir) };
+    }
+    volao::process::exit_quietly_on_broken_pipe();
     let cli = Cli::parse();
     if let Err(e) = run(cli) {
         // One line: the error and its causes, joined.
@@ -802,6 +814,7 @@ fn render(args: &RenderArgs) -> Result<()> {
                     frame: s.volume.frame,
                     raw,
                     max_bytes: None,
+                    series: None,
                 },
             )
         }
@@ -1075,7 +1088,7 @@ fn load_with_bar(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
     }
     let loaded = loaded?;
     for w in &loaded.warnings {
-        eprintln!("warning: {}: {w}", path.display());
+        eprintln!("warning: {}: {w}", volume::display_path(path));
     }
     Ok(loaded)
 }
@@ -1193,6 +1206,7 @@ fn print_info(r: &Report, json: bool) -> Result<()> {
         volume::orient::AffineSource::Sform => "from sform",
         volume::orient::AffineSource::Qform => "from qform",
         volume::orient::AffineSource::Assumed => "assumed: the file has no orientation",
+        volume::orient::AffineSource::Header => "from the file's geometry fields",
     };
     println!("orientation:  {} ({source})", r.orientation);
     for row in &r.affine {
