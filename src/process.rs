@@ -55,6 +55,9 @@ pub fn exit_quietly_on_broken_pipe() {
         if is_broken_pipe_message(msg) {
             std::process::exit(0);
         }
+        if is_containing() {
+            return; // reported as an error by `contain`'s caller
+        }
         default(info);
     }));
 }
@@ -62,4 +65,31 @@ pub fn exit_quietly_on_broken_pipe() {
 /// Whether a panic message is std's "failed printing to stdout: Broken pipe".
 pub fn is_broken_pipe_message(msg: &str) -> bool {
     msg.starts_with("failed printing to std") && msg.contains("Broken pipe")
+}
+
+thread_local! {
+    /// Set while [`contain`] runs third-party decoding code on this thread.
+    static CONTAINING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs third-party parsing code that may panic on malformed input (dicom-rs does, e.g.
+/// in its RLE decoder) and turns a panic into `Err(message)`. The panic hook installed
+/// by [`exit_quietly_on_broken_pipe`] stays silent for these, so a damaged file gets one
+/// error line, not a panic report.
+pub fn contain<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    let was = CONTAINING.with(|c| c.replace(true));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    CONTAINING.with(|c| c.set(was));
+    result.map_err(|payload| {
+        payload
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| payload.downcast_ref::<&str>().map(|s| (*s).to_owned()))
+            .unwrap_or_else(|| "panic".to_owned())
+    })
+}
+
+/// Whether this thread is inside [`contain`] (for panic hooks).
+pub fn is_containing() -> bool {
+    CONTAINING.with(|c| c.get())
 }

@@ -142,11 +142,30 @@ fn rescale_of(obj: Option<&InMemDicomObject>) -> Option<Scaling> {
 
 /// Reads the header of one file (up to the pixel data). `None` if it is not DICOM.
 pub fn scan_file(path: &Path) -> Result<FileInfo, VolumeError> {
-    let obj = OpenFileOptions::new()
-        .read_until(tags::PIXEL_DATA)
-        .open_file(path)
-        .map_err(|e| VolumeError::invalid(path, format!("not a readable DICOM file ({e})")))?;
+    let obj = contained(path, "reading the header", || {
+        OpenFileOptions::new()
+            .read_until(tags::PIXEL_DATA)
+            .open_file(path)
+            .map_err(|e| VolumeError::invalid(path, format!("not a readable DICOM file ({e})")))
+    })?;
     info_from_object(&obj, path)
+}
+
+/// Runs dicom-rs code that may panic on damaged input; a panic becomes an error.
+fn contained<T>(
+    path: &Path,
+    what: &str,
+    f: impl FnOnce() -> Result<T, VolumeError>,
+) -> Result<T, VolumeError> {
+    crate::process::contain(f).unwrap_or_else(|panic| {
+        Err(VolumeError::invalid(
+            path,
+            format!(
+                "dicom-rs failed while {what} ({}): the file is damaged",
+                short_name(&panic)
+            ),
+        ))
+    })
 }
 
 /// Reads what [`FileInfo`] needs from an opened object.
@@ -675,11 +694,18 @@ pub fn load(
 /// right after the pixel data element and parsed again (`true` = it was cut).
 fn open_full(info: &FileInfo) -> Result<(DefaultDicomObject, bool), VolumeError> {
     let p = &info.path;
-    let first_error = match dicom_object::open_file(p) {
+    let first_error = match contained(p, "reading the file", || {
+        dicom_object::open_file(p).map_err(|e| VolumeError::invalid(p, e.to_string()))
+    }) {
         Ok(obj) => return Ok((obj, false)),
         Err(e) => e,
     };
-    let fail = || VolumeError::invalid(p, format!("cannot read the DICOM file ({first_error})"));
+    let fail = || match &first_error {
+        VolumeError::Invalid { message, .. } => {
+            VolumeError::invalid(p, format!("cannot read the DICOM file ({message})"))
+        }
+        other => VolumeError::invalid(p, format!("cannot read the DICOM file ({other})")),
+    };
     let bytes = std::fs::read(p).map_err(|e| VolumeError::io(p, e))?;
     let s = info.slices.first().ok_or_else(fail)?;
     let expected = u64::from(s.rows)
@@ -721,6 +747,12 @@ fn pixel_data_end(bytes: &[u8], expected: u64) -> Option<usize> {
 type Decoded = dicom_pixeldata::DecodedPixelData<'static>;
 
 fn decode_object(obj: &DefaultDicomObject, info: &FileInfo) -> Result<Decoded, VolumeError> {
+    contained(&info.path, "decoding the pixel data", || {
+        decode_object_inner(obj, info)
+    })
+}
+
+fn decode_object_inner(obj: &DefaultDicomObject, info: &FileInfo) -> Result<Decoded, VolumeError> {
     let px = obj.decode_pixel_data().map_err(|e| {
         VolumeError::invalid(
             &info.path,
@@ -784,8 +816,10 @@ fn open_bytes(
     if let Some(t) = until {
         opts = opts.read_until(t);
     }
-    opts.from_reader(body)
-        .map_err(|e| VolumeError::invalid(path, format!("not a readable DICOM file ({e})")))
+    contained(path, "reading the file", || {
+        opts.from_reader(body)
+            .map_err(|e| VolumeError::invalid(path, format!("not a readable DICOM file ({e})")))
+    })
 }
 
 /// Groups, orders and decodes the images of `infos` into one volume; `decode(k)` gives
