@@ -51,7 +51,6 @@ def main():
             data[k] = d.pixel_array
         slope = float(getattr(first, "RescaleSlope", 1) or 1)
         inter = float(getattr(first, "RescaleIntercept", 0) or 0)
-        checksum = float(data.astype(np.float64).mean()) * slope + inter
         reader = "pydicom " + pydicom.__version__ + " + numpy"
     elif a.file.endswith((".nrrd", ".nhdr")):
         import nrrd
@@ -67,14 +66,17 @@ def main():
         data = np.asanyarray(img.dataobj)
         reader = "nibabel " + nib.__version__
     seconds = time.perf_counter() - t0
-    if not os.path.isdir(a.file):
-        checksum = float(data.astype(np.float64).mean())
+    # Peak memory of the load itself, before the checksum's float64 copy.
+    hwm_kb = status_kb("VmHWM")
+    checksum = float(data.astype(np.float64).mean())
+    if os.path.isdir(a.file):
+        checksum = checksum * slope + inter  # Hounsfield units, as volao reports
     print(json.dumps({
         "reader": reader,
         "seconds": seconds,
         "payload_bytes": int(data.nbytes),
         "rss_before_kb": before,
-        "hwm_kb": status_kb("VmHWM"),
+        "hwm_kb": hwm_kb,
         "checksum": checksum,
     }))
 
@@ -93,7 +95,7 @@ def run_dcm2niix(folder, np, nib):
         seconds = time.perf_counter() - t0
         hwm_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
         img = nib.load(out + "/bench.nii")
-        raw = np.asanyarray(img.dataobj)
+        raw = img.dataobj.get_unscaled()
         checksum = float(np.asarray(img.get_fdata(dtype=np.float64)).mean())
         version = subprocess.run(["dcm2niix", "-v"], capture_output=True, text=True).stdout
     print(json.dumps({
