@@ -10,10 +10,10 @@ use std::path::PathBuf;
 /// Without it Mesa prints `error: XDG_RUNTIME_DIR is invalid or not set` on every
 /// headless run that opens a device, which users read as volao failing.
 pub fn private_runtime_dir() -> Option<PathBuf> {
-    if let Some(dir) = std::env::var_os("XDG_RUNTIME_DIR") {
-        if std::path::Path::new(&dir).is_dir() {
-            return None;
-        }
+    if let Some(dir) = std::env::var_os("XDG_RUNTIME_DIR")
+        && std::path::Path::new(&dir).is_dir()
+    {
+        return None;
     }
     let owner = std::env::var("USER").unwrap_or_else(|_| std::process::id().to_string());
     let name: String = owner

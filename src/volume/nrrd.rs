@@ -598,10 +598,10 @@ pub fn geometry(
     if let Some((space, name)) = &h.space {
         let mut cols = [DVec3::ZERO; 3];
         let mut ok = true;
-        for i in 0..3 {
-            match lay.axes[i].and_then(|a| h.directions.get(a).copied().flatten()) {
-                Some(d) => cols[i] = DVec3::from_array(d),
-                None => ok = lay.axes[i].is_none() && ok,
+        for (col, axis) in cols.iter_mut().zip(lay.axes) {
+            match axis.and_then(|a| h.directions.get(a).copied().flatten()) {
+                Some(d) => *col = DVec3::from_array(d),
+                None => ok = axis.is_none() && ok,
             }
         }
         // A missing axis (2-D image): unit step along the remaining orthogonal direction.
@@ -648,9 +648,9 @@ pub fn geometry(
         return (spacing, Orientation::from_spacing(spacing));
     }
     let mut spacing = [1.0f32; 3];
-    for i in 0..3 {
-        if let Some(s) = lay.axes[i].and_then(|a| h.spacings.get(a)) {
-            spacing[i] = s.abs() as f32;
+    for (sp, axis) in spacing.iter_mut().zip(lay.axes) {
+        if let Some(s) = axis.and_then(|a| h.spacings.get(a)) {
+            *sp = s.abs() as f32;
         }
     }
     let fields = ["spacings (x)", "spacings (y)", "spacings (z)"];
@@ -806,7 +806,7 @@ pub fn load(
     let parts = data_paths(&h, path);
     let attached = h.data_files.is_empty();
     let total = lay.frame_bytes * lay.frames as u64;
-    if total % parts.len() as u64 != 0 {
+    if !total.is_multiple_of(parts.len() as u64) {
         return Err(invalid(
             path,
             format!(
