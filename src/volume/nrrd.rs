@@ -494,7 +494,7 @@ pub fn layout(
             path,
             format!(
                 "axis {a} has kind {} and size {}: {} values per voxel (colour, vector or list) — volao renders scalar volumes only",
-                kind(a).unwrap_or_default(),
+                h.kinds.get(a).map(String::as_str).unwrap_or_default(),
                 h.sizes[a],
                 h.sizes[a]
             ),
@@ -1179,7 +1179,8 @@ mod tests {
         let v = load_bytes(text.as_bytes(), 1 << 20, p()).expect("loads");
         assert_eq!(v.dims, [2, 1, 1]);
         assert_eq!(v.data, VoxelData::U8(vec![1, 2]));
-        let h = parse_header(text, p()).expect("header");
+        let header = text.split("\n\n").next().unwrap_or_default();
+        let h = parse_header(header, p()).expect("header");
         let err = layout(&h, 3, p(), 1 << 20).expect_err("frame 3 of 3");
         assert!(err.to_string().contains("count from 0"), "{err}");
     }
