@@ -2,7 +2,7 @@
 //!
 //! How data flows from a file to a pixel (modules in that order):
 //!
-//! 1. [`volume`] loads a file (NIfTI, PVM/DDS, raw) into a [`volume::Volume`]: voxels in
+//! 1. [`volume`] loads a file (NIfTI, Analyze, NRRD, DICOM series, PVM/DDS, raw) into a [`volume::Volume`]: voxels in
 //!    their stored type and units, spacing in mm, orientation in RAS.
 //! 2. [`tf`] maps values to colour and opacity (the transfer function, in the data's
 //!    units); [`scene`] files hold a volume, its transfer function, camera, light, AO
@@ -24,7 +24,8 @@
 //! 7. [`app`] is the eframe viewer: the same texels, stages and ray caster behind a UI
 //!    whose background jobs compute AO, modulation and light volumes.
 //!
-//! The command-line interface and the benchmarks live in the binary (`src/bin/volao`).
+//! The command-line interface and the benchmarks live in the binary (`src/bin/volao`);
+//! [`process`] holds the few process-wide settings it makes at start.
 
 pub mod volume;
 
@@ -41,3 +42,5 @@ pub mod clip;
 pub mod render;
 
 pub mod app;
+
+pub mod process;

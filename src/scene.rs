@@ -97,6 +97,7 @@ impl VolumeSource {
                 .map(RawOverrides::from)
                 .unwrap_or_default(),
             max_bytes: None,
+            series: None,
         }
     }
 }

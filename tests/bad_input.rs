@@ -348,3 +348,317 @@ fn raw_without_a_layout_says_which_flags_to_pass() {
     .to_string();
     assert!(msg.contains("spacing"), "{msg}");
 }
+
+// ---- DICOM and NRRD: truncation and mutation -------------------------------------------
+
+/// Small DICOM files in several transfer syntaxes (native, deflate, RLE, JPEG 2000,
+/// JPEG lossless, big endian, enhanced multi-frame).
+const DICOM_SMALL: &[&str] = &[
+    "dicom/files/CT_small.dcm",
+    "dicom/files/deflated.dcm",
+    "dicom/files/emri_small_RLE.dcm",
+    "dicom/files/emri_small_big_endian.dcm",
+    "dicom/files/emri_small_jpeg_2k_lossless.dcm",
+    "dicom/files/eCT_Supplemental.dcm",
+    "dicom/files/jpeg_lossless_sel1.dcm",
+];
+
+fn shared(rel: &str) -> Vec<u8> {
+    let p = common::data_dir().join(rel);
+    std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+fn dicom_bytes(files: &[&[u8]]) -> Result<Volume, VolumeError> {
+    volume::dicom::load_bytes(files, None, CAP, Path::new("mutant"), &mut Vec::new())
+}
+
+fn nrrd_bytes(bytes: &[u8]) -> Result<Volume, VolumeError> {
+    volume::nrrd::load_bytes(bytes, CAP, Path::new("mutant.nrrd"))
+}
+
+/// An attached NRRD built from the shared detached one (header + its raw voxels), and a
+/// small gzip one written by volao.
+fn nrrd_samples() -> Vec<(String, Vec<u8>)> {
+    let header = shared("nrrd/avg152.nhdr");
+    let text = String::from_utf8(header).expect("text header");
+    let attached: String = text
+        .lines()
+        .filter(|l| !l.starts_with("data file"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let mut avg = attached.into_bytes();
+    avg.push(b'\n');
+    avg.extend(shared("nrrd/avg152.raw"));
+    let dir = tempfile::tempdir().expect("temp dir");
+    let small = Volume::new(
+        [12, 10, 8],
+        [0.5, 1.0, 2.0],
+        VoxelData::I16((0..960).map(|i| (i * 37 % 2000 - 1000) as i16).collect()),
+    )
+    .expect("valid");
+    let p = dir.path().join("small.nrrd");
+    volume::save(&small, &p).expect("write nrrd");
+    vec![
+        ("avg152 attached".into(), avg),
+        ("small gzip".into(), std::fs::read(&p).expect("read")),
+        ("4-D ascii".into(), shared("nrrd/4d-example4.nrrd")),
+    ]
+}
+
+#[test]
+fn dicom_and_nrrd_truncation_sweep_never_panics() {
+    for file in DICOM_SMALL {
+        let bytes = shared(file);
+        let whole = dicom_bytes(&[&bytes]).unwrap_or_else(|e| panic!("{file}: {e}"));
+        let mut cuts: Vec<usize> = (0..bytes.len().min(1024)).step_by(13).collect();
+        cuts.extend((1..=24).map(|k| bytes.len() * k / 25));
+        for cut in cuts {
+            match dicom_bytes(&[&bytes[..cut]]) {
+                // A cut after the pixel data may leave a complete image.
+                Ok(v) => assert!(
+                    v.data.bits_eq(&whole.data),
+                    "{file} cut at {cut}: wrong voxels"
+                ),
+                Err(e) => assert!(!e.to_string().contains('\n'), "{file}: {e}"),
+            }
+        }
+    }
+    for (name, bytes) in nrrd_samples() {
+        let whole = nrrd_bytes(&bytes).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let mut cuts: Vec<usize> = (0..bytes.len().min(600)).step_by(3).collect();
+        cuts.extend((1..=24).map(|k| bytes.len() * k / 25));
+        for cut in cuts {
+            match nrrd_bytes(&bytes[..cut]) {
+                Ok(v) => assert!(
+                    v.data.bits_eq(&whole.data) || name == "4-D ascii",
+                    "{name} cut at {cut} of {} loaded wrong voxels",
+                    bytes.len()
+                ),
+                Err(e) => assert!(!e.to_string().contains('\n'), "{name}: {e}"),
+            }
+        }
+    }
+}
+
+#[test]
+fn dicom_and_nrrd_mutations_never_panic() {
+    let mut rng = Rng(0xd1c0_4e44_0000_0017);
+    let mut mutate = |bytes: &[u8], header: usize| {
+        let mut b = bytes.to_vec();
+        for _ in 0..1 + rng.below(8) {
+            let span = if rng.below(4) == 0 {
+                b.len()
+            } else {
+                b.len().min(header)
+            };
+            let at = rng.below(span);
+            b[at] = match rng.below(3) {
+                0 => rng.next() as u8,
+                1 => b[at] ^ (1 << rng.below(8)),
+                _ => [0, 0xff, 0x7f, 0x80][rng.below(4)],
+            };
+        }
+        b
+    };
+    for file in DICOM_SMALL {
+        let bytes = shared(file);
+        for round in 0..40 {
+            let m = mutate(&bytes, 2048);
+            check_consistent(dicom_bytes(&[&m]), &format!("{file} mutation {round}"));
+        }
+    }
+    // Series assembly: three MR slices, one of them mutated.
+    let slices: Vec<Vec<u8>> = (1..=3)
+        .map(|k| shared(&format!("dicom/brain-mr/brain_{k:03}.dcm")))
+        .collect();
+    for round in 0..30 {
+        let m = mutate(&slices[round % 3], 2048);
+        let mut files: Vec<&[u8]> = slices.iter().map(Vec::as_slice).collect();
+        files[round % 3] = &m;
+        check_consistent(dicom_bytes(&files), &format!("series mutation {round}"));
+    }
+    for (name, bytes) in nrrd_samples() {
+        for round in 0..100 {
+            let m = mutate(&bytes, 500);
+            check_consistent(nrrd_bytes(&m), &format!("{name} mutation {round}"));
+        }
+    }
+}
+
+// ---- Integrity of gzip streams ---------------------------------------------------------
+
+fn gzip_cases(original: &[u8]) -> Vec<(&'static str, Vec<u8>)> {
+    let n = original.len();
+    let mut flipped = original.to_vec();
+    flipped[n / 2] ^= 0x10;
+    let mut crc = original.to_vec();
+    crc[n - 8] ^= 0x01;
+    let mut isize = original.to_vec();
+    isize[n - 4] ^= 0x01;
+    vec![
+        ("flipped deflate bit", flipped),
+        ("bad CRC32", crc),
+        ("bad ISIZE", isize),
+    ]
+}
+
+#[test]
+fn corrupt_gzip_nifti_and_nrrd_are_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    for (file, name) in [
+        ("nifti/avg152T1_LR_nifti.nii.gz", "case.nii.gz"),
+        ("nrrd/cranium-ct.nrrd", "case.nrrd"),
+    ] {
+        let original = shared(file);
+        for (what, bytes) in gzip_cases(&original) {
+            let p = write(dir.path(), name, &bytes);
+            let msg = load_err(&p);
+            assert!(
+                msg.contains("gzip") || msg.contains("corrupt"),
+                "{file}, {what}: {msg}"
+            );
+        }
+        // And the in-memory loaders used by fuzzing agree.
+        for (what, bytes) in gzip_cases(&original) {
+            let res = if name.ends_with(".nrrd") {
+                nrrd_bytes(&bytes)
+            } else {
+                nifti::load_bytes(&bytes, 0, CAP, Path::new("m.nii.gz"))
+            };
+            assert!(res.is_err(), "{file}, {what}: loaded from memory");
+        }
+    }
+}
+
+// ---- Absurd values ---------------------------------------------------------------------
+
+#[test]
+fn absurd_spacing_becomes_1mm_with_a_warning_naming_the_field() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut bytes = header([2, 2, 2], 2, [1e-30, 1e30, 3e38]);
+    bytes.extend([7u8; 8]);
+    let p = write(dir.path(), "absurd.nii", &bytes);
+    let l = volume::load(&p, &LoadOptions::default()).expect("loads");
+    assert_eq!(l.volume.spacing, [1.0, 1.0, 1.0]);
+    for k in 1..=3 {
+        assert!(
+            l.warnings
+                .iter()
+                .any(|w| w.contains(&format!("pixdim[{k}]"))),
+            "{:?}",
+            l.warnings
+        );
+    }
+    // A .dat sidecar with an absurd SliceThickness.
+    write(dir.path(), "v.raw", &[1u8; 8]);
+    write(
+        dir.path(),
+        "v.dat",
+        b"ObjectFileName: v.raw\nResolution: 2 2 2\nSliceThickness: 1 1e-30 1\nFormat: UCHAR\n",
+    );
+    let l = volume::load(&dir.path().join("v.dat"), &LoadOptions::default()).expect("loads");
+    assert_eq!(l.volume.spacing, [1.0, 1.0, 1.0]);
+    assert!(
+        l.warnings
+            .iter()
+            .any(|w| w.contains(".dat SliceThickness (y)")),
+        "{:?}",
+        l.warnings
+    );
+    // NRRD spacings.
+    let text = b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nspacings: 1e30 1 1\nencoding: raw\n\n\0\0\0\0\0\0\0\0";
+    let p = write(dir.path(), "s.nrrd", text);
+    let l = volume::load(&p, &LoadOptions::default()).expect("loads");
+    assert_eq!(l.volume.spacing, [1.0, 1.0, 1.0]);
+    assert!(
+        l.warnings.iter().any(|w| w.contains("spacings (x)")),
+        "{:?}",
+        l.warnings
+    );
+}
+
+#[test]
+fn infinite_scl_slope_is_ignored_with_a_warning() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut bytes = header([2, 2, 2], 2, [1.0; 3]);
+    bytes[112..116].copy_from_slice(&f32::INFINITY.to_le_bytes());
+    bytes.extend([7u8; 8]);
+    let p = write(dir.path(), "inf.nii", &bytes);
+    let l = volume::load(&p, &LoadOptions::default()).expect("loads");
+    assert!(l.volume.scaling.is_identity());
+    assert!(
+        l.warnings.iter().any(|w| w.contains("scl_slope = inf")),
+        "{:?}",
+        l.warnings
+    );
+}
+
+#[test]
+fn f64_beyond_f32_range_is_rescaled_with_a_warning() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let values = vec![1e300, -2e300, 0.0, 5e299, 1e-10, 3e300, 7.0, -1e300];
+    let v = Volume::new([2, 2, 2], [1.0; 3], VoxelData::F64(values.clone())).expect("valid");
+    let p = dir.path().join("huge.nii");
+    volume::save(&v, &p).expect("write");
+    let l = volume::load(&p, &LoadOptions::default()).expect("loads");
+    assert!(
+        l.warnings.iter().any(|w| w.contains("f32")),
+        "{:?}",
+        l.warnings
+    );
+    let VoxelData::F64(stored) = &l.volume.data else {
+        panic!("f64 stays f64")
+    };
+    assert!(stored.iter().all(|x| (*x as f32).is_finite()), "{stored:?}");
+    for (i, want) in values.iter().enumerate() {
+        let got = l.volume.scaling.apply(stored[i]);
+        assert!(
+            (got - want).abs() <= 1e-12 * want.abs().max(1e-300),
+            "{got} vs {want}"
+        );
+    }
+}
+
+// ---- Messages --------------------------------------------------------------------------
+
+#[test]
+fn header_without_its_image_names_both_files_and_the_os_error_once() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    std::fs::copy(
+        common::data_dir().join("analyze/analyze75.hdr"),
+        dir.path().join("lonely.hdr"),
+    )
+    .expect("copy");
+    let msg = load_err(&dir.path().join("lonely.hdr"));
+    assert!(msg.contains("lonely.img"), "{msg}");
+    assert_eq!(msg.matches("os error 2").count(), 1, "{msg}");
+    // The same for a NIfTI pair.
+    let v = Volume::new([2, 2, 2], [1.0; 3], VoxelData::U8(vec![1; 8])).expect("valid");
+    let mut h = nifti::encode_header(&v);
+    h[344..348].copy_from_slice(b"ni1\0");
+    write(dir.path(), "pair.hdr", &h);
+    let msg = load_err(&dir.path().join("pair.hdr"));
+    assert!(msg.contains("pair.img"), "{msg}");
+    assert_eq!(msg.matches("os error 2").count(), 1, "{msg}");
+}
+
+#[test]
+fn dat_naming_a_missing_or_absurd_file_names_the_dat_and_cuts_the_name() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    write(
+        dir.path(),
+        "gone.dat",
+        b"ObjectFileName: gone.raw\nResolution: 2 2 2\nFormat: UCHAR\n",
+    );
+    let msg = load_err(&dir.path().join("gone.dat"));
+    assert!(msg.contains("gone.raw"), "{msg}");
+    let long = format!("x{}\u{0}y.raw", "a".repeat(5000));
+    write(
+        dir.path(),
+        "long.dat",
+        format!("ObjectFileName: {long}\nResolution: 2 2 2\nFormat: UCHAR\n").as_bytes(),
+    );
+    let msg = load_err(&dir.path().join("long.dat"));
+    assert!(msg.len() < 600, "{} characters: {msg}", msg.len());
+    assert!(!msg.contains('\0'), "raw NUL in {msg:?}");
+}

@@ -469,3 +469,81 @@ fn clip_shapes_and_meshes_drawn_as_surfaces_are_saved_in_the_scene() {
     let (redder, greener) = (more(0), more(1));
     assert!(redder > 20 && greener > 5, "red {redder}, green {greener}");
 }
+
+#[test]
+fn info_into_a_closed_pipe_exits_quietly() {
+    use std::process::Stdio;
+    let file = data("nifti/avg152T1_LR_nifti.nii.gz");
+    for _ in 0..3 {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_volao"))
+            .args(["info", file.to_str().expect("utf-8 path"), "--bins", "4096"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("volao runs");
+        // Close the reading end before volao writes (as `| head -0` or `| true` does).
+        drop(child.stdout.take());
+        let out = child.wait_with_output().expect("volao ends");
+        let err = text(&out.stderr);
+        assert!(
+            !err.contains("panicked") && !err.contains("Broken pipe"),
+            "{err}"
+        );
+        assert_eq!(out.status.code(), Some(0), "{err}");
+    }
+}
+
+#[test]
+fn info_on_a_dicom_folder_lists_the_series_and_series_flag_chooses() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let shared = common::data_dir();
+    for f in ["brain_001.dcm", "brain_002.dcm"] {
+        std::fs::copy(shared.join("dicom/brain-mr").join(f), dir.path().join(f)).expect("copy");
+    }
+    std::fs::copy(
+        shared.join("dicom/files/CT_small.dcm"),
+        dir.path().join("ct.dcm"),
+    )
+    .expect("copy");
+    let d = dir.path().to_str().expect("utf-8 path");
+    let out = volao(&["info", d]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let s = text(&out.stdout);
+    assert!(
+        s.contains("DICOM series of 2 files") && s.contains("[1]"),
+        "{s}"
+    );
+    let out = volao(&["info", d, "--series", "1"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("128×128×1"),
+        "{}",
+        text(&out.stdout)
+    );
+    let out = volao(&["info", d, "--series", "7"]);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("numbered from 0"), "{err}");
+}
+
+#[test]
+fn convert_writes_nrrd_that_reads_back() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = data("nifti/avg152T1_LR_nifti.nii");
+    let out_path = dir.path().join("avg.nrrd");
+    let out = volao(&[
+        "convert",
+        input.to_str().expect("utf-8 path"),
+        out_path.to_str().expect("utf-8 path"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let a = volao::volume::load(&input, &Default::default())
+        .expect("loads")
+        .volume;
+    let b = volao::volume::load(&out_path, &Default::default())
+        .expect("nrrd loads")
+        .volume;
+    assert!(a.data.bits_eq(&b.data));
+    assert_eq!(a.orientation.rows(), b.orientation.rows());
+}

@@ -54,7 +54,9 @@ impl Viewer {
             .set_title("Open a volume or a scene")
             .add_filter(
                 "Volumes and scenes",
-                &["nii", "gz", "hdr", "img", "pvm", "raw", "dat", "json"],
+                &[
+                    "nii", "gz", "hdr", "img", "nrrd", "nhdr", "dcm", "pvm", "raw", "dat", "json",
+                ],
             )
             .add_filter("All files", &["*"])
             .pick_file();
@@ -112,6 +114,14 @@ impl Viewer {
             ui.menu_button("File", |ui| {
                 if ui.button("Open…  (Ctrl+O)").clicked() {
                     self.open_dialog();
+                }
+                if ui.button("Open folder…  (DICOM series)").clicked() {
+                    let picked = rfd::FileDialog::new()
+                        .set_title("Open a folder of DICOM files")
+                        .pick_folder();
+                    if let Some(p) = picked {
+                        self.open(OpenRequest::for_path(p));
+                    }
                 }
                 ui.menu_button("Open recent", |ui| {
                     if self.recent.is_empty() {

@@ -3,7 +3,7 @@
 use super::pvm::{self, DdsVersion, PvmSamples, PvmVersion, PvmVoxels};
 use super::raw::{self, RawOverrides};
 use super::{Volume, fmt_dims};
-use super::{VolumeError, VoxelData, fmt_bytes, memory_budget, nifti};
+use super::{VolumeError, VoxelData, analyze, dicom, fmt_bytes, memory_budget, nifti, nrrd};
 use std::fmt;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -23,6 +23,21 @@ pub enum Format {
     Raw {
         /// ".dat" or ".plist" when a sidecar described the layout.
         sidecar: Option<&'static str>,
+    },
+    Nrrd {
+        /// `.nhdr` with `data file:` rather than attached voxels.
+        detached: bool,
+        encoding: nrrd::Encoding,
+    },
+    /// Analyze 7.5 `.hdr`/`.img` (no NIfTI magic).
+    Analyze {
+        gzip: bool,
+    },
+    Dicom {
+        /// Files whose images form the volume.
+        files: usize,
+        /// Slices (single-frame files or frames of multi-frame files).
+        slices: usize,
     },
     Demo,
 }
@@ -60,6 +75,36 @@ impl fmt::Display for Format {
                 sidecar: Some(kind),
             } => write!(f, "raw with {kind} sidecar"),
             Format::Raw { sidecar: None } => f.write_str("raw"),
+            Format::Nrrd { detached, encoding } => {
+                let enc = match encoding {
+                    nrrd::Encoding::Raw => "raw",
+                    nrrd::Encoding::Gzip => "gzip",
+                    nrrd::Encoding::Ascii => "ascii",
+                    nrrd::Encoding::Hex => "hex",
+                };
+                let how = if *detached {
+                    "detached header"
+                } else {
+                    "attached"
+                };
+                write!(f, "NRRD ({how}, {enc})")
+            }
+            Format::Analyze { gzip } => {
+                f.write_str("Analyze 7.5 (.hdr/.img pair)")?;
+                if *gzip {
+                    f.write_str(", gzip")?;
+                }
+                Ok(())
+            }
+            Format::Dicom { files, slices } => {
+                if *files == 1 && *slices > 1 {
+                    write!(f, "DICOM, one multi-frame file of {slices} frames")
+                } else if *files == 1 {
+                    f.write_str("DICOM, one image")
+                } else {
+                    write!(f, "DICOM series of {files} files")
+                }
+            }
             Format::Demo => f.write_str("built-in demo volume"),
         }
     }
@@ -74,6 +119,9 @@ pub struct LoadOptions {
     pub raw: RawOverrides,
     /// Refuse headers claiming more voxel bytes than this (default: available memory).
     pub max_bytes: Option<u64>,
+    /// DICOM folder: which series, by its number in `volao info`'s list (from 0) or its
+    /// SeriesInstanceUID; `None` = the one with the most slices.
+    pub series: Option<String>,
 }
 
 /// A loaded volume with its format and any non-fatal problems found on the way.
@@ -96,30 +144,50 @@ enum Kind {
     Nifti,
     Pvm,
     Raw,
+    Nrrd,
+    Dicom,
 }
 
 fn detect(path: &Path, opts: &LoadOptions) -> Result<Kind, VolumeError> {
     if !opts.raw.is_empty() {
         return Ok(Kind::Raw);
     }
+    if path.is_dir() {
+        return Ok(Kind::Dicom);
+    }
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
+    // The magic bytes first: a DICOM preamble may start with anything (even 348).
+    let mut head = [0u8; 132];
+    let mut n = 0;
+    let mut f = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
+    while n < head.len() {
+        match f.read(&mut head[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(VolumeError::io(path, e)),
+        }
+    }
+    let head = &head[..n];
+    if dicom::has_dicm_magic(head) {
+        return Ok(Kind::Dicom);
+    }
+    if head.starts_with(b"NRRD000") {
+        return Ok(Kind::Nrrd);
+    }
     if nifti::is_nifti_path(path) {
         return Ok(Kind::Nifti);
     }
     match ext.as_str() {
         "pvm" => return Ok(Kind::Pvm),
         "raw" | "dat" => return Ok(Kind::Raw),
+        "nrrd" | "nhdr" => return Ok(Kind::Nrrd),
+        "dcm" | "dicom" | "ima" => return Ok(Kind::Dicom),
         _ => {}
     }
-    // Unknown extension: look at the first bytes.
-    let mut head = [0u8; 8];
-    let n = std::fs::File::open(path)
-        .and_then(|f| f.take(8).read(&mut head))
-        .map_err(|e| VolumeError::io(path, e))?;
-    let head = &head[..n];
     let le = head
         .get(..4)
         .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]));
@@ -141,6 +209,15 @@ fn detect(path: &Path, opts: &LoadOptions) -> Result<Kind, VolumeError> {
     }
 }
 
+/// The first 348 bytes of a NIfTI-1/Analyze header file (decompressed), if it has them
+/// and they are Analyze 7.5 (no NIfTI magic).
+fn analyze_header(header: &Path) -> Option<[u8; 348]> {
+    let (mut r, _, _) = nifti::open_maybe_gz(header).ok()?;
+    let mut buf = [0u8; 348];
+    r.read_exact(&mut buf).ok()?;
+    analyze::is_analyze(&buf).then_some(buf)
+}
+
 /// [`load`] with a progress callback `(bytes done, bytes total)` for the voxel read.
 pub fn load_with_progress(
     path: &Path,
@@ -148,11 +225,115 @@ pub fn load_with_progress(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Loaded, VolumeError> {
     if !path.exists() {
-        return Err(VolumeError::invalid(path, "no such file"));
+        return Err(VolumeError::invalid(path, "no such file or folder"));
     }
     let max_bytes = opts.max_bytes.unwrap_or_else(memory_budget);
+    let kind = detect(path, opts)?;
+    if opts.series.is_some() && !matches!(kind, Kind::Dicom) {
+        return Err(VolumeError::invalid(
+            path,
+            "--series applies to DICOM folders and files only",
+        ));
+    }
+    let mut loaded = load_kind(kind, path, opts, max_bytes, progress)?;
+    // Every reader's spacing goes through the same range check (a no-op for readers
+    // that already made it with their own field names).
+    let field = match loaded.format {
+        Format::Pvm { .. } => "PVM voxel spacing",
+        Format::Raw {
+            sidecar: Some(".dat"),
+        } => ".dat SliceThickness",
+        Format::Raw { sidecar: Some(_) } => ".plist spacing",
+        Format::Raw { sidecar: None } => "--spacing",
+        _ => "spacing",
+    };
+    let fields = ["x", "y", "z"].map(|a| format!("{field} ({a})"));
+    let fields = [fields[0].as_str(), fields[1].as_str(), fields[2].as_str()];
+    let v = &mut loaded.volume;
+    super::fix_spacing(
+        &mut v.spacing,
+        &mut v.orientation,
+        &fields,
+        &mut loaded.warnings,
+    );
+    super::fit_f64_to_f32(&mut loaded.volume, &mut loaded.warnings);
+    Ok(loaded)
+}
+
+fn load_kind(
+    kind: Kind,
+    path: &Path,
+    opts: &LoadOptions,
+    max_bytes: u64,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<Loaded, VolumeError> {
     let mut warnings = Vec::new();
-    match detect(path, opts)? {
+    match kind {
+        Kind::Dicom => {
+            if opts.frame != 0 {
+                return Err(VolumeError::invalid(
+                    path,
+                    "DICOM: --frame does not apply (frames of a multi-frame file are slices); use --series to choose a series",
+                ));
+            }
+            let (volume, info, data_path) = dicom::load(
+                path,
+                opts.series.as_deref(),
+                max_bytes,
+                &mut warnings,
+                progress,
+            )?;
+            Ok(Loaded {
+                volume,
+                format: Format::Dicom {
+                    files: info.files,
+                    slices: info.frames,
+                },
+                data_path,
+                warnings,
+            })
+        }
+        Kind::Nrrd => {
+            let h = nrrd::read_header_file(path)?;
+            let detached = !h.data_files.is_empty();
+            let (volume, data_path) =
+                nrrd::load(path, opts.frame, max_bytes, &mut warnings, progress)?;
+            Ok(Loaded {
+                volume,
+                format: Format::Nrrd {
+                    detached,
+                    encoding: h.encoding,
+                },
+                data_path,
+                warnings,
+            })
+        }
+        Kind::Nifti if analyze_header(&nifti::resolve_paths(path).header).is_some() => {
+            let paths = nifti::resolve_paths(path);
+            let buf = analyze_header(&paths.header).unwrap_or([0; 348]);
+            if opts.frame != 0 {
+                return Err(VolumeError::invalid(
+                    path,
+                    "Analyze 7.5: --frame is not supported; frame 0 is read",
+                ));
+            }
+            let volume = analyze::load(
+                &paths.header,
+                &paths.image,
+                &buf,
+                max_bytes,
+                &mut warnings,
+                progress,
+            )?;
+            Ok(Loaded {
+                volume,
+                format: Format::Analyze {
+                    gzip: is_gzip(&paths.image),
+                },
+                data_path: paths.image,
+                warnings,
+            })
+        }
         Kind::Nifti => {
             let (volume, header) =
                 nifti::load(path, opts.frame, max_bytes, &mut warnings, progress)?;
@@ -188,7 +369,14 @@ pub fn load_with_progress(
         Kind::Raw => {
             let (data_path, spec) = raw::resolve(path, &opts.raw)?;
             let sidecar = raw::find_sidecar(path).map(|s| s.kind());
-            let volume = raw::load(&data_path, &spec, max_bytes, &mut warnings, progress)?;
+            let volume =
+                raw::load(&data_path, &spec, max_bytes, &mut warnings, progress).map_err(|e| {
+                    if data_path == path {
+                        e
+                    } else {
+                        super::with_context(e, path, "the voxel file it names")
+                    }
+                })?;
             Ok(Loaded {
                 volume,
                 format: Format::Raw { sidecar },
@@ -265,10 +453,12 @@ pub fn save(volume: &Volume, path: &Path) -> Result<Vec<String>, VolumeError> {
         save_pvm(volume, path, &mut warnings)?;
     } else if lower.ends_with(".raw") {
         raw::save(volume, path, &mut warnings)?;
+    } else if lower.ends_with(".nrrd") {
+        nrrd::save(volume, path, &mut warnings)?;
     } else {
         return Err(VolumeError::unsupported(
             path,
-            "cannot tell the output format: use .nii, .nii.gz, .pvm or .raw",
+            "cannot tell the output format: use .nii, .nii.gz, .nrrd, .pvm or .raw",
         ));
     }
     Ok(warnings)

@@ -10,9 +10,12 @@
 //! into their final buffer, so loading peaks at about one voxel payload (plus, for
 //! PVM/DDS, the compressed bytes).
 
+pub mod analyze;
 pub mod demo;
+pub mod dicom;
 pub mod format;
 pub mod nifti;
+pub mod nrrd;
 pub mod orient;
 pub mod pvm;
 pub mod raw;
@@ -33,24 +36,26 @@ pub use voxels::{VoxelData, VoxelType};
 /// Each message is one line that names the file and says what is wrong with it.
 #[derive(Debug, thiserror::Error)]
 pub enum VolumeError {
-    #[error("{path}: {source}")]
+    /// The OS error is part of the message, not a `source`: printing the chain with
+    /// `{:#}` would otherwise repeat it.
+    #[error("{}: {}", display_path(.path), .error)]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
-    #[error("{path}: truncated: {what} needs {expected} bytes but the file holds {actual}")]
+    #[error("{}: truncated: {what} needs {expected} bytes but the file holds {actual}", display_path(.path))]
     Truncated {
         path: PathBuf,
         what: String,
         expected: u64,
         actual: u64,
     },
-    #[error("{path}: {message}")]
+    #[error("{}: {message}", display_path(.path))]
     Invalid { path: PathBuf, message: String },
-    #[error("{path}: {message}")]
+    #[error("{}: {message}", display_path(.path))]
     Unsupported { path: PathBuf, message: String },
     #[error(
-        "{path}: header claims {dims} {ty} = {bytes} of voxels, more than this machine can hold ({limit} available)"
+        "{}: header claims {dims} {ty} = {bytes} of voxels, more than this machine can hold ({limit} available)", display_path(.path)
     )]
     TooLarge {
         path: PathBuf,
@@ -60,9 +65,25 @@ pub enum VolumeError {
         limit: String,
     },
     #[error(
-        "{path}: unknown volume format (expected .nii, .nii.gz, .hdr/.img, .pvm, or .raw with a .dat sidecar or --dims/--type)"
+        "{}: unknown volume format (expected .nii, .nii.gz, .hdr/.img, .nrrd/.nhdr, DICOM (.dcm or a folder), .pvm, or .raw with a .dat sidecar or --dims/--type)", display_path(.path)
     )]
     UnknownFormat { path: PathBuf },
+    /// A problem in a file that `path` (the one the user gave) refers to.
+    #[error("{} ({what}): {inner}", display_path(.path))]
+    Within {
+        path: PathBuf,
+        what: String,
+        inner: Box<VolumeError>,
+    },
+}
+
+/// Wraps `e` (about a file the user did not name) with the file the user gave.
+pub fn with_context(e: VolumeError, path: &Path, what: impl Into<String>) -> VolumeError {
+    VolumeError::Within {
+        path: path.to_owned(),
+        what: what.into(),
+        inner: Box::new(e),
+    }
 }
 
 impl VolumeError {
@@ -80,10 +101,10 @@ impl VolumeError {
         }
     }
 
-    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+    pub(crate) fn io(path: &Path, error: std::io::Error) -> Self {
         Self::Io {
             path: path.to_owned(),
-            source,
+            error,
         }
     }
 }
@@ -232,4 +253,170 @@ pub fn memory_budget() -> u64 {
         })
         .map(|kb| kb * 1024)
         .unwrap_or(16 << 30)
+}
+
+/// A user-supplied name or header value fit for a one-line message: quoted, control
+/// characters escaped, cut to 120 characters.
+pub fn short_name(s: &str) -> String {
+    const MAX: usize = 120;
+    let mut out = String::new();
+    for (i, c) in s.chars().enumerate() {
+        if i == MAX {
+            out.push('…');
+            break;
+        }
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    format!("\"{out}\"")
+}
+
+/// A path fit for a one-line message: control characters escaped, long names cut in
+/// the middle so both the folder and the file name stay readable.
+pub fn display_path(path: &Path) -> String {
+    const MAX: usize = 160;
+    let s = path.to_string_lossy();
+    let escaped: String = s
+        .chars()
+        .flat_map(|c| {
+            if c.is_control() {
+                c.escape_default().collect::<Vec<_>>()
+            } else {
+                vec![c]
+            }
+        })
+        .collect();
+    let n = escaped.chars().count();
+    if n <= MAX {
+        return escaped;
+    }
+    let head: String = escaped.chars().take(MAX / 2).collect();
+    let tail: String = escaped.chars().skip(n - MAX / 2).collect();
+    format!("{head}…{tail}")
+}
+
+/// "frame 3 requested but the file has 3 frames (frames count from 0: 0 … 2)".
+pub fn frame_out_of_range(frame: usize, frames: u64) -> String {
+    if frames == 1 {
+        format!("frame {frame} requested but the file has 1 frame (frames count from 0: use 0)")
+    } else {
+        format!(
+            "frame {frame} requested but the file has {frames} frames (frames count from 0: 0 … {})",
+            frames.saturating_sub(1)
+        )
+    }
+}
+
+/// Smallest and largest voxel spacing (mm) we accept; anything else is a broken header.
+pub const SPACING_RANGE: (f32, f32) = (1e-4, 1e4);
+
+/// Replaces each spacing outside [`SPACING_RANGE`] (or not finite) by 1 mm, with a
+/// warning naming `fields[axis]`, and rescales that column of the affine to match so
+/// spacing and orientation keep agreeing.
+pub fn fix_spacing(
+    spacing: &mut [f32; 3],
+    orientation: &mut Orientation,
+    fields: &[&str; 3],
+    warnings: &mut Vec<String>,
+) {
+    let (lo, hi) = SPACING_RANGE;
+    for i in 0..3 {
+        let s = spacing[i];
+        if s.is_finite() && (lo..=hi).contains(&s) {
+            continue;
+        }
+        warnings.push(format!(
+            "{} = {s} mm is outside [{lo}, {hi}] mm; using 1 mm",
+            fields[i]
+        ));
+        spacing[i] = 1.0;
+        let col = orientation.linear.col(i);
+        let len = col.length();
+        let dir = if len.is_finite() && len > 0.0 {
+            col / len
+        } else {
+            glam::DVec3::AXES[i]
+        };
+        *orientation.linear.col_mut(i) = dir;
+    }
+    if !orientation.is_valid() {
+        *orientation = Orientation::from_spacing(*spacing);
+    }
+}
+
+/// The physical values `slope · stored + inter`, as the narrowest type that holds them
+/// exactly: i16 or i32 when slope and intercept are whole and the range fits, else f32.
+pub fn physical_values(volume: &Volume) -> VoxelData {
+    let s = volume.scaling;
+    let n = volume.data.len();
+    let whole = s.slope.fract() == 0.0 && s.inter.fract() == 0.0;
+    let st = volume.stats();
+    let fits = |lo: f64, hi: f64| st.non_finite == 0 && st.min >= lo && st.max <= hi;
+    if whole && fits(i16::MIN as f64, i16::MAX as f64) {
+        VoxelData::I16(
+            (0..n)
+                .map(|i| s.apply(volume.data.get_f64(i)) as i16)
+                .collect(),
+        )
+    } else if whole && fits(i32::MIN as f64, i32::MAX as f64) {
+        VoxelData::I32(
+            (0..n)
+                .map(|i| s.apply(volume.data.get_f64(i)) as i32)
+                .collect(),
+        )
+    } else {
+        VoxelData::F32(
+            (0..n)
+                .map(|i| s.apply(volume.data.get_f64(i)) as f32)
+                .collect(),
+        )
+    }
+}
+
+/// A slope or intercept that is not finite cannot describe values: warn and use none.
+pub fn check_scaling(
+    scaling: Scaling,
+    data: VoxelData,
+    path: &Path,
+    warnings: &mut Vec<String>,
+) -> (Scaling, VoxelData) {
+    let _ = path;
+    if scaling.slope.is_finite() && scaling.inter.is_finite() && scaling.slope != 0.0 {
+        return (scaling, data);
+    }
+    warnings.push(format!(
+        "rescale slope {} / intercept {} is not usable; showing stored values unscaled",
+        scaling.slope, scaling.inter
+    ));
+    (Scaling::IDENTITY, data)
+}
+
+/// f64 voxels whose magnitude the GPU's f32 cannot hold (beyond ~1e30, or all below
+/// ~1e-30) are divided by a power of ten, which moves into the slope: physical values
+/// are unchanged, the stored ones fit f32. Returns whether it rescaled.
+pub fn fit_f64_to_f32(volume: &mut Volume, warnings: &mut Vec<String>) -> bool {
+    let VoxelData::F64(v) = &mut volume.data else {
+        return false;
+    };
+    let max_abs = v
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    if max_abs == 0.0 || (1e-30..=1e30).contains(&max_abs) {
+        return false;
+    }
+    let k = max_abs.log10().floor();
+    let factor = 10f64.powf(k);
+    if !factor.is_finite() || factor == 0.0 {
+        return false;
+    }
+    v.iter_mut().for_each(|x| *x /= factor);
+    volume.scaling.slope *= factor;
+    warnings.push(format!(
+        "f64 values reach {max_abs:e}, beyond what the GPU's f32 holds: stored values divided by 1e{k} (the slope carries the factor, physical values are unchanged)"
+    ));
+    true
 }

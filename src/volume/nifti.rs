@@ -380,10 +380,7 @@ pub fn layout(
     if frame as u64 >= frames {
         return Err(VolumeError::invalid(
             path,
-            format!(
-                "frame {frame} requested but the file has {frames} frame{}",
-                if frames == 1 { "" } else { "s" }
-            ),
+            super::frame_out_of_range(frame, frames),
         ));
     }
     let vo = h.vox_offset;
@@ -530,8 +527,25 @@ pub fn scaling(h: &Header) -> Scaling {
 
 /// Builds the volume once its voxels are read.
 pub fn assemble(h: &Header, lay: &Layout, data: VoxelData, warnings: &mut Vec<String>) -> Volume {
-    let spacing = spacing(h, warnings);
-    let orientation = orientation(h, spacing, warnings);
+    let mut spacing = spacing(h, warnings);
+    let mut orientation = orientation(h, spacing, warnings);
+    super::fix_spacing(
+        &mut spacing,
+        &mut orientation,
+        &["pixdim[1]", "pixdim[2]", "pixdim[3]"],
+        warnings,
+    );
+    if !h.scl_slope.is_finite() {
+        warnings.push(format!(
+            "scl_slope = {} is not finite; showing stored values unscaled",
+            h.scl_slope
+        ));
+    } else if h.scl_slope != 0.0 && !h.scl_inter.is_finite() {
+        warnings.push(format!(
+            "scl_inter = {} is not finite; using 0",
+            h.scl_inter
+        ));
+    }
     let mut descriptions = Vec::new();
     if !h.descrip.is_empty() {
         descriptions.push(("description".to_owned(), h.descrip.clone()));
@@ -703,7 +717,8 @@ pub fn load(
         warnings.push("header says it belongs to a .hdr/.img pair (magic ni1/ni2); reading voxels from this file".into());
     }
     let (mut r, consumed, exact_len, bound) = if pair {
-        let (r, exact, bound) = open_maybe_gz(&paths.image)?;
+        let (r, exact, bound) = open_maybe_gz(&paths.image)
+            .map_err(|e| super::with_context(e, &paths.header, "NIfTI header; its image file"))?;
         (r, 0, exact, bound)
     } else {
         (hr, h.size(), header_len, header_bound)
@@ -745,6 +760,10 @@ pub fn load(
         consumed,
     )?;
     let data = read_voxels(&mut r, &lay, h.little_endian, data_path, start, progress)?;
+    if exact_len.is_none() {
+        // gzip: read to the end so the CRC32 and ISIZE of every member are checked.
+        super::nrrd::finish_gzip(&mut r, data_path)?;
+    }
     let volume = assemble(&h, &lay, data, warnings);
     Ok((volume, h))
 }
@@ -794,6 +813,9 @@ pub fn load_bytes(
         h.size(),
     )?;
     let data = read_voxels(&mut r, &lay, h.little_endian, path, start, &mut |_, _| {})?;
+    if gz {
+        super::nrrd::finish_gzip(&mut r, path)?;
+    }
     Ok(assemble(&h, &lay, data, &mut warnings))
 }
 

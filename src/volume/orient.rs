@@ -17,6 +17,9 @@ pub enum AffineSource {
     Qform,
     /// No orientation in the file: voxel axes are taken as RAS, scaled by the spacing.
     Assumed,
+    /// The format's own geometry fields: NRRD `space directions`/`space origin`, DICOM
+    /// ImagePositionPatient/ImageOrientationPatient.
+    Header,
 }
 
 /// Voxel index → world (RAS+, mm): `world = linear · index + offset`.

@@ -462,6 +462,10 @@ pub struct LoadArgs {
     /// Raw: bytes to skip before the first voxel.
     #[arg(long)]
     pub offset: Option<u64>,
+    /// DICOM folder: which series, by number (from 0, as `volao info` lists them) or
+    /// SeriesInstanceUID; default: the one with the most slices.
+    #[arg(long, value_name = "N|UID")]
+    pub series: Option<String>,
 }
 
 pub fn parse_type(s: &str) -> Result<VoxelType, String> {
@@ -490,6 +494,7 @@ impl LoadArgs {
                 offset: self.offset,
             },
             max_bytes: None,
+            series: self.series.clone(),
         }
     }
 }

@@ -132,6 +132,7 @@ fn print_info(r: &Report, json: bool) -> Result<()> {
         volume::orient::AffineSource::Sform => "from sform",
         volume::orient::AffineSource::Qform => "from qform",
         volume::orient::AffineSource::Assumed => "assumed: the file has no orientation",
+        volume::orient::AffineSource::Header => "from the file's geometry fields",
     };
     println!("orientation:  {} ({source})", r.orientation);
     for row in &r.affine {

@@ -46,7 +46,14 @@ enum Command {
     Bench(bench::BenchCommand),
 }
 
+#[allow(unsafe_code, reason = "set_var before any thread exists; see SAFETY")]
 fn main() {
+    if let Some(dir) = volao::process::private_runtime_dir() {
+        // SAFETY: first statement of main: no other thread exists yet that could read
+        // the environment concurrently.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", dir) };
+    }
+    volao::process::exit_quietly_on_broken_pipe();
     let cli = Cli::parse();
     if let Err(e) = run(cli) {
         // One line: the error and its causes, joined.

@@ -42,7 +42,7 @@ pub fn load_with_bar(path: &Path, opts: &LoadOptions) -> Result<Loaded> {
     }
     let loaded = loaded?;
     for w in &loaded.warnings {
-        eprintln!("warning: {}: {w}", path.display());
+        eprintln!("warning: {}: {w}", volume::display_path(path));
     }
     Ok(loaded)
 }

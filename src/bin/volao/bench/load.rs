@@ -91,6 +91,8 @@ pub fn load_bench(args: &LoadBenchArgs) -> Result<()> {
     let files = [
         args.data.join("nifti/ch2.nii.gz"),
         args.data.join("raw/cranium-ct.raw"),
+        args.data.join("dicom/cranium-ct"),
+        args.data.join("nrrd/cranium-ct.nrrd"),
     ];
     let runs = args.runs.max(1);
     println!(
@@ -106,7 +108,17 @@ pub fn load_bench(args: &LoadBenchArgs) -> Result<()> {
         }
         let mut ours = Vec::new();
         let mut theirs = Vec::new();
+        // A DICOM folder: dcm2niix's conversion to NIfTI, for scale (it also writes).
+        let mut converted = Vec::new();
         for _ in 0..runs {
+            if file.is_dir() {
+                converted.push(run_json(
+                    Command::new(&args.python)
+                        .arg(&script)
+                        .arg(file)
+                        .arg("--dcm2niix"),
+                )?);
+            }
             ours.push(run_json(
                 Command::new(&exe).args(["bench", "load-one"]).arg(file),
             )?);
@@ -123,8 +135,13 @@ pub fn load_bench(args: &LoadBenchArgs) -> Result<()> {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        for (samples, t) in [(&ours, t_ours), (&theirs, t_theirs)] {
-            let s = &samples[0];
+        let t_conv = if converted.is_empty() {
+            0.0
+        } else {
+            median(converted.iter().map(|s| s.seconds).collect())
+        };
+        for (samples, t) in [(&ours, t_ours), (&theirs, t_theirs), (&converted, t_conv)] {
+            let Some(s) = samples.first() else { continue };
             let peak = median(samples.iter().map(LoadSample::peak_over_payload).collect());
             let ratio = if s.reader == "volao" {
                 format!("{:.2}", t_theirs / t_ours)
