@@ -139,7 +139,7 @@ pub fn load(
         progress,
     )?;
     if exact.is_none() {
-        super::nrrd::finish_gzip(&mut r, image_path)?;
+        super::gzip::finish_gzip(&mut r, image_path)?;
     }
     let mut spacing = nifti::spacing(&h, warnings);
     let mut orient = orientation(lay.dims, spacing, origin);

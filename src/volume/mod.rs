@@ -14,6 +14,7 @@ pub mod analyze;
 pub mod demo;
 pub mod dicom;
 pub mod format;
+pub mod gzip;
 pub mod nifti;
 pub mod nrrd;
 pub mod orient;

@@ -5,15 +5,12 @@
 //! NIfTI-2 header, the voxel reading and the writer are ours. Voxels are read straight
 //! into their final typed buffer and byte-swapped in place: loading peaks at one payload.
 
+pub use super::gzip::{MAX_DEFLATE_RATIO, read_all, skip};
 use super::orient::{AffineSource, Orientation};
 use super::{Scaling, Volume, VolumeError, VoxelData, VoxelType, fmt_bytes, fmt_dims};
 use glam::{DMat3, DVec3};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-
-/// Largest ratio deflate can achieve (≈1032:1): a gzip file of N bytes never inflates to
-/// more than this many times N, so a header claiming more is refused before allocating.
-pub const MAX_DEFLATE_RATIO: u64 = 1032;
 
 /// The header fields volao uses, from either NIfTI version.
 #[derive(Debug, Clone, PartialEq)]
@@ -560,72 +557,6 @@ pub fn assemble(h: &Header, lay: &Layout, data: VoxelData, warnings: &mut Vec<St
     }
 }
 
-/// Reads exactly `buf.len()` bytes; a short read becomes [`VolumeError::Truncated`]
-/// reporting how far the file went (`consumed` bytes were read before this call).
-pub fn read_all(
-    r: &mut impl Read,
-    buf: &mut [u8],
-    path: &Path,
-    what: &str,
-    consumed: u64,
-) -> Result<(), VolumeError> {
-    let mut done = 0;
-    while done < buf.len() {
-        match r.read(&mut buf[done..]) {
-            Ok(0) => {
-                return Err(VolumeError::Truncated {
-                    path: path.to_owned(),
-                    what: what.to_owned(),
-                    expected: consumed + buf.len() as u64,
-                    actual: consumed + done as u64,
-                });
-            }
-            Ok(n) => done += n,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            // A gzip stream cut short: report it as the truncation it is.
-            Err(e)
-                if e.kind() == std::io::ErrorKind::UnexpectedEof
-                    || e.to_string().contains("incomplete") =>
-            {
-                return Err(VolumeError::Truncated {
-                    path: path.to_owned(),
-                    what: format!("{what} (compressed stream ends early)"),
-                    expected: consumed + buf.len() as u64,
-                    actual: consumed + done as u64,
-                });
-            }
-            Err(e) => {
-                return Err(VolumeError::invalid(
-                    path,
-                    format!("{what}: corrupt or unreadable data ({e})"),
-                ));
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Discards `n` bytes (to skip extensions or earlier frames); short → `Truncated`.
-pub fn skip(
-    r: &mut impl Read,
-    n: u64,
-    path: &Path,
-    what: &str,
-    consumed: u64,
-) -> Result<(), VolumeError> {
-    let got = std::io::copy(&mut r.take(n), &mut std::io::sink())
-        .map_err(|e| VolumeError::invalid(path, format!("{what}: {e}")))?;
-    if got < n {
-        return Err(VolumeError::Truncated {
-            path: path.to_owned(),
-            what: what.to_owned(),
-            expected: consumed + n,
-            actual: consumed + got,
-        });
-    }
-    Ok(())
-}
-
 /// Reads one frame of voxels into a new typed buffer, reporting progress in bytes.
 pub fn read_voxels(
     r: &mut impl Read,
@@ -762,7 +693,7 @@ pub fn load(
     let data = read_voxels(&mut r, &lay, h.little_endian, data_path, start, progress)?;
     if exact_len.is_none() {
         // gzip: read to the end so the CRC32 and ISIZE of every member are checked.
-        super::nrrd::finish_gzip(&mut r, data_path)?;
+        super::gzip::finish_gzip(&mut r, data_path)?;
     }
     let volume = assemble(&h, &lay, data, warnings);
     Ok((volume, h))
@@ -814,7 +745,7 @@ pub fn load_bytes(
     )?;
     let data = read_voxels(&mut r, &lay, h.little_endian, path, start, &mut |_, _| {})?;
     if gz {
-        super::nrrd::finish_gzip(&mut r, path)?;
+        super::gzip::finish_gzip(&mut r, path)?;
     }
     Ok(assemble(&h, &lay, data, &mut warnings))
 }
