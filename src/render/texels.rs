@@ -210,11 +210,16 @@ fn encode(data: &VoxelData) -> (TexelFormat, Vec<u8>, f64, f64) {
                 .filter(|x| x.is_finite())
                 .fold(f64::INFINITY, f64::min);
             let lowest = if lowest.is_finite() { lowest } else { 0.0 };
+            // f64 beyond f32's range (see volume::f64_scale_for_f32): texels hold
+            // stored / scale, and the map below multiplies it back.
+            let scale = crate::volume::f64_scale_for_f32(other).unwrap_or(1.0);
             let bytes = vals
                 .iter()
-                .flat_map(|&x| (if x.is_finite() { x } else { lowest } as f32).to_le_bytes())
+                .flat_map(|&x| {
+                    ((if x.is_finite() { x } else { lowest } / scale) as f32).to_le_bytes()
+                })
                 .collect();
-            (TexelFormat::R32Float, bytes, 1.0, 0.0)
+            (TexelFormat::R32Float, bytes, scale, 0.0)
         }
     }
 }

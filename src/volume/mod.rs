@@ -395,29 +395,32 @@ pub fn check_scaling(
     (Scaling::IDENTITY, data)
 }
 
-/// f64 voxels whose magnitude the GPU's f32 cannot hold (beyond ~1e30, or all below
-/// ~1e-30) are divided by a power of ten, which moves into the slope: physical values
-/// are unchanged, the stored ones fit f32. Returns whether it rescaled.
-pub fn fit_f64_to_f32(volume: &mut Volume, warnings: &mut Vec<String>) -> bool {
-    let VoxelData::F64(v) = &mut volume.data else {
-        return false;
+/// For f64 voxels whose magnitude the GPU's f32 cannot hold (beyond ~1e30, or all
+/// below ~1e-30): the power of ten the texels are divided by (the texel map multiplies
+/// it back, so rendered values are physical). `None` when f32 holds them.
+pub fn f64_scale_for_f32(data: &VoxelData) -> Option<f64> {
+    let VoxelData::F64(v) = data else {
+        return None;
     };
     let max_abs = v
         .iter()
         .filter(|x| x.is_finite())
         .fold(0.0f64, |m, x| m.max(x.abs()));
     if max_abs == 0.0 || (1e-30..=1e30).contains(&max_abs) {
-        return false;
+        return None;
     }
-    let k = max_abs.log10().floor();
-    let factor = 10f64.powf(k);
-    if !factor.is_finite() || factor == 0.0 {
+    let factor = 10f64.powf(max_abs.log10().floor());
+    (factor.is_finite() && factor != 0.0).then_some(factor)
+}
+
+/// Warns when f64 voxels are beyond f32's range: the stored values are kept exactly,
+/// the GPU copy is scaled by a power of ten ([`f64_scale_for_f32`]).
+pub fn fit_f64_to_f32(volume: &mut Volume, warnings: &mut Vec<String>) -> bool {
+    let Some(factor) = f64_scale_for_f32(&volume.data) else {
         return false;
-    }
-    v.iter_mut().for_each(|x| *x /= factor);
-    volume.scaling.slope *= factor;
+    };
     warnings.push(format!(
-        "f64 values reach {max_abs:e}, beyond what the GPU's f32 holds: stored values divided by 1e{k} (the slope carries the factor, physical values are unchanged)"
+        "f64 values reach beyond what the GPU's f32 holds: the GPU copy is divided by {factor:e} (and multiplied back when rendering); stored values are kept"
     ));
     true
 }
