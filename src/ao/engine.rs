@@ -132,23 +132,17 @@ impl AoEngine {
                 cao: None,
             })
         };
+        if matches!(s.method, AoMethod::Vao | AoMethod::VaoLive) {
+            s.vao.validate().map_err(|e| GpuError::Validation {
+                stage: "positional AO settings".into(),
+                message: e.to_string(),
+            })?;
+        }
         match s.method {
             AoMethod::None => done(Ambient::One, self.describe(), notes),
-            AoMethod::VaoLive => {
-                s.vao.validate().map_err(|e| GpuError::Validation {
-                    stage: "positional AO settings".into(),
-                    message: e.to_string(),
-                })?;
-                done(Ambient::Live, self.describe(), notes)
-            }
+            AoMethod::VaoLive => done(Ambient::Live, self.describe(), notes),
             AoMethod::Cao | AoMethod::LaoFull => self.cao(input, request, progress, notes),
             method => {
-                if method == AoMethod::Vao {
-                    s.vao.validate().map_err(|e| GpuError::Validation {
-                        stage: "positional AO settings".into(),
-                        message: e.to_string(),
-                    })?;
-                }
                 let map = map_of(method);
                 match (&self.gpu, fits) {
                     // A CPU adapter runs the box statistics ~20× slower than the twin.

@@ -142,22 +142,6 @@ impl ComputeStage {
             sampler: linear_sampler(device, &format!("{name}::linear_clamp")),
         })
     }
-
-    /// The pipeline's bind group `index` with `resources` at bindings 0, 1, ….
-    pub fn bind_group(
-        &self,
-        device: &wgpu::Device,
-        label: &str,
-        index: u32,
-        resources: &[wgpu::BindingResource<'_>],
-    ) -> wgpu::BindGroup {
-        bind_group(
-            device,
-            label,
-            &self.pipeline.get_bind_group_layout(index),
-            resources,
-        )
-    }
 }
 
 /// Declares a stage that is one [`ComputeStage`] (a shader's pipeline and sampler),
@@ -234,21 +218,6 @@ pub fn write_texture_3d(
         },
         extent(dims),
     );
-}
-
-/// A sampled 3-D texture of `dims` holding `data` (one mip level).
-pub fn sampled_volume(
-    gpu: &Gpu,
-    label: &str,
-    dims: [u32; 3],
-    format: wgpu::TextureFormat,
-    bytes_per_texel: u32,
-    data: &[u8],
-) -> wgpu::Texture {
-    let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-    let texture = texture_3d(&gpu.device, label, dims, format, usage);
-    write_texture_3d(&gpu.queue, &texture, 0, dims, bytes_per_texel, data);
-    texture
 }
 
 /// A 2-D texture of `size` (an image, a tile, a render target).
