@@ -131,11 +131,7 @@ pub fn mip_chain(texels: &VolumeTexels, levels: u32) -> Vec<(Vec<u16>, [usize; 3
         let values: Vec<u16> = (0..dims[0] * dims[1] * dims[2])
             .into_par_iter()
             .map(|i| {
-                let v = [
-                    i % dims[0],
-                    (i / dims[0]) % dims[1],
-                    i / (dims[0] * dims[1]),
-                ];
+                let v = crate::volume::voxel_of(i, dims);
                 let mut sum = 0.0f32;
                 for dz in 0..2 {
                     for dy in 0..2 {

@@ -23,7 +23,7 @@ use super::lao::{Rays, STEP_MM, lao_lut};
 use crate::clip::ClipShape;
 use crate::clip::cpu::ClipMapsCpu;
 use crate::clip::gpu::{ClipMaps, ClipUpdate};
-use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
+use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
 use crate::gpu::{
     Gpu, GpuError, compute_pipeline, read_buffer, read_texture_f32, readback_buffer, shaders,
     storage_buffer, uniform_group, validated,
@@ -37,9 +37,6 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 pub use super::settings::DEFAULT_MSAA;
-
-/// Ray samples per GPU submission in step V (see [`super::lao::SAMPLES_PER_SUBMISSION`]).
-const SAMPLES_PER_SUBMISSION: u64 = 1 << 30;
 
 /// Selective recomputation (CAO) or the baseline that ray casts every voxel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -77,9 +74,8 @@ pub fn reach_mm(samples: u32, spacing: [f32; 3]) -> f32 {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct ClipParams {
-    dims: [u32; 3],
-    /// First z-slice of this dispatch.
-    z0: u32,
+    /// The volume's size and this dispatch's first z-slice.
+    slab: SlabOrigin,
     spacing: [f32; 3],
     /// N, the extra anti-aliasing samples.
     msaa: f32,
@@ -101,9 +97,8 @@ slab_fields!(ClipParams, tiles);
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct LaoParams {
-    dims: [u32; 3],
-    /// First z-slice of this dispatch.
-    z0: u32,
+    /// The volume's size and this dispatch's first z-slice.
+    slab: SlabOrigin,
     mm_to_uvw: [f32; 3],
     _pad0: f32,
     rays: u32,
@@ -140,8 +135,8 @@ pub struct CaoPipelines {
 
 impl crate::gpu::Stage for CaoPipelines {
     fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let clip_module = shaders::module(device, "cao_clip.wgsl")?;
-        let lao_module = shaders::module(device, "cao_lao.wgsl")?;
+        let [clip_module, lao_module] =
+            shaders::modules(device, ["cao_clip.wgsl", "cao_lao.wgsl"])?;
         validated(device, "CaoPipelines::create", || CaoPipelines {
             clip: compute_pipeline(device, "Cao::clip", &clip_module, "main", None),
             lao: compute_pipeline(device, "Cao::lao", &lao_module, "main", None),
@@ -254,8 +249,7 @@ impl CaoGpu {
         let extent = texels.extent();
         let (a, b) = texels.lut_map(&lut);
         let clip_params = ClipParams {
-            dims,
-            z0: 0,
+            slab: SlabOrigin::of(dims),
             spacing: texels.spacing,
             msaa: msaa as f32,
             half: [extent[0] * 0.5, extent[1] * 0.5, extent[2] * 0.5],
@@ -266,8 +260,7 @@ impl CaoGpu {
             _pad1: 0.0,
         };
         let lao_params = LaoParams {
-            dims,
-            z0: 0,
+            slab: SlabOrigin::of(dims),
             mm_to_uvw: super::lao::mm_to_uvw(texels),
             _pad0: 0.0,
             rays: rays.directions.len() as u32,
@@ -418,7 +411,7 @@ impl CaoGpu {
             self.dims,
             Grid::Tiles,
             per_voxel,
-            SAMPLES_PER_SUBMISSION,
+            budget::LAO_SAMPLES,
             u64::MAX,
         );
         gpu.queue.write_buffer(&self.counters, 0, &[0u8; 16]);
@@ -453,7 +446,7 @@ impl CaoGpu {
             self.dims,
             Grid::Tiles,
             per_voxel,
-            SAMPLES_PER_SUBMISSION,
+            budget::LAO_SAMPLES,
             u64::MAX,
         );
         let mut params = self.lao_params;

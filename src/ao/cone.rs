@@ -18,7 +18,7 @@
 use crate::gpu::dispatch::{Grid, SlabDispatch};
 use crate::gpu::{
     Gpu, GpuError, copy_texture_out, read_buffer, storage_buffer, submit_compute, texture_readback,
-    uniform_group, unpad, validated,
+    unpad, validated,
 };
 use crate::render::texels::VolumeTexels;
 use crate::sample::trilinear;
@@ -174,7 +174,7 @@ pub fn cone_cpu(
                 pyramid,
                 &dirs,
                 &sph,
-                [i % nx, (i / nx) % ny, i / (nx * ny)],
+                crate::volume::voxel_of(i, [nx, ny, nz]),
             )
         })
         .collect()
@@ -229,14 +229,12 @@ impl ConeGpu {
             let (readback, row) = texture_readback(device, "Cone::readback", dims, 4);
             let mip_view = mip.create_view(&Default::default());
             let out_view = out.create_view(&Default::default());
-            let (_uniforms, group) = uniform_group(
+            let (_uniforms, group) = self.0.sampling_group(
                 gpu,
                 "Cone",
-                &self.0.pipeline,
                 &p,
+                &mip_view,
                 &[
-                    wgpu::BindingResource::TextureView(&mip_view),
-                    wgpu::BindingResource::Sampler(&self.0.sampler),
                     dir_buf.as_entire_binding(),
                     sphere_buf.as_entire_binding(),
                     wgpu::BindingResource::TextureView(&out_view),

@@ -7,10 +7,8 @@
 //! Opacities `a_i` come from the transfer function, corrected for a 1 mm step; samples
 //! outside the volume are empty.
 
-use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
-use crate::gpu::{
-    Gpu, GpuError, output_buffer, readback_buffer, storage_buffer, uniform_group, validated,
-};
+use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
+use crate::gpu::{Gpu, GpuError, output_buffer, readback_buffer, storage_buffer, validated};
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
 use crate::sample::bake_lut;
@@ -60,9 +58,8 @@ impl Rays {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct LaoParams {
-    pub dims: [u32; 3],
-    /// First z-slice of this dispatch.
-    pub z0: u32,
+    /// The volume's size and this dispatch's first z-slice.
+    pub slab: SlabOrigin,
     /// One LAO step (1 mm) in texture coordinates per axis.
     pub mm_to_uvw: [f32; 3],
     pub _pad0: f32,
@@ -96,8 +93,7 @@ pub fn mm_to_uvw(texels: &VolumeTexels) -> [f32; 3] {
 fn params(texels: &VolumeTexels, lut: &Lut, rays: &Rays, samples: u32) -> LaoParams {
     let (a, b) = texels.lut_map(lut);
     LaoParams {
-        dims: texels.dims.map(|d| d as u32),
-        z0: 0,
+        slab: SlabOrigin::of(texels.dims.map(|d| d as u32)),
         mm_to_uvw: mm_to_uvw(texels),
         _pad0: 0.0,
         lut_scale: a,
@@ -164,10 +160,6 @@ pub fn lao_cpu(
     })
 }
 
-/// Samples per submission on the GPU: small enough that no dispatch runs into a driver
-/// watchdog (about a second on a mid-range GPU), large enough to keep it busy.
-pub const SAMPLES_PER_SUBMISSION: u64 = 1 << 30;
-
 crate::gpu::compute_stage!(
     /// Long-lived LAO compute state.
     LaoGpu,
@@ -193,10 +185,10 @@ impl LaoGpu {
         let per_voxel = rays.directions.len() as u64 * samples.max(1) as u64;
         let max_storage = device.limits().max_storage_buffer_binding_size / 4;
         let slabs = SlabDispatch::new(
-            base.dims,
+            base.slab.dims,
             Grid::Linear,
             per_voxel,
-            SAMPLES_PER_SUBMISSION,
+            budget::LAO_SAMPLES,
             max_storage,
         );
         let alpha = alpha_column(lut);
@@ -216,19 +208,10 @@ impl LaoGpu {
             let size = slabs.max_slab_voxels() * 4;
             let out = output_buffer(device, "Lao::v_pao", size);
             let readback = readback_buffer(device, "Lao::readback", size);
-            let (uniforms, group) = uniform_group(
-                gpu,
-                "Lao",
-                &self.0.pipeline,
-                &base,
-                &[
-                    wgpu::BindingResource::TextureView(vol.volume_view()),
-                    wgpu::BindingResource::Sampler(&self.0.sampler),
-                    lut_buf.as_entire_binding(),
-                    ray_buf.as_entire_binding(),
-                    out.as_entire_binding(),
-                ],
-            );
+            let bound = [&lut_buf, &ray_buf, &out].map(|b| b.as_entire_binding());
+            let (uniforms, group) =
+                self.0
+                    .sampling_group(gpu, "Lao", &base, vol.volume_view(), &bound);
             (uniforms, out, readback, group)
         })?;
         let pass = Pass {

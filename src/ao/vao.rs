@@ -17,7 +17,7 @@
 //! - a ray stops at an accepted sample with V ≥ V_thres (the sample itself still counts,
 //!   Eq. 7 is kept), or once γ is within 1/256 of 1.
 
-use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
+use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
 use crate::gpu::{
     Gpu, GpuError, bind_group, f16_texture, output_buffer, readback_buffer, shaders,
     uniform_buffer, validated,
@@ -376,11 +376,6 @@ impl VaoInputs {
     }
 }
 
-/// Samples per submission: keeps every dispatch short. Lower than LAO's 2^30 because a
-/// sample here costs more (branches, f16 fetch): at 2^30 one slab of the full Engine
-/// outran the 60 s readback bound on a busy 2-core lavapipe.
-pub const SAMPLES_PER_SUBMISSION: u64 = 1 << 27;
-
 /// Long-lived state of the precompute kernel (`vao.wgsl`).
 #[derive(Debug)]
 pub struct VaoGpu {
@@ -394,9 +389,8 @@ pub struct VaoGpu {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 struct VaoSlab {
-    dims: [u32; 3],
-    /// First z-slice of this dispatch.
-    z0: u32,
+    /// The volume's size and this dispatch's first z-slice.
+    slab: SlabOrigin,
     /// Voxels in this dispatch and invocations per row of workgroups.
     voxels: u32,
     row_stride: u32,
@@ -464,13 +458,12 @@ impl VaoGpu {
             dims,
             Grid::Linear,
             per_voxel,
-            SAMPLES_PER_SUBMISSION,
+            budget::COSTLY_SAMPLES,
             max_storage,
         );
         let size = slabs.max_slab_voxels() * 4;
         let base = VaoSlab {
-            dims,
-            z0: 0,
+            slab: SlabOrigin::of(dims),
             voxels: 0,
             row_stride: 0,
             _pad: [0; 2],

@@ -478,26 +478,8 @@ mod tests {
     fn tf() -> TransferFunction {
         TransferFunction {
             name: "t".into(),
-            opacity: vec![
-                OpacityPoint {
-                    value: 0.0,
-                    alpha: 0.0,
-                },
-                OpacityPoint {
-                    value: 100.0,
-                    alpha: 1.0,
-                },
-            ],
-            color: vec![
-                ColorStop {
-                    value: 0.0,
-                    rgb: [0.0, 0.0, 0.0],
-                },
-                ColorStop {
-                    value: 100.0,
-                    rgb: [1.0, 0.5, 0.0],
-                },
-            ],
+            opacity: OpacityPoint::list(&[(0.0, 0.0), (100.0, 1.0)]),
+            color: ColorStop::list(&[(0.0, [0.0; 3]), (100.0, [1.0, 0.5, 0.0])]),
         }
     }
 

@@ -70,46 +70,27 @@ pub struct ClipPipelines {
 
 impl crate::gpu::Stage for ClipPipelines {
     fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let depth_module = shaders::module(device, "clip_depth.wgsl")?;
-        let maps_module = shaders::module(device, "clip_maps.wgsl")?;
+        let [depth_module, maps_module] =
+            shaders::modules(device, ["clip_depth.wgsl", "clip_maps.wgsl"])?;
         validated(device, "ClipPipelines::create", || {
             let peel = |label, cull| {
-                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                    label: Some(label),
-                    layout: None,
-                    vertex: wgpu::VertexState {
-                        module: &depth_module,
-                        entry_point: Some("vs"),
-                        compilation_options: Default::default(),
-                        buffers: &[Some(wgpu::VertexBufferLayout {
-                            array_stride: 12,
-                            step_mode: wgpu::VertexStepMode::Vertex,
-                            attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                        })],
+                crate::gpu::depth_tested_pipeline(
+                    device,
+                    label,
+                    &depth_module,
+                    wgpu::VertexBufferLayout {
+                        array_stride: 12,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
                     },
-                    primitive: wgpu::PrimitiveState {
+                    wgpu::PrimitiveState {
                         topology: wgpu::PrimitiveTopology::TriangleList,
                         front_face: wgpu::FrontFace::Ccw,
                         cull_mode: Some(cull),
                         ..Default::default()
                     },
-                    depth_stencil: Some(wgpu::DepthStencilState {
-                        format: wgpu::TextureFormat::Depth32Float,
-                        depth_write_enabled: Some(true),
-                        depth_compare: Some(wgpu::CompareFunction::Less),
-                        stencil: Default::default(),
-                        bias: Default::default(),
-                    }),
-                    multisample: Default::default(),
-                    fragment: Some(wgpu::FragmentState {
-                        module: &depth_module,
-                        entry_point: Some("fs"),
-                        compilation_options: Default::default(),
-                        targets: &[],
-                    }),
-                    multiview_mask: None,
-                    cache: None,
-                })
+                    &[],
+                )
             };
             let passes = ["resolve", "reduce", "dilate", "expand"].map(|entry| {
                 crate::gpu::compute_pipeline(device, entry, &maps_module, entry, None)
@@ -516,33 +497,17 @@ impl ClipMaps {
                 block_texture("ClipMaps::dilated").create_view(&Default::default()),
             );
             use wgpu::BindingResource::TextureView as Tex;
-            let depth = |k: usize| Tex(&views[k]);
+            // The uniforms, the four depth layers (bindings 1–4) and one output.
+            let from_depths = |output| {
+                let mut entries = vec![(0, uniforms.as_entire_binding())];
+                entries.extend((0..4).map(|k| (1 + k as u32, Tex(&views[k]))));
+                entries.push(output);
+                entries
+            };
             // (pass, bindings it uses, workgroups)
             let steps: [Step<'_>; 4] = [
-                (
-                    0,
-                    vec![
-                        (0, uniforms.as_entire_binding()),
-                        (1, depth(0)),
-                        (2, depth(1)),
-                        (3, depth(2)),
-                        (4, depth(3)),
-                        (5, Tex(&storage)),
-                    ],
-                    res,
-                ),
-                (
-                    1,
-                    vec![
-                        (0, uniforms.as_entire_binding()),
-                        (1, depth(0)),
-                        (2, depth(1)),
-                        (3, depth(2)),
-                        (4, depth(3)),
-                        (6, Tex(&reduced)),
-                    ],
-                    blocks,
-                ),
+                (0, from_depths((5, Tex(&storage))), res),
+                (1, from_depths((6, Tex(&reduced))), blocks),
                 (
                     2,
                     vec![

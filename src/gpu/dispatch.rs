@@ -17,6 +17,18 @@ pub const LINEAR_GROUP: u32 = 64;
 /// Most workgroups along one dispatch dimension (WebGPU's guaranteed limit).
 pub const MAX_GROUPS: u32 = 65535;
 
+/// Work per submission, in ray samples: small enough that no dispatch runs into a driver
+/// watchdog (about a second on a mid-range GPU) or the 60 s readback bound on a busy
+/// lavapipe, large enough to keep a GPU busy. One place for every stage's budget.
+pub mod budget {
+    /// LAO and CAO's step V: a trilinear fetch and a LUT lookup per sample.
+    pub const LAO_SAMPLES: u64 = 1 << 30;
+    /// Light rays and positional AO, whose samples cost more (branches, f16 fetches,
+    /// clip tests): at 2^30, one slab of the full Engine outran the 60 s readback bound
+    /// on a busy 2-core lavapipe.
+    pub const COSTLY_SAMPLES: u64 = 1 << 27;
+}
+
 /// How a stage's invocations cover a slab.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Grid {
@@ -51,25 +63,43 @@ pub fn fold_linear(count: u32) -> ([u32; 3], u32) {
     ([gx, gy, 1], gx * LINEAR_GROUP)
 }
 
+/// The first 16 bytes of every slab stage's uniforms: the volume's size and the first
+/// z-slice of this dispatch (each shader's `struct Params` starts with
+/// `dims: vec3<u32>, z0: u32`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SlabOrigin {
+    pub dims: [u32; 3],
+    pub z0: u32,
+}
+
+impl SlabOrigin {
+    /// The origin of the first slab of a volume of `dims`.
+    pub fn of(dims: [u32; 3]) -> Self {
+        SlabOrigin { dims, z0: 0 }
+    }
+}
+
 /// A stage's uniform struct: it knows which of its fields say where the slab is.
 pub trait SlabParams: bytemuck::Pod {
     fn set_slab(&mut self, slab: &Slab);
 }
 
-/// Implements [`SlabParams`] for a uniform struct with a `z0` field (`tiles`), or with
-/// `z0`, `voxels` and `row_stride` (`linear`, the fields a [`Grid::Linear`] shader reads).
+/// Implements [`SlabParams`] for a uniform struct with a `slab: SlabOrigin` field
+/// (`tiles`), and also `voxels` and `row_stride` (`linear`, the fields a
+/// [`Grid::Linear`] shader reads).
 macro_rules! slab_fields {
     ($params:ty, tiles) => {
         impl $crate::gpu::dispatch::SlabParams for $params {
             fn set_slab(&mut self, slab: &$crate::gpu::dispatch::Slab) {
-                self.z0 = slab.z0;
+                self.slab.z0 = slab.z0;
             }
         }
     };
     ($params:ty, linear) => {
         impl $crate::gpu::dispatch::SlabParams for $params {
             fn set_slab(&mut self, slab: &$crate::gpu::dispatch::Slab) {
-                self.z0 = slab.z0;
+                self.slab.z0 = slab.z0;
                 self.voxels = slab.voxels;
                 self.row_stride = slab.row_stride;
             }

@@ -142,6 +142,24 @@ impl ComputeStage {
             sampler: linear_sampler(device, &format!("{name}::linear_clamp")),
         })
     }
+
+    /// The uniform buffer holding `params` and the bind group of a shader whose
+    /// bindings are `params`, the sampled `volume`, this stage's sampler, then `rest`.
+    pub fn sampling_group<P: bytemuck::Pod>(
+        &self,
+        gpu: &Gpu,
+        name: &str,
+        params: &P,
+        volume: &wgpu::TextureView,
+        rest: &[wgpu::BindingResource<'_>],
+    ) -> (wgpu::Buffer, wgpu::BindGroup) {
+        let mut resources = vec![
+            wgpu::BindingResource::TextureView(volume),
+            wgpu::BindingResource::Sampler(&self.sampler),
+        ];
+        resources.extend(rest.iter().cloned());
+        uniform_group(gpu, name, &self.pipeline, params, &resources)
+    }
 }
 
 /// Declares a stage that is one [`ComputeStage`] (a shader's pipeline and sampler),
@@ -529,4 +547,43 @@ pub fn read_texture_f32(
     })?;
     let bytes = read_buffer(device, &readback, stage)?;
     Ok(unpad::<f32>(&bytes, row, size[0]))
+}
+
+/// A render pipeline that draws triangles from one vertex buffer with `module`'s `vs`
+/// and `fs` entry points, keeping the nearest fragment in a `Depth32Float` buffer.
+pub fn depth_tested_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    vertices: wgpu::VertexBufferLayout,
+    primitive: wgpu::PrimitiveState,
+    targets: &[Option<wgpu::ColorTargetState>],
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs"),
+            compilation_options: Default::default(),
+            buffers: &[Some(vertices)],
+        },
+        primitive,
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: wgpu::TextureFormat::Depth32Float,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs"),
+            compilation_options: Default::default(),
+            targets,
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }

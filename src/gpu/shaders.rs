@@ -93,6 +93,20 @@ pub fn module(device: &wgpu::Device, name: &str) -> Result<wgpu::ShaderModule, G
     })
 }
 
+/// Several shader modules at once, in the order named.
+pub fn modules<const N: usize>(
+    device: &wgpu::Device,
+    names: [&str; N],
+) -> Result<[wgpu::ShaderModule; N], GpuError> {
+    let built = names
+        .iter()
+        .map(|name| module(device, name))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(built
+        .try_into()
+        .unwrap_or_else(|_| unreachable!("one module per name")))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -7,10 +7,8 @@
 //! positions between neighbouring samples), and the light rays start at a per-voxel
 //! jittered offset, so no stair-steps appear at shadow boundaries.
 
-use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, slab_fields};
-use crate::gpu::{
-    Gpu, GpuError, output_buffer, readback_buffer, storage_buffer, uniform_group, validated,
-};
+use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
+use crate::gpu::{Gpu, GpuError, output_buffer, readback_buffer, storage_buffer, validated};
 use crate::render::jitter;
 use crate::render::texels::VolumeTexels;
 use crate::sample::bake_lut;
@@ -48,9 +46,8 @@ pub fn light_direction(d: [f32; 3]) -> Result<Vec3, String> {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct LightParams {
-    pub dims: [u32; 3],
-    /// First z-slice of this dispatch.
-    pub z0: u32,
+    /// The volume's size and this dispatch's first z-slice.
+    pub slab: SlabOrigin,
     /// Voxels in this dispatch and invocations per row of workgroups.
     pub voxels: u32,
     pub row_stride: u32,
@@ -81,8 +78,7 @@ fn params(texels: &VolumeTexels, lut: &Lut, direction: Vec3) -> LightParams {
     let (a, b) = crate::sample::f16_lut_map(texels, lut);
     let step = direction * h / Vec3::from(extent);
     LightParams {
-        dims: texels.dims.map(|d| d as u32),
-        z0: 0,
+        slab: SlabOrigin::of(texels.dims.map(|d| d as u32)),
         voxels: 0,
         row_stride: 0,
         max_steps: (diag / h).ceil() as u32 + 2,
@@ -147,9 +143,6 @@ pub fn light_cpu(
     })
 }
 
-/// Samples per submission: keeps each dispatch well inside the 60 s readback bound.
-pub const SAMPLES_PER_SUBMISSION: u64 = 1 << 27;
-
 crate::gpu::compute_stage!(
     /// Long-lived light-volume compute state.
     LightGpu,
@@ -178,10 +171,10 @@ impl LightGpu {
         let base = params(texels, lut, direction);
         let max_storage = device.limits().max_storage_buffer_binding_size / 4;
         let slabs = SlabDispatch::new(
-            base.dims,
+            base.slab.dims,
             Grid::Linear,
             base.max_steps as u64,
-            SAMPLES_PER_SUBMISSION,
+            budget::COSTLY_SAMPLES,
             max_storage,
         );
         let alpha = alpha_column(lut);
@@ -198,18 +191,8 @@ impl LightGpu {
             );
             let out = output_buffer(device, "Light::transmittance", size);
             let readback = readback_buffer(device, "Light::readback", size);
-            let (uniforms, group) = uniform_group(
-                gpu,
-                "Light",
-                &self.0.pipeline,
-                &base,
-                &[
-                    wgpu::BindingResource::TextureView(&volume),
-                    wgpu::BindingResource::Sampler(&self.0.sampler),
-                    lut_buf.as_entire_binding(),
-                    out.as_entire_binding(),
-                ],
-            );
+            let bound = [&lut_buf, &out].map(|b| b.as_entire_binding());
+            let (uniforms, group) = self.0.sampling_group(gpu, "Light", &base, &volume, &bound);
             (uniforms, out, readback, group)
         })?;
         let pass = Pass {

@@ -251,11 +251,8 @@ fn halve(v: &Volume) -> Volume {
     };
     let n = dims[0] * dims[1] * dims[2];
     let idx = |i: usize| {
-        (
-            i % dims[0],
-            (i / dims[0]) % dims[1],
-            i / (dims[0] * dims[1]),
-        )
+        let [x, y, z] = crate::volume::voxel_of(i, dims);
+        (x, y, z)
     };
     macro_rules! rebuild {
         ($variant:ident, $t:ty) => {
@@ -324,11 +321,7 @@ impl BlockRanges {
         let ranges = (0..grid[0] * grid[1] * grid[2])
             .into_par_iter()
             .map(|b| {
-                let bi = [
-                    b % grid[0],
-                    (b / grid[0]) % grid[1],
-                    b / (grid[0] * grid[1]),
-                ];
+                let bi = crate::volume::voxel_of(b, grid);
                 let lo: [usize; 3] = std::array::from_fn(|i| (bi[i] * BLOCK).saturating_sub(1));
                 let hi: [usize; 3] =
                     std::array::from_fn(|i| ((bi[i] + 1) * BLOCK + 1).min(dims[i]));

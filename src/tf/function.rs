@@ -20,6 +20,26 @@ pub struct ColorStop {
     pub rgb: [f32; 3],
 }
 
+impl OpacityPoint {
+    /// Points from (value, alpha) pairs.
+    pub fn list(points: &[(f64, f32)]) -> Vec<OpacityPoint> {
+        points
+            .iter()
+            .map(|&(value, alpha)| OpacityPoint { value, alpha })
+            .collect()
+    }
+}
+
+impl ColorStop {
+    /// Stops from (value, rgb) pairs.
+    pub fn list(stops: &[(f64, [f32; 3])]) -> Vec<ColorStop> {
+        stops
+            .iter()
+            .map(|&(value, rgb)| ColorStop { value, rgb })
+            .collect()
+    }
+}
+
 /// A 1-D transfer function: piecewise-linear opacity and colour over the data's units.
 ///
 /// Both lists are sorted by value; two points with the same value make a step (the

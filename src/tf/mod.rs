@@ -64,30 +64,8 @@ mod tests {
     fn simple() -> TransferFunction {
         TransferFunction {
             name: "test".into(),
-            opacity: vec![
-                OpacityPoint {
-                    value: 0.0,
-                    alpha: 0.0,
-                },
-                OpacityPoint {
-                    value: 100.0,
-                    alpha: 1.0,
-                },
-                OpacityPoint {
-                    value: 200.0,
-                    alpha: 0.5,
-                },
-            ],
-            color: vec![
-                ColorStop {
-                    value: 0.0,
-                    rgb: [0.0, 0.0, 0.0],
-                },
-                ColorStop {
-                    value: 200.0,
-                    rgb: [1.0, 0.5, 0.0],
-                },
-            ],
+            opacity: OpacityPoint::list(&[(0.0, 0.0), (100.0, 1.0), (200.0, 0.5)]),
+            color: ColorStop::list(&[(0.0, [0.0; 3]), (200.0, [1.0, 0.5, 0.0])]),
         }
     }
 
@@ -120,16 +98,7 @@ mod tests {
     #[test]
     fn steps_are_right_continuous() {
         let mut tf = simple();
-        tf.opacity = vec![
-            OpacityPoint {
-                value: 100.0,
-                alpha: 0.0,
-            },
-            OpacityPoint {
-                value: 100.0,
-                alpha: 0.7,
-            },
-        ];
+        tf.opacity = OpacityPoint::list(&[(100.0, 0.0), (100.0, 0.7)]);
         tf.validate().expect("ties are allowed");
         assert_eq!(tf.eval(99.999)[3], 0.0);
         assert_eq!(tf.eval(100.0)[3], 0.7);
@@ -297,16 +266,7 @@ mod tests {
         // One entry per unit; opacity 0 up to 100, rising after. The test reaches two
         // entries past floor(t(hi)): 98.5 → entries ..=100 (all 0), 99 → entry 101.
         let mut tf = simple();
-        tf.opacity = vec![
-            OpacityPoint {
-                value: 100.0,
-                alpha: 0.0,
-            },
-            OpacityPoint {
-                value: 150.0,
-                alpha: 1.0,
-            },
-        ];
+        tf.opacity = OpacityPoint::list(&[(100.0, 0.0), (150.0, 1.0)]);
         let lut = tf.bake(0.0, 200.0, 201);
         assert!(lut.is_transparent_over(-10.0, 50.0));
         assert!(lut.is_transparent_over(98.5, 10.0));

@@ -22,7 +22,8 @@ pub enum Preset {
 }
 
 /// Where a preset's point values live.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 enum Units {
     /// Absolute data units (HU).
     Absolute,
@@ -30,100 +31,30 @@ enum Units {
     Relative,
 }
 
-/// A preset's points before resolving: (value, alpha) and (value, rgb).
+/// A preset's points before resolving: (value, alpha) and (value, rgb), as
+/// `presets.json` lists them.
+#[derive(serde::Deserialize)]
 struct PresetPoints {
+    name: String,
+    /// What the preset shows, and where its numbers come from (for readers of the file).
+    #[serde(rename = "about")]
+    _about: String,
     units: Units,
-    opacity: &'static [(f64, f32)],
-    color: &'static [(f64, [f32; 3])],
+    opacity: Vec<(f64, f32)>,
+    color: Vec<(f64, [f32; 3])>,
 }
 
-/// Bone: nothing below +150 HU (soft tissue, contrast-free blood), a brownish rim at the
-/// transition, ivory and nearly opaque from +400…+500 HU (cortical bone ≈ +700…+1900).
-const CT_BONE: PresetPoints = PresetPoints {
-    units: Units::Absolute,
-    opacity: &[(150.0, 0.0), (300.0, 0.45), (500.0, 0.8), (1500.0, 0.9)],
-    color: &[
-        (150.0, [0.60, 0.30, 0.20]),
-        (300.0, [0.90, 0.80, 0.62]),
-        (1500.0, [1.0, 0.98, 0.94]),
-    ],
-};
+/// The presets' control points, a data file like 3D Slicer's `presets.xml`: one entry
+/// per [`Preset`], by [`Preset::name`].
+const PRESETS_JSON: &str = include_str!("presets.json");
 
-/// Soft tissue: fat (−100…−50 HU) faint yellow, skin and muscle (+20…+80 HU)
-/// semi-transparent red, bone ivory and nearly opaque.
-const CT_SOFT_TISSUE: PresetPoints = PresetPoints {
-    units: Units::Absolute,
-    opacity: &[
-        (-200.0, 0.0),
-        (-60.0, 0.04),
-        (20.0, 0.10),
-        (80.0, 0.20),
-        (250.0, 0.45),
-        (700.0, 0.85),
-        (1500.0, 0.9),
-    ],
-    color: &[
-        (-200.0, [0.80, 0.55, 0.40]),
-        (-60.0, [0.90, 0.72, 0.45]),
-        (20.0, [0.75, 0.30, 0.25]),
-        (80.0, [0.80, 0.25, 0.20]),
-        (250.0, [0.92, 0.78, 0.62]),
-        (700.0, [0.98, 0.95, 0.88]),
-        (1500.0, [1.0, 1.0, 1.0]),
-    ],
-};
-
-/// Vessels (CT angiography): unenhanced tissue (< +100 HU) hidden, contrast
-/// (+150…+400 HU) red, bone (> +600 HU) white.
-const CT_VESSELS: PresetPoints = PresetPoints {
-    units: Units::Absolute,
-    opacity: &[
-        (100.0, 0.0),
-        (150.0, 0.3),
-        (300.0, 0.6),
-        (600.0, 0.85),
-        (1500.0, 0.9),
-    ],
-    color: &[
-        (100.0, [0.45, 0.0, 0.02]),
-        (150.0, [0.70, 0.05, 0.05]),
-        (400.0, [0.85, 0.15, 0.10]),
-        (600.0, [1.0, 0.95, 0.90]),
-        (1500.0, [1.0, 1.0, 1.0]),
-    ],
-};
-
-/// MR T1 brain, as fractions of the value range: background and CSF hidden, a grey to
-/// warm ramp over grey matter, white matter and the bright scalp fat.
-const MR_T1_BRAIN: PresetPoints = PresetPoints {
-    units: Units::Relative,
-    opacity: &[
-        (0.10, 0.0),
-        (0.25, 0.05),
-        (0.45, 0.25),
-        (0.70, 0.50),
-        (1.0, 0.60),
-    ],
-    color: &[
-        (0.10, [0.20, 0.20, 0.20]),
-        (0.25, [0.50, 0.50, 0.50]),
-        (0.45, [0.80, 0.72, 0.62]),
-        (0.70, [0.95, 0.80, 0.60]),
-        (1.0, [1.0, 0.92, 0.80]),
-    ],
-};
-
-/// The CAO paper's evaluation transfer function. Titov et al. §4: "We used a
-/// single-color transfer function for each volume to better highlight the effect of LAO
-/// rendering on the dataset." The paper gives neither the colour nor the opacity curve,
-/// so: one light neutral grey (AO darkening reads best on it) and a linear opacity ramp
-/// from 0 at 15 % of the value range (the ImageVis3D Engine, Beetle and Skeleton
-/// volumes keep their background below that) to 1 at the maximum.
-const CAO_SINGLE_COLOR: PresetPoints = PresetPoints {
-    units: Units::Relative,
-    opacity: &[(0.15, 0.0), (1.0, 1.0)],
-    color: &[(0.15, [0.9, 0.9, 0.9])],
-};
+fn table() -> &'static [PresetPoints] {
+    static TABLE: std::sync::OnceLock<Vec<PresetPoints>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        // Compiled in; `tf::tests` builds and validates every preset from it.
+        serde_json::from_str(PRESETS_JSON).expect("tf/presets.json is valid JSON")
+    })
+}
 
 impl Preset {
     pub const ALL: [Preset; 5] = [
@@ -167,14 +98,12 @@ impl Preset {
         }
     }
 
+    /// The preset's entry in `presets.json`.
     fn points(self) -> &'static PresetPoints {
-        match self {
-            Preset::CtBone => &CT_BONE,
-            Preset::CtSoftTissue => &CT_SOFT_TISSUE,
-            Preset::CtVessels => &CT_VESSELS,
-            Preset::MrT1Brain => &MR_T1_BRAIN,
-            Preset::CaoSingleColor => &CAO_SINGLE_COLOR,
-        }
+        table()
+            .iter()
+            .find(|p| p.name == self.name())
+            .expect("tf/presets.json lists every preset")
     }
 }
 
@@ -216,24 +145,42 @@ impl TransferFunction {
             Units::Absolute => x,
             Units::Relative => lo + (hi - lo) * x,
         };
-        TransferFunction {
+        let mut tf = TransferFunction {
             name: p.name().to_owned(),
-            opacity: points
-                .opacity
-                .iter()
-                .map(|&(v, alpha)| OpacityPoint {
-                    value: place(v),
-                    alpha,
-                })
-                .collect(),
-            color: points
-                .color
-                .iter()
-                .map(|&(v, rgb)| ColorStop {
-                    value: place(v),
-                    rgb,
-                })
-                .collect(),
+            opacity: OpacityPoint::list(&points.opacity),
+            color: ColorStop::list(&points.color),
+        };
+        tf.opacity.iter_mut().for_each(|o| o.value = place(o.value));
+        tf.color.iter_mut().for_each(|c| c.value = place(c.value));
+        tf
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_table_has_each_preset_once_and_each_is_valid() {
+        assert_eq!(table().len(), Preset::ALL.len());
+        let stats = Stats {
+            min: -1024.0,
+            max: 3071.0,
+            mean: 0.0,
+            non_finite: 0,
+            finite: 1,
+        };
+        for p in Preset::ALL {
+            let tf = TransferFunction::preset(p, &stats);
+            tf.validate().unwrap_or_else(|e| panic!("{p}: {e}"));
+            assert_eq!(tf.name, p.name());
         }
+        // CT bone, point for point as documented (absolute HU).
+        let bone = TransferFunction::preset(Preset::CtBone, &stats);
+        let points: Vec<(f64, f32)> = bone.opacity.iter().map(|o| (o.value, o.alpha)).collect();
+        assert_eq!(
+            points,
+            [(150.0, 0.0), (300.0, 0.45), (500.0, 0.8), (1500.0, 0.9)]
+        );
     }
 }

@@ -32,32 +32,13 @@ pub fn parse_header(buf: &[u8; 348], path: &Path) -> Result<(Header, [i16; 3]), 
             "not an Analyze 7.5 header (sizeof_hdr is not 348)",
         ));
     }
-    let i16_at = |at: usize| {
-        let b = [buf[at], buf[at + 1]];
-        if little_endian {
-            i16::from_le_bytes(b)
-        } else {
-            i16::from_be_bytes(b)
-        }
-    };
-    let f32_at = |at: usize| {
-        let b = [buf[at], buf[at + 1], buf[at + 2], buf[at + 3]];
-        f64::from(if little_endian {
-            f32::from_le_bytes(b)
-        } else {
-            f32::from_be_bytes(b)
-        })
-    };
-    let text = |at: usize, n: usize| {
-        let b = &buf[at..at + n];
-        let end = b.iter().position(|&c| c == 0).unwrap_or(n);
-        String::from_utf8_lossy(&b[..end]).trim().to_owned()
-    };
+    let f = super::fields::Fields::new(buf, little_endian);
+    let f32_at = |at: usize| f64::from(f.f32(at));
     let header = Header {
         version: 1,
         little_endian,
-        dim: std::array::from_fn(|k| i64::from(i16_at(40 + 2 * k))),
-        datatype: i16_at(70),
+        dim: std::array::from_fn(|k| i64::from(f.i16(40 + 2 * k))),
+        datatype: f.i16(70),
         pixdim: std::array::from_fn(|k| f32_at(76 + 4 * k)),
         vox_offset: f32_at(108),
         scl_slope: f32_at(112),
@@ -67,11 +48,11 @@ pub fn parse_header(buf: &[u8; 348], path: &Path) -> Result<(Header, [i16; 3]), 
         quatern: [0.0; 3],
         qoffset: [0.0; 3],
         srow: [[0.0; 4]; 3],
-        descrip: text(148, 80),
+        descrip: f.text(148, 80),
         intent_code: 0,
         single_file: false,
     };
-    let origin = [i16_at(253), i16_at(255), i16_at(257)];
+    let origin = [f.i16(253), f.i16(255), f.i16(257)];
     Ok((header, origin))
 }
 
@@ -101,10 +82,13 @@ pub fn load(
     header_path: &Path,
     image_path: &Path,
     buf: &[u8; 348],
-    max_bytes: u64,
-    warnings: &mut Vec<String>,
-    progress: &mut dyn FnMut(u64, u64),
+    reading: super::Reading<'_>,
 ) -> Result<Volume, VolumeError> {
+    let super::Reading {
+        max_bytes,
+        warnings,
+        progress,
+    } = reading;
     let (h, origin) = parse_header(buf, header_path)?;
     let lay: Layout = nifti::layout(&h, 0, header_path, max_bytes)?;
     if lay.frames > 1 {

@@ -2,7 +2,7 @@
 
 use super::pvm::{self, DdsVersion, PvmSamples, PvmVersion, PvmVoxels};
 use super::raw::{self, RawOverrides};
-use super::{Volume, fmt_dims};
+use super::{Reading, Volume, fmt_dims};
 use super::{VolumeError, VoxelData, analyze, dicom, fmt_bytes, memory_budget, nifti, nrrd};
 use std::fmt;
 use std::io::Read;
@@ -268,6 +268,11 @@ fn load_kind(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Loaded, VolumeError> {
     let mut warnings = Vec::new();
+    let reading = Reading {
+        max_bytes,
+        warnings: &mut warnings,
+        progress,
+    };
     match kind {
         Kind::Dicom => {
             if opts.frame != 0 {
@@ -276,13 +281,7 @@ fn load_kind(
                     "DICOM: --frame does not apply (frames of a multi-frame file are slices); use --series to choose a series",
                 ));
             }
-            let (volume, info, data_path) = dicom::load(
-                path,
-                opts.series.as_deref(),
-                max_bytes,
-                &mut warnings,
-                progress,
-            )?;
+            let (volume, info, data_path) = dicom::load(path, opts.series.as_deref(), reading)?;
             Ok(Loaded {
                 volume,
                 format: Format::Dicom {
@@ -296,8 +295,7 @@ fn load_kind(
         Kind::Nrrd => {
             let h = nrrd::read_header_file(path)?;
             let detached = !h.data_files.is_empty();
-            let (volume, data_path) =
-                nrrd::load(path, opts.frame, max_bytes, &mut warnings, progress)?;
+            let (volume, data_path) = nrrd::load(path, opts.frame, reading)?;
             Ok(Loaded {
                 volume,
                 format: Format::Nrrd {
@@ -317,14 +315,7 @@ fn load_kind(
                     "Analyze 7.5: --frame is not supported; frame 0 is read",
                 ));
             }
-            let volume = analyze::load(
-                &paths.header,
-                &paths.image,
-                &buf,
-                max_bytes,
-                &mut warnings,
-                progress,
-            )?;
+            let volume = analyze::load(&paths.header, &paths.image, &buf, reading)?;
             Ok(Loaded {
                 volume,
                 format: Format::Analyze {
@@ -335,8 +326,7 @@ fn load_kind(
             })
         }
         Kind::Nifti => {
-            let (volume, header) =
-                nifti::load(path, opts.frame, max_bytes, &mut warnings, progress)?;
+            let (volume, header) = nifti::load(path, opts.frame, reading)?;
             let paths = nifti::resolve_paths(path);
             let gzip = is_gzip(&paths.image);
             let pair = paths.image != paths.header;

@@ -13,6 +13,7 @@
 pub mod analyze;
 pub mod demo;
 pub mod dicom;
+mod fields;
 pub mod format;
 pub mod gzip;
 pub mod nifti;
@@ -31,6 +32,34 @@ pub use raw::{Endian, RawOverrides, RawSpec};
 pub use stats::{Histogram, Stats};
 pub(crate) use voxels::with_voxels;
 pub use voxels::{VoxelData, VoxelType};
+
+/// What every format's loader is given besides the file: the size limit, where
+/// non-fatal problems go and how far it has read.
+pub struct Reading<'a> {
+    /// Refuse more voxel bytes than this.
+    pub max_bytes: u64,
+    pub warnings: &'a mut Vec<String>,
+    /// (bytes read, bytes in all)
+    pub progress: &'a mut dyn FnMut(u64, u64),
+}
+
+/// The voxel `[x, y, z]` at linear index `i` (x fastest) of a volume of `dims`.
+pub fn voxel_of(i: usize, dims: [usize; 3]) -> [usize; 3] {
+    [
+        i % dims[0],
+        (i / dims[0]) % dims[1],
+        i / (dims[0] * dims[1]),
+    ]
+}
+
+impl std::fmt::Debug for Reading<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Reading")
+            .field("max_bytes", &self.max_bytes)
+            .field("warnings", &self.warnings)
+            .finish_non_exhaustive()
+    }
+}
 
 /// Everything that can go wrong while reading or writing a volume file.
 ///

@@ -190,53 +190,23 @@ fn parse_nifti2(buf: &[u8; 540], little_endian: bool, path: &Path) -> Result<Hea
             ));
         }
     };
-    let bytes = |at: usize, n: usize| -> &[u8] { &buf[at..at + n] };
-    let i16_at = |at| {
-        let b = [buf[at], buf[at + 1]];
-        if little_endian {
-            i16::from_le_bytes(b)
-        } else {
-            i16::from_be_bytes(b)
-        }
-    };
-    let i32_at = |at: usize| {
-        let b: [u8; 4] = std::array::from_fn(|k| buf[at + k]);
-        if little_endian {
-            i32::from_le_bytes(b)
-        } else {
-            i32::from_be_bytes(b)
-        }
-    };
-    let i64_at = |at: usize| {
-        let b: [u8; 8] = std::array::from_fn(|k| buf[at + k]);
-        if little_endian {
-            i64::from_le_bytes(b)
-        } else {
-            i64::from_be_bytes(b)
-        }
-    };
-    let f64_at = |at: usize| f64::from_bits(i64_at(at) as u64);
-    let text = |at, n| {
-        let b = bytes(at, n);
-        let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
-        String::from_utf8_lossy(&b[..end]).trim().to_owned()
-    };
+    let f = super::fields::Fields::new(buf, little_endian);
     Ok(Header {
         version: 2,
         little_endian,
-        dim: std::array::from_fn(|k| i64_at(16 + 8 * k)),
-        datatype: i16_at(12),
-        pixdim: std::array::from_fn(|k| f64_at(104 + 8 * k)),
-        vox_offset: i64_at(168) as f64,
-        scl_slope: f64_at(176),
-        scl_inter: f64_at(184),
-        qform_code: i32_at(344),
-        sform_code: i32_at(348),
-        quatern: [f64_at(352), f64_at(360), f64_at(368)],
-        qoffset: [f64_at(376), f64_at(384), f64_at(392)],
-        srow: std::array::from_fn(|r| std::array::from_fn(|c| f64_at(400 + 32 * r + 8 * c))),
-        descrip: text(240, 80),
-        intent_code: i32_at(504),
+        dim: std::array::from_fn(|k| f.i64(16 + 8 * k)),
+        datatype: f.i16(12),
+        pixdim: std::array::from_fn(|k| f.f64(104 + 8 * k)),
+        vox_offset: f.i64(168) as f64,
+        scl_slope: f.f64(176),
+        scl_inter: f.f64(184),
+        qform_code: f.i32(344),
+        sform_code: f.i32(348),
+        quatern: [f.f64(352), f.f64(360), f.f64(368)],
+        qoffset: [f.f64(376), f.f64(384), f.f64(392)],
+        srow: std::array::from_fn(|r| std::array::from_fn(|c| f.f64(400 + 32 * r + 8 * c))),
+        descrip: f.text(240, 80),
+        intent_code: f.i32(504),
         single_file,
     })
 }
@@ -633,10 +603,13 @@ pub fn open_maybe_gz(path: &Path) -> Result<Opened, VolumeError> {
 pub fn load(
     path: &Path,
     frame: usize,
-    max_bytes: u64,
-    warnings: &mut Vec<String>,
-    progress: &mut dyn FnMut(u64, u64),
+    reading: super::Reading<'_>,
 ) -> Result<(Volume, Header), VolumeError> {
+    let super::Reading {
+        max_bytes,
+        warnings,
+        progress,
+    } = reading;
     let paths = resolve_paths(path);
     let (mut hr, header_len, header_bound) = open_maybe_gz(&paths.header)?;
     let h = read_header(&mut hr, &paths.header)?;
@@ -805,6 +778,9 @@ pub fn encode_header(volume: &Volume) -> Vec<u8> {
         .map(|(_, t)| t.as_bytes().to_vec())
         .unwrap_or_default();
     descrip.truncate(79);
+    // descrip (80 bytes, NUL-padded) and aux_file (24, empty): the same in both versions.
+    let mut descrip_aux = [0u8; 80 + 24];
+    descrip_aux[..descrip.len()].copy_from_slice(&descrip);
     let pixdim = [
         1.0,
         volume.spacing[0] as f64,
@@ -840,10 +816,7 @@ pub fn encode_header(volume: &Volume) -> Vec<u8> {
         b.extend(s.inter.to_le_bytes());
         b.extend([0u8; 8 * 4]); // cal_max, cal_min, slice_duration, toffset
         b.extend([0u8; 16]); // slice_start, slice_end
-        let mut d = [0u8; 80];
-        d[..descrip.len()].copy_from_slice(&descrip);
-        b.extend(d);
-        b.extend([0u8; 24]); // aux_file
+        b.extend(descrip_aux);
         b.extend(0i32.to_le_bytes()); // qform_code
         b.extend(sform_code.to_le_bytes());
         b.extend([0u8; 48]); // quatern_b..d, qoffset_x..z
@@ -875,10 +848,7 @@ pub fn encode_header(volume: &Volume) -> Vec<u8> {
         b.push(2); // xyzt_units: mm
         b.extend([0u8; 16]); // cal_max, cal_min, slice_duration, toffset
         b.extend([0u8; 8]); // glmax, glmin
-        let mut d = [0u8; 80];
-        d[..descrip.len()].copy_from_slice(&descrip);
-        b.extend(d);
-        b.extend([0u8; 24]); // aux_file
+        b.extend(descrip_aux);
         b.extend(0i16.to_le_bytes()); // qform_code
         b.extend((sform_code as i16).to_le_bytes());
         b.extend([0u8; 24]); // quatern_b..d, qoffset_x..z

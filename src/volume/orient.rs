@@ -152,9 +152,7 @@ impl Volume {
             }
         }
         let gather = |i: usize| -> usize {
-            let x = i % dims[0];
-            let y = (i / dims[0]) % dims[1];
-            let z = i / (dims[0] * dims[1]);
+            let [x, y, z] = super::voxel_of(i, dims);
             (start + x as isize * step[0] + y as isize * step[1] + z as isize * step[2]) as usize
         };
         let data = with_voxels!(&self.data, v => {

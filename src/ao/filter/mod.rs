@@ -498,8 +498,8 @@ struct GpuStats {
 
 impl crate::gpu::Stage for FilterGpu {
     fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let box_module = shaders::module(device, "box_stats.wgsl")?;
-        let map_module = shaders::module(device, "ambient_maps.wgsl")?;
+        let [box_module, map_module] =
+            shaders::modules(device, ["box_stats.wgsl", "ambient_maps.wgsl"])?;
         let pipeline = |label, module| compute_pipeline(device, label, module, "main", None);
         validated(device, "Filter::new", || FilterGpu {
             box_pipeline: pipeline("Filter::box_stats", &box_module),

@@ -187,16 +187,17 @@ impl FastAoArgs {
         if self.radius_mm {
             ao.radius_unit = volao::ao::filter::RadiusUnit::Mm;
         }
-        if let Some(s) = self.statistic {
-            ao.statistic = s;
-        }
-        if let Some(c) = self.cones {
-            ao.cones = c;
-        }
-        if let Some(p) = self.cone_preset {
-            ao.cone_preset = p;
-        }
+        set(&mut ao.statistic, self.statistic);
+        set(&mut ao.cones, self.cones);
+        set(&mut ao.cone_preset, self.cone_preset);
         Ok(())
+    }
+}
+
+/// Overrides `setting` with a flag's value when the flag was given.
+pub fn set<T>(setting: &mut T, flag: Option<T>) {
+    if let Some(v) = flag {
+        *setting = v;
     }
 }
 
@@ -264,18 +265,10 @@ pub struct VaoArgs {
 impl VaoArgs {
     /// Applies the flags to `s` and checks the result.
     pub fn apply(&self, s: &mut volao::ao::vao::VaoSettings) -> Result<()> {
-        if let Some(n) = self.vao_directions {
-            s.directions = n;
-        }
-        if let Some(n) = self.vao_samples {
-            s.samples = n;
-        }
-        if let Some(r) = self.vao_radius {
-            s.r_max_mm = r;
-        }
-        if let Some(t) = self.vao_threshold {
-            s.v_thres = t;
-        }
+        set(&mut s.directions, self.vao_directions);
+        set(&mut s.samples, self.vao_samples);
+        set(&mut s.r_max_mm, self.vao_radius);
+        set(&mut s.v_thres, self.vao_threshold);
         if let Some((value, tolerance)) = self.vao_iso {
             s.isosurface = Some(volao::ao::vao::Isosurface { value, tolerance });
         }

@@ -4,7 +4,7 @@
 //! volume file. Flags given on the command line are applied onto it (they override the
 //! scene; flags left out keep it), and `--save-scene` writes exactly the scene rendered.
 
-use crate::args::{RenderArgs, parse_background};
+use crate::args::{RenderArgs, parse_background, set};
 use crate::progress::{load_with_bar, slice_bar};
 use anyhow::{Result, bail};
 use volao::ao::{AoMethod, AoSettings};
@@ -188,9 +188,7 @@ impl RenderArgs {
             }
             settings.ambient = k;
         }
-        if let Some(sh) = self.shading {
-            settings.shading = sh;
-        }
+        set(&mut settings.shading, self.shading);
         if let Some(step) = self.step {
             if step.is_nan() || step <= 0.0 || step.is_infinite() {
                 bail!("--step must be positive (voxels between samples)");
@@ -204,12 +202,8 @@ impl RenderArgs {
     /// The AO method and its parameters, the clip shapes and the meshes.
     fn apply_ao(&self, scene: &mut Scene) -> Result<()> {
         let ao = &mut scene.ambient_occlusion;
-        if let Some(m) = self.ao {
-            ao.method = m;
-        }
-        if let Some(r) = self.rays {
-            ao.rays = r;
-        }
+        set(&mut ao.method, self.ao);
+        set(&mut ao.rays, self.rays);
         if let Some(m) = self.samples {
             if m == 0 {
                 bail!("--samples must be at least 1");

@@ -26,7 +26,7 @@ pub use lengths::*;
 use series::choose;
 pub use series::*;
 
-use crate::volume::{Scaling, Volume, VolumeError, VoxelData, fmt_bytes, fmt_dims};
+use crate::volume::{Reading, Scaling, Volume, VolumeError, VoxelData, fmt_bytes, fmt_dims};
 use dicom_dictionary_std::tags;
 use dicom_object::DefaultDicomObject;
 use dicom_pixeldata::PixelDecoder;
@@ -46,10 +46,9 @@ pub struct DicomInfo {
 pub fn load(
     path: &Path,
     series_wanted: Option<&str>,
-    max_bytes: u64,
-    warnings: &mut Vec<String>,
-    progress: &mut dyn FnMut(u64, u64),
+    mut reading: Reading<'_>,
 ) -> Result<(Volume, DicomInfo, PathBuf), VolumeError> {
+    let warnings = &mut *reading.warnings;
     let infos: Vec<FileInfo> = if path.is_dir() {
         let files = list_folder(path)?;
         if files.is_empty() {
@@ -98,18 +97,10 @@ pub fn load(
         }
         decode_object(&obj, &infos[k])
     };
-    let (volume, info, k) = assemble(
-        &infos,
-        series_wanted,
-        path,
-        max_bytes,
-        warnings,
-        &decode,
-        progress,
-    )?;
+    let (volume, info, k) = assemble(&infos, series_wanted, path, &decode, &mut reading)?;
     let padded = padded.into_inner();
     if padded > 0 {
-        warnings.push(format!(
+        reading.warnings.push(format!(
             "{padded} {} bytes after the pixel data that are not DICOM (padding?); ignored",
             if padded == 1 {
                 "file carries"
@@ -221,15 +212,12 @@ pub fn load_bytes(
         return Err(VolumeError::invalid(path, "no readable DICOM images found"));
     }
     let decode = |k: usize| decode_object(&objs[k], &infos[k]);
-    let (volume, _, _) = assemble(
-        &infos,
-        series_wanted,
-        path,
+    let mut reading = Reading {
         max_bytes,
         warnings,
-        &decode,
-        &mut |_, _| {},
-    )?;
+        progress: &mut |_, _| {},
+    };
+    let (volume, _, _) = assemble(&infos, series_wanted, path, &decode, &mut reading)?;
     Ok(volume)
 }
 
@@ -239,11 +227,12 @@ fn assemble(
     infos: &[FileInfo],
     series_wanted: Option<&str>,
     path: &Path,
-    max_bytes: u64,
-    warnings: &mut Vec<String>,
     decode_file: &(dyn Fn(usize) -> Result<Decoded, VolumeError> + Sync),
-    progress: &mut dyn FnMut(u64, u64),
+    reading: &mut Reading<'_>,
 ) -> Result<(Volume, DicomInfo, usize), VolumeError> {
+    let max_bytes = reading.max_bytes;
+    let warnings = &mut *reading.warnings;
+    let progress = &mut *reading.progress;
     let series = group_series(infos, warnings);
     let chosen = choose(&series, series_wanted, path)?;
     let files_used: std::collections::BTreeSet<usize> =

@@ -63,8 +63,22 @@ pub(super) fn invalid(path: &Path, m: impl Into<String>) -> VolumeError {
 }
 
 /// Type names as teem spells them.
-pub(super) fn parse_type(s: &str) -> Option<Result<VoxelType, &'static str>> {
-    Some(Ok(match s {
+/// Why a field's value was refused.
+enum Refused {
+    /// NRRD knows the value but volao does not read it: the whole message.
+    Unsupported(String),
+    /// Not a value of the field: what was expected.
+    Unknown(&'static str),
+}
+
+/// A NRRD `type`, in any case.
+fn parse_type(s: &str) -> Result<VoxelType, Refused> {
+    let unsupported = |what| {
+        Refused::Unsupported(format!(
+            "NRRD type {s} ({what}) is not supported (int8 … int32, uint8 … uint32, float, double)"
+        ))
+    };
+    Ok(match s.to_ascii_lowercase().as_str() {
         "signed char" | "int8" | "int8_t" => VoxelType::I8,
         "uchar" | "unsigned char" | "uint8" | "uint8_t" => VoxelType::U8,
         "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => {
@@ -88,10 +102,26 @@ pub(super) fn parse_type(s: &str) -> Option<Result<VoxelType, &'static str>> {
         | "unsigned long long"
         | "unsigned long long int"
         | "uint64"
-        | "uint64_t" => return Some(Err("64-bit integer")),
-        "block" => return Some(Err("block")),
-        _ => return None,
-    }))
+        | "uint64_t" => return Err(unsupported("64-bit integer")),
+        "block" => return Err(unsupported("block")),
+        _ => return Err(Refused::Unknown("a NRRD type (int8 … double)")),
+    })
+}
+
+/// A NRRD `encoding` (lower case).
+fn parse_encoding(s: &str) -> Result<Encoding, Refused> {
+    Ok(match s {
+        "raw" => Encoding::Raw,
+        "gz" | "gzip" => Encoding::Gzip,
+        "txt" | "text" | "ascii" => Encoding::Ascii,
+        "hex" => Encoding::Hex,
+        "bz2" | "bzip2" | "zstd" => {
+            return Err(Refused::Unsupported(format!(
+                "NRRD encoding {s} is not supported (raw, gzip, ascii, hex); re-save with gzip"
+            )));
+        }
+        _ => return Err(Refused::Unknown("an encoding (raw, gzip, ascii, hex)")),
+    })
 }
 
 pub(super) fn parse_vector(s: &str) -> Option<[f64; 3]> {
@@ -205,21 +235,12 @@ pub fn parse_header(text: &str, path: &Path) -> Result<Header, VolumeError> {
                 ),
             )
         };
+        let refused = |r| match r {
+            Refused::Unsupported(message) => VolumeError::unsupported(path, message),
+            Refused::Unknown(what) => bad(what),
+        };
         match field.as_str() {
-            "type" => {
-                ty = Some(match parse_type(&value.to_ascii_lowercase()) {
-                    Some(Ok(t)) => t,
-                    Some(Err(what)) => {
-                        return Err(VolumeError::unsupported(
-                            path,
-                            format!(
-                                "NRRD type {value} ({what}) is not supported (int8 … int32, uint8 … uint32, float, double)"
-                            ),
-                        ));
-                    }
-                    None => return Err(bad("a NRRD type (int8 … double)")),
-                })
-            }
+            "type" => ty = Some(parse_type(value).map_err(refused)?),
             "dimension" => {
                 dimension = Some(
                     value
@@ -241,21 +262,7 @@ pub fn parse_header(text: &str, path: &Path) -> Result<Header, VolumeError> {
                 sizes = Some(v);
             }
             "encoding" => {
-                encoding = Some(match value.to_ascii_lowercase().as_str() {
-                    "raw" => Encoding::Raw,
-                    "gz" | "gzip" => Encoding::Gzip,
-                    "txt" | "text" | "ascii" => Encoding::Ascii,
-                    "hex" => Encoding::Hex,
-                    e @ ("bz2" | "bzip2" | "zstd") => {
-                        return Err(VolumeError::unsupported(
-                            path,
-                            format!(
-                                "NRRD encoding {e} is not supported (raw, gzip, ascii, hex); re-save with gzip"
-                            ),
-                        ));
-                    }
-                    _ => return Err(bad("an encoding (raw, gzip, ascii, hex)")),
-                })
+                encoding = Some(parse_encoding(&value.to_ascii_lowercase()).map_err(refused)?)
             }
             "endian" => {
                 little_endian = Some(match value.to_ascii_lowercase().as_str() {

@@ -328,10 +328,9 @@ fn open_part(
 pub fn load(
     path: &Path,
     frame: usize,
-    max_bytes: u64,
-    warnings: &mut Vec<String>,
-    progress: &mut dyn FnMut(u64, u64),
+    reading: super::Reading<'_>,
 ) -> Result<(Volume, PathBuf), VolumeError> {
+    let max_bytes = reading.max_bytes;
     let h = read_header_file(path)?;
     let lay = layout(&h, frame, path, max_bytes)?;
     let parts = data_paths(&h, path);
@@ -396,7 +395,7 @@ pub fn load(
                 for (c, chunk) in dst.chunks_mut(4 << 20).enumerate() {
                     read_all(&mut r, chunk, p, &what, lo - p0 + (c as u64) * (4 << 20))?;
                     let done = (lo - start) + (c as u64 + 1) * (4 << 20);
-                    progress(done.min(lay.frame_bytes), lay.frame_bytes);
+                    (reading.progress)(done.min(lay.frame_bytes), lay.frame_bytes);
                 }
                 if h.encoding == Encoding::Gzip {
                     finish_gzip(&mut r, p)?;
@@ -431,19 +430,30 @@ pub fn load(
             )?;
         }
     }
-    let (spacing, orientation) = geometry(&h, &lay, path, warnings);
-    let mut volume = Volume {
+    Ok((volume(&h, &lay, data, path, reading.warnings), last_path))
+}
+
+/// The volume of decoded `data`, with the header's geometry and content.
+fn volume(
+    h: &Header,
+    lay: &Layout,
+    data: VoxelData,
+    path: &Path,
+    warnings: &mut Vec<String>,
+) -> Volume {
+    let (spacing, orientation) = geometry(h, lay, path, warnings);
+    Volume {
         dims: lay.dims,
         spacing,
         data,
         scaling: super::Scaling::IDENTITY,
         orientation,
-        descriptions: Vec::new(),
-    };
-    if let Some(c) = &h.content {
-        volume.descriptions.push(("content".into(), c.clone()));
+        descriptions: h
+            .content
+            .iter()
+            .map(|c| ("content".into(), c.clone()))
+            .collect(),
     }
-    Ok((volume, last_path))
 }
 
 /// Parses ascii numbers or hex bytes into `data`, starting at value `first`.
@@ -617,15 +627,7 @@ pub fn load_bytes(bytes: &[u8], max_bytes: u64, path: &Path) -> Result<Volume, V
             decode_text(&h, body, 0, &mut data, path, lay.frame_bytes)?;
         }
     }
-    let (spacing, orientation) = geometry(&h, &lay, path, &mut warnings);
-    Ok(Volume {
-        dims: lay.dims,
-        spacing,
-        data,
-        scaling: super::Scaling::IDENTITY,
-        orientation,
-        descriptions: Vec::new(),
-    })
+    Ok(volume(&h, &lay, data, path, &mut warnings))
 }
 
 /// Writes an attached, gzip-compressed `.nrrd` in LPS space (as 3D Slicer writes).

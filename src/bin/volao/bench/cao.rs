@@ -11,7 +11,7 @@ use volao::ao::rays::RaySet;
 use volao::clip::{ClipShape, Shape};
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::texels::{UploadLimits, VolumeTexels};
-use volao::render::{Camera, Frame, RenderSettings, Shading};
+use volao::render::{Frame, RenderSettings, Shading};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, RawOverrides, VoxelType};
 
@@ -91,16 +91,7 @@ impl Bench {
             rc,
             vol,
             tf,
-            frame: Frame {
-                camera: Camera {
-                    azimuth_deg: 30.0,
-                    elevation_deg: 20.0,
-                    ..Default::default()
-                },
-                settings,
-                width: size,
-                height: size,
-            },
+            frame: super::frame(20.0, settings, size),
             resolution,
         })
     }

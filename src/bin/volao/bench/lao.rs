@@ -43,7 +43,7 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     use volao::ao::rays::RaySet;
     use volao::render::gpu::{GpuVolume, RayCaster};
     use volao::render::texels::{UploadLimits, VolumeTexels};
-    use volao::render::{Camera, Frame, RenderSettings, Shading};
+    use volao::render::{RenderSettings, Shading};
 
     let gpu = volao::gpu::request_device()?;
     let lao = gpu.stage::<LaoGpu>()?;
@@ -54,20 +54,15 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     let lut = lao_lut(&tf, &vol.texels);
     let m = args.samples;
     // The AO term alone, as the paper's "LAO rendering": unshaded, k = 1.
-    let frame = Frame {
-        camera: Camera {
-            azimuth_deg: 30.0,
-            elevation_deg: 25.0,
-            ..Default::default()
-        },
-        settings: RenderSettings {
+    let frame = super::frame(
+        25.0,
+        RenderSettings {
             shading: Shading::None,
             ambient: 1.0,
             ..Default::default()
         },
-        width: args.size,
-        height: args.size,
-    };
+        args.size,
+    );
     let voxels = vol.texels.dims.iter().product::<usize>() as f64;
     let run = |vol: &GpuVolume, set: RaySet| -> Result<(Vec<f32>, f64)> {
         let start = Instant::now();

@@ -46,7 +46,6 @@ pub fn run(command: &BenchCommand) -> Result<()> {
     }
 }
 
-/// The median of `xs` (the upper one of an even count).
 /// The Engine (`raw/engine.raw` under `data`) in RAS order with the CAO paper's
 /// single-colour transfer function: the volume of the paper's tables.
 pub fn engine_volume(
@@ -61,9 +60,29 @@ pub fn engine_volume(
     Ok((volume, tf))
 }
 
+/// The median of `xs` (the upper one of an even count).
 pub fn median(mut xs: Vec<f64>) -> f64 {
     xs.sort_by(f64::total_cmp);
     xs[xs.len() / 2]
+}
+
+/// The benchmarks' view: a square image of `size` pixels from azimuth 30° and
+/// `elevation_deg`, at the default distance.
+pub fn frame(
+    elevation_deg: f32,
+    settings: volao::render::RenderSettings,
+    size: u32,
+) -> volao::render::Frame {
+    volao::render::Frame {
+        camera: volao::render::Camera {
+            azimuth_deg: 30.0,
+            elevation_deg,
+            ..Default::default()
+        },
+        settings,
+        width: size,
+        height: size,
+    }
 }
 
 /// Root-mean-square difference of two AO volumes.

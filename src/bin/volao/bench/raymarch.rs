@@ -8,10 +8,10 @@ use std::time::Instant;
 use volao::ao::lao::{LaoGpu, Rays, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::vao::{VaoGpu, VaoInputs, VaoSettings};
+use volao::render::RenderSettings;
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::shadow::{LightGpu, light_direction, light_lut};
 use volao::render::texels::{UploadLimits, VolumeTexels};
-use volao::render::{Camera, Frame, RenderSettings};
 use volao::tf::TransferFunction;
 
 /// Arguments of `volao bench raymarch`.
@@ -42,20 +42,46 @@ pub fn raymarch_bench(args: &RaymarchBenchArgs) -> Result<()> {
     let (volume, tf) = super::engine_volume(&args.data)?;
 
     let kernel = gpu.stage::<VaoGpu>()?;
+    let bench = Bench {
+        gpu: &gpu,
+        kernel: &kernel,
+        volume: &volume,
+        tf: &tf,
+        args,
+    };
     if !args.frames_only {
-        accuracy(&gpu, &kernel, &volume, &tf, args)?;
+        accuracy(bench)?;
     }
-    frames(&gpu, &kernel, &volume, &tf, args)
+    frames(bench)
+}
+
+/// What both parts of the benchmark run on.
+#[derive(Clone, Copy)]
+struct Bench<'a> {
+    gpu: &'a volao::gpu::Gpu,
+    kernel: &'a VaoGpu,
+    volume: &'a volao::volume::Volume,
+    tf: &'a TransferFunction,
+    args: &'a RaymarchBenchArgs,
+}
+
+type Parts<'a> = (
+    &'a volao::gpu::Gpu,
+    &'a VaoGpu,
+    &'a volao::volume::Volume,
+    &'a TransferFunction,
+    &'a RaymarchBenchArgs,
+);
+
+impl<'a> Bench<'a> {
+    fn parts(self) -> Parts<'a> {
+        (self.gpu, self.kernel, self.volume, self.tf, self.args)
+    }
 }
 
 /// Accuracy: positional AO (1 − A_P) against 512-ray LAO (A), on a halved engine.
-fn accuracy(
-    gpu: &volao::gpu::Gpu,
-    kernel: &VaoGpu,
-    volume: &volao::volume::Volume,
-    tf: &TransferFunction,
-    args: &RaymarchBenchArgs,
-) -> Result<()> {
+fn accuracy(bench: Bench) -> Result<()> {
+    let (gpu, kernel, volume, tf, args) = bench.parts();
     let small = VolumeTexels::new(
         volume,
         UploadLimits {
@@ -126,24 +152,10 @@ fn accuracy(
 }
 
 /// Frame times on the full engine: no AO, precomputed and live positional AO, shadows.
-fn frames(
-    gpu: &volao::gpu::Gpu,
-    kernel: &VaoGpu,
-    volume: &volao::volume::Volume,
-    tf: &TransferFunction,
-    args: &RaymarchBenchArgs,
-) -> Result<()> {
+fn frames(bench: Bench) -> Result<()> {
+    let (gpu, kernel, volume, tf, args) = bench.parts();
     let rc = RayCaster::new(&gpu.device)?;
-    let frame = Frame {
-        camera: Camera {
-            azimuth_deg: 30.0,
-            elevation_deg: 20.0,
-            ..Default::default()
-        },
-        settings: RenderSettings::default(),
-        width: args.size,
-        height: args.size,
-    };
+    let frame = super::frame(20.0, RenderSettings::default(), args.size);
     let time_frames = |vol: &GpuVolume| -> Result<f64> {
         rc.render(gpu, vol, &frame, None)?;
         let mut times = Vec::new();

@@ -51,7 +51,7 @@ fn box_steps(
 /// `volao bench render`: frame times of the GPU ray caster.
 pub fn render_bench(args: &RenderBenchArgs) -> Result<()> {
     use volao::render::gpu::{GpuVolume, RayCaster};
-    use volao::render::{Camera, Frame, RenderSettings, Shading};
+    use volao::render::{RenderSettings, Shading};
     use volao::tf::{Preset, TransferFunction};
 
     let gpu = volao::gpu::request_device()?;
@@ -74,20 +74,12 @@ pub fn render_bench(args: &RenderBenchArgs) -> Result<()> {
         for size in [512u32, 1024] {
             for shading in [Shading::None, Shading::Phong] {
                 for skipping in [false, true] {
-                    let frame = Frame {
-                        camera: Camera {
-                            azimuth_deg: 30.0,
-                            elevation_deg: 20.0,
-                            ..Default::default()
-                        },
-                        settings: RenderSettings {
-                            shading,
-                            empty_space_skipping: skipping,
-                            ..Default::default()
-                        },
-                        width: size,
-                        height: size,
+                    let settings = RenderSettings {
+                        shading,
+                        empty_space_skipping: skipping,
+                        ..Default::default()
                     };
+                    let frame = super::frame(20.0, settings, size);
                     rc.render(&gpu, &vol, &frame, None)?;
                     let mut times = Vec::new();
                     for _ in 0..args.runs.max(1) {
