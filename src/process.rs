@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-/// A private runtime dir (`$TMPDIR/volao-runtime-<uid-or-pid>`, mode 0700) to offer
+/// A private runtime dir (`$TMPDIR/volao-runtime-<user>`, by `$USER` or the uid, mode 0700) to offer
 /// Mesa when `XDG_RUNTIME_DIR` is unset or unusable; `None` when the current one is fine
 /// or none could be made. Setting the variable is left to `main`, before any thread.
 ///
@@ -15,7 +15,12 @@ pub fn private_runtime_dir() -> Option<PathBuf> {
     {
         return None;
     }
-    let owner = std::env::var("USER").unwrap_or_else(|_| std::process::id().to_string());
+    // One directory per user, reused by every run (a per-process name would leave one
+    // empty directory behind per run).
+    let owner = std::env::var("USER")
+        .ok()
+        .or_else(uid)
+        .unwrap_or_else(|| std::process::id().to_string());
     let name: String = owner
         .chars()
         .filter(|c| c.is_ascii_alphanumeric() || *c == '_' || *c == '-')
@@ -38,6 +43,19 @@ pub fn private_runtime_dir() -> Option<PathBuf> {
         }
     }
     Some(dir)
+}
+
+/// The real user id, where the OS shows it (`/proc/self` belongs to it on Linux).
+fn uid() -> Option<String> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        std::fs::metadata("/proc/self")
+            .ok()
+            .map(|m| m.uid().to_string())
+    }
+    #[cfg(not(unix))]
+    None
 }
 
 /// Makes a panic caused by writing to a closed stdout (`println!` after the reader of a
