@@ -14,7 +14,14 @@ struct Params {
     step: vec4<f32>,      // dt (mm), jitter on, max steps, skipping on
     image: vec4<u32>,     // width, height, tile x0, tile y0
     grid: vec4<u32>,      // occupancy grid dims, block edge (voxels)
+    mode: vec4<f32>,      // render mode (0 composite … 4 iso), u = norm · y + z
 }
+
+const MODE_COMPOSITE: u32 = 0u;
+const MODE_MIP: u32 = 1u;
+const MODE_MINIP: u32 = 2u;
+const MODE_AVERAGE: u32 = 3u;
+const MODE_ISO: u32 = 4u;
 
 @group(0) @binding(0) var<uniform> p: Params;
 @group(0) @binding(1) var volume: texture_3d<f32>;
@@ -109,7 +116,10 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
     ) / (2.0 * p.voxel_uvw.w);
     // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
     let strength = length(g) * abs(p.lut_map.x) * p.voxel_uvw.w * p.lut_map.w;
-    let edge = clamp(strength, 0.0, 1.0);
+    var edge = clamp(strength, 0.0, 1.0);
+    if u32(p.mode.x) == MODE_ISO && strength > 0.0 {
+        edge = 1.0;  // an isosurface is a surface however soft its gradient
+    }
     var diffuse = 1.0;
     var specular = 0.0;
     if strength > 0.0 && shadows {
@@ -127,6 +137,86 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
         specular = p.shading.y * pow(n_dot_v, p.shading.z) * edge;
     }
     return rgb * (k * ao + (1.0 - k) * diffuse * lit) + vec3<f32>(specular * lit);
+}
+
+// The mode's value at a sample: projections map the TF's window to [0, 1]; iso puts
+// the surface at 0.
+fn mode_value(uvw: vec3<f32>) -> f32 {
+    return sample_norm(uvw) * p.mode.y + p.mode.z;
+}
+
+fn visible(pos: vec3<f32>) -> bool {
+    return clip.counts.x == 0u || clip_visible(pos);
+}
+
+// MIP, MinIP or average of the mode value over the ray's unclipped samples: opaque
+// grey, or nothing when every sample is clipped.
+fn project(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset: f32, max_steps: u32, mode: u32) -> vec4<f32> {
+    var best = 0.0;
+    var sum = 0.0;
+    var count = 0u;
+    for (var k = 0u; k < max_steps; k = k + 1u) {
+        let t = t_enter + (f32(k) + offset) * p.step.x;
+        if t >= t_exit {
+            break;
+        }
+        let pos = origin + dir * t;
+        if !visible(pos) {
+            continue;
+        }
+        let u = mode_value(pos / (2.0 * p.box_half.xyz) + 0.5);
+        if count == 0u {
+            best = u;
+        } else if mode == MODE_MIP {
+            best = max(best, u);
+        } else {
+            best = min(best, u);
+        }
+        sum = sum + u;
+        count = count + 1u;
+    }
+    if count == 0u {
+        return vec4<f32>(0.0);
+    }
+    if mode == MODE_AVERAGE {
+        best = sum / f32(count);
+    }
+    return vec4<f32>(vec3<f32>(clamp(best, 0.0, 1.0)), 1.0);
+}
+
+fn inside_surface(origin: vec3<f32>, dir: vec3<f32>, t: f32) -> bool {
+    let pos = origin + dir * t;
+    return visible(pos) && mode_value(pos / (2.0 * p.box_half.xyz) + 0.5) >= 0.0;
+}
+
+// Bisection steps that place an isosurface hit between two samples (1/64 of a step).
+const ISO_REFINE: u32 = 6u;
+
+// The first point of the ray inside the isosurface (value ≥ iso, unclipped), refined
+// between the last sample outside and the first inside; -1 when there is none.
+fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset: f32, max_steps: u32) -> f32 {
+    var before = t_enter;
+    for (var k = 0u; k < max_steps; k = k + 1u) {
+        let t = t_enter + (f32(k) + offset) * p.step.x;
+        if t >= t_exit {
+            break;
+        }
+        if inside_surface(origin, dir, t) {
+            var lo = before;
+            var hi = t;
+            for (var i = 0u; i < ISO_REFINE; i = i + 1u) {
+                let mid = 0.5 * (lo + hi);
+                if inside_surface(origin, dir, mid) {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            return hi;
+        }
+        before = t;
+    }
+    return -1.0;
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -163,7 +253,33 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             surf = textureLoad(surface_color, vec2<u32>(px, py), 0);
         }
     }
-    if t_exit > t_enter {
+    let mode = u32(p.mode.x);
+    if t_exit > t_enter && mode != MODE_COMPOSITE {
+        var offset = 0.0;
+        if p.step.y != 0.0 {
+            offset = jitter(px, py);
+        }
+        let max_steps = u32(p.step.z);
+        var front = 3.0e38;  // surfaces nearer than this are drawn over the result
+        var result = vec4<f32>(0.0);
+        if mode == MODE_ISO {
+            let t_hit = iso_hit(origin, dir, t_enter, t_exit, offset, max_steps);
+            if t_hit >= 0.0 {
+                front = t_hit;
+                let uvw = (origin + dir * t_hit) / (2.0 * half) + 0.5;
+                result = vec4<f32>(shade(classify(sample_norm(uvw)).rgb, uvw, -dir), 1.0);
+            }
+        } else {
+            result = project(origin, dir, t_enter, t_exit, offset, max_steps, mode);
+        }
+        if pending && t_surf < front {
+            acc = over(acc, surf.rgb, surf.a);
+            pending = false;
+        }
+        acc = over(acc, result.rgb, result.a);
+        pending = pending && result.a < 1.0;
+    }
+    if t_exit > t_enter && mode == MODE_COMPOSITE {
         var offset = 0.0;
         if p.step.y != 0.0 {
             offset = jitter(px, py);

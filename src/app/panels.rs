@@ -4,7 +4,7 @@
 use super::document::file_name;
 use super::{Document, OpenRequest, Pending, ShotSize, Viewer};
 use super::{ao_panel, camera_input, screenshot, tf_editor, viewport};
-use crate::render::{Camera, Frame, Shading};
+use crate::render::{Camera, Frame, RenderMode, Shading};
 use crate::scene::Light;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -232,8 +232,10 @@ impl Viewer {
                 );
             });
         egui::CollapsingHeader::new("Rendering").show(ui, |ui| {
+            let tf_iso = doc.view_tf().half_opacity_value().unwrap_or(0.0);
             let r = &mut doc.render;
             ui.add(ao_panel::slider(&mut r.step_voxels, 0.1..=2.0).text("Step (voxels)"));
+            mode_controls(ui, &mut r.mode, tf_iso);
             ui.horizontal(|ui| {
                 ui.label("Shading");
                 ui.selectable_value(&mut r.shading, Shading::Phong, "Phong");
@@ -645,4 +647,75 @@ fn progress_bar(ui: &mut egui::Ui, fraction: Option<f32>) {
     } else {
         bar
     });
+}
+
+/// The render modes with their names and what each shows.
+const MODES: [(RenderMode, &str, &str); 5] = [
+    (
+        RenderMode::Composite,
+        "Composite",
+        "Colour and opacity of the transfer function, lit, with AO and shadows",
+    ),
+    (
+        RenderMode::Mip,
+        "Maximum intensity (MIP)",
+        "The brightest value along each ray, grey over the transfer function's window",
+    ),
+    (
+        RenderMode::Minip,
+        "Minimum intensity (MinIP)",
+        "The darkest value along each ray (airways); clip with a probe to look inside",
+    ),
+    (
+        RenderMode::Average,
+        "Average intensity",
+        "The mean value along each ray: a simulated radiograph",
+    ),
+    (
+        RenderMode::Iso(None),
+        "Isosurface",
+        "The first surface at a value, lit, coloured by the transfer function, with AO",
+    ),
+];
+
+/// The mode and, for iso, its value (`tf_iso`: the transfer function's own).
+fn mode_controls(ui: &mut egui::Ui, mode: &mut RenderMode, tf_iso: f64) {
+    let name = |m: RenderMode| {
+        MODES
+            .iter()
+            .find(|(k, ..)| k.code() == m.code())
+            .map_or("", |(_, name, _)| *name)
+    };
+    ui.horizontal(|ui| {
+        ui.label("Mode");
+        egui::ComboBox::from_id_salt("render_mode")
+            .selected_text(name(*mode))
+            .show_ui(ui, |ui| {
+                for (m, label, tip) in MODES {
+                    let chosen = mode.code() == m.code();
+                    if ui
+                        .selectable_label(chosen, label)
+                        .on_hover_text(tip)
+                        .clicked()
+                        && !chosen
+                    {
+                        *mode = m;
+                    }
+                }
+            });
+    });
+    if let RenderMode::Iso(value) = mode {
+        ui.horizontal(|ui| {
+            let mut auto = value.is_none();
+            ui.checkbox(&mut auto, "Value from the transfer function")
+                .on_hover_text("Where its opacity first reaches half its maximum");
+            match (auto, value.as_mut()) {
+                (true, _) => *value = None,
+                (false, Some(v)) => {
+                    ui.add(egui::DragValue::new(v).speed(1.0));
+                }
+                (false, None) => *value = Some(tf_iso),
+            }
+        });
+    }
 }

@@ -98,7 +98,10 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -
         s(Vec3::new(0.0, 0.0, d.z)) - s(Vec3::new(0.0, 0.0, -d.z)),
     ) / (2.0 * p.voxel_uvw[3]);
     let strength = g.length() * p.lut_map[0].abs() * p.voxel_uvw[3] * p.lut_map[3];
-    let edge = strength.clamp(0.0, 1.0);
+    let mut edge = strength.clamp(0.0, 1.0);
+    if p.mode[0] as u32 == MODE_ISO && strength > 0.0 {
+        edge = 1.0; // an isosurface is a surface however soft its gradient
+    }
     let (mut diffuse, mut specular) = (1.0, 0.0);
     if let (true, Some(l)) = (strength > 0.0, &vol.light) {
         let n = g.normalize();
@@ -113,6 +116,104 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -
         specular = p.shading[1] * n_dot_v.powf(p.shading[2]) * edge;
     }
     rgb * (k * ao + (1.0 - k) * diffuse * lit) + Vec3::splat(specular * lit)
+}
+
+const MODE_COMPOSITE: u32 = 0;
+const MODE_MIP: u32 = 1;
+const MODE_AVERAGE: u32 = 3;
+const MODE_ISO: u32 = 4;
+
+/// Bisection steps that place an isosurface hit between two samples.
+const ISO_REFINE: u32 = 6;
+
+/// One ray through the box: what `project` and `iso_hit` walk.
+struct Ray<'a> {
+    p: &'a RaycastParams,
+    vol: &'a CpuVolume,
+    origin: Vec3,
+    dir: Vec3,
+    t_enter: f32,
+    t_exit: f32,
+    offset: f32,
+}
+
+impl Ray<'_> {
+    fn half(&self) -> Vec3 {
+        Vec3::new(self.p.box_half[0], self.p.box_half[1], self.p.box_half[2])
+    }
+
+    /// The samples' positions, as the shader steps them.
+    fn samples(&self) -> impl Iterator<Item = (f32, Vec3)> + '_ {
+        (0..self.p.step[2] as u32)
+            .map(|k| self.t_enter + (k as f32 + self.offset) * self.p.step[0])
+            .take_while(|&t| t < self.t_exit)
+            .map(|t| (t, self.origin + self.dir * t))
+    }
+
+    fn visible(&self, pos: Vec3) -> bool {
+        self.vol
+            .clip
+            .as_ref()
+            .is_none_or(|c| c.uniforms.counts[0] == 0 || c.classify(pos).0)
+    }
+
+    fn mode_value(&self, pos: Vec3) -> f32 {
+        let uvw = pos / (2.0 * self.half()) + Vec3::splat(0.5);
+        trilinear(&self.vol.norm, self.vol.dims, uvw) * self.p.mode[1] + self.p.mode[2]
+    }
+
+    /// MIP, MinIP or average over the unclipped samples (raycast.wgsl's `project`).
+    fn project(&self, mode: u32) -> Vec4 {
+        let (mut best, mut sum, mut count) = (0.0f32, 0.0f32, 0u32);
+        for (_, pos) in self.samples() {
+            if !self.visible(pos) {
+                continue;
+            }
+            let u = self.mode_value(pos);
+            best = if count == 0 {
+                u
+            } else if mode == MODE_MIP {
+                best.max(u)
+            } else {
+                best.min(u)
+            };
+            sum += u;
+            count += 1;
+        }
+        if count == 0 {
+            return Vec4::ZERO;
+        }
+        if mode == MODE_AVERAGE {
+            best = sum / count as f32;
+        }
+        Vec3::splat(best.clamp(0.0, 1.0)).extend(1.0)
+    }
+
+    fn inside_surface(&self, t: f32) -> bool {
+        let pos = self.origin + self.dir * t;
+        self.visible(pos) && self.mode_value(pos) >= 0.0
+    }
+
+    /// The first point inside the isosurface, refined (raycast.wgsl's `iso_hit`).
+    fn iso_hit(&self) -> Option<f32> {
+        let mut before = self.t_enter;
+        for (t, _) in self.samples() {
+            if self.inside_surface(t) {
+                let (mut lo, mut hi) = (before, t);
+                for _ in 0..ISO_REFINE {
+                    let mid = 0.5 * (lo + hi);
+                    if self.inside_surface(mid) {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                return Some(hi);
+            }
+            before = t;
+        }
+        None
+    }
 }
 
 /// One pixel, exactly as `main` in raycast.wgsl computes it (before 8-bit quantisation).
@@ -143,7 +244,42 @@ pub fn pixel(
         .and_then(|s| super::surface::nearest_hit(&s.surfaces, &s.frame, &s.texels, origin, dir));
     let mut pending = hit.is_some();
     let (t_surf, surf) = hit.unwrap_or((0.0, Vec4::ZERO));
-    if t_exit > t_enter {
+    let mode = p.mode[0] as u32;
+    if t_exit > t_enter && mode != MODE_COMPOSITE {
+        let ray = Ray {
+            p,
+            vol,
+            origin,
+            dir,
+            t_enter,
+            t_exit,
+            offset: if p.step[1] != 0.0 {
+                jitter(px, py)
+            } else {
+                0.0
+            },
+        };
+        let (front, result) = if mode == MODE_ISO {
+            match ray.iso_hit() {
+                Some(t_hit) => {
+                    let uvw = (origin + dir * t_hit) / (2.0 * half) + Vec3::splat(0.5);
+                    let norm = trilinear(&vol.norm, vol.dims, uvw);
+                    let rgb = shade(p, vol, classify(p, lut, norm).truncate(), uvw, -dir);
+                    (t_hit, rgb.extend(1.0))
+                }
+                None => (3.0e38, Vec4::ZERO),
+            }
+        } else {
+            (3.0e38, ray.project(mode))
+        };
+        if pending && t_surf < front {
+            acc = over(acc, surf.truncate(), surf.w);
+            pending = false;
+        }
+        acc = over(acc, result.truncate(), result.w);
+        pending = pending && result.w < 1.0;
+    }
+    if t_exit > t_enter && mode == MODE_COMPOSITE {
         let offset = if p.step[1] != 0.0 {
             jitter(px, py)
         } else {

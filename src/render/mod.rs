@@ -6,7 +6,10 @@
 //! fixed steps of `step_voxels` voxels, the last one shortened to the box exit and its
 //! opacity corrected for its true length (Imagire et al.'s valid sampling path) →
 //! transfer-function lookup → optional Blinn–Phong headlight with the ambient term
-//! `k · A(x) · C_TF(x)` → front-to-back compositing, stopping at α > 0.99.
+//! `k · A(x) · C_TF(x)` → front-to-back compositing, stopping at α > 0.99. The other
+//! [`RenderMode`]s walk the same samples: MIP, MinIP and average reduce the values of
+//! the unclipped ones to a grey; iso stops at the first one inside the surface, places
+//! the hit by bisection and shades it there.
 
 pub mod camera;
 pub mod cpu;
@@ -38,10 +41,107 @@ pub enum Shading {
     Phong,
 }
 
+/// What a ray makes of its samples.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum RenderMode {
+    /// Front-to-back compositing of the transfer function's colour and opacity.
+    #[default]
+    Composite,
+    /// Maximum intensity projection: the largest value along the ray, in grey from
+    /// black to white over the transfer function's window (first to last point).
+    Mip,
+    /// Minimum intensity projection (airways, vessels in black-blood MR), same grey.
+    Minip,
+    /// Mean value along the ray, same grey (a simulated radiograph).
+    Average,
+    /// The first surface where the value reaches this (data units; `None`: where the
+    /// transfer function's opacity first reaches half its maximum), refined between
+    /// samples, coloured by the transfer function, lit and ambient-occluded.
+    Iso(Option<f64>),
+}
+
+impl RenderMode {
+    /// The shader's code for the mode (`MODE_*` in raycast.wgsl).
+    pub fn code(self) -> u32 {
+        match self {
+            RenderMode::Composite => 0,
+            RenderMode::Mip => 1,
+            RenderMode::Minip => 2,
+            RenderMode::Average => 3,
+            RenderMode::Iso(_) => 4,
+        }
+    }
+
+    /// Whether the mode reads the ambient-occlusion volume (MIP, MinIP and average
+    /// show values, not light).
+    pub fn uses_ao(self) -> bool {
+        matches!(self, RenderMode::Composite | RenderMode::Iso(_))
+    }
+
+    pub fn is_composite(&self) -> bool {
+        *self == RenderMode::Composite
+    }
+}
+
+impl std::str::FromStr for RenderMode {
+    type Err = String;
+
+    /// `composite`, `mip`, `minip`, `average`, `iso` or `iso:VALUE`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let s = s.trim();
+        let lower = s.to_ascii_lowercase();
+        Ok(match lower.as_str() {
+            "composite" => RenderMode::Composite,
+            "mip" => RenderMode::Mip,
+            "minip" => RenderMode::Minip,
+            "average" => RenderMode::Average,
+            "iso" => RenderMode::Iso(None),
+            _ => match lower.strip_prefix("iso:").map(|v| v.trim().parse::<f64>()) {
+                Some(Ok(v)) if v.is_finite() => RenderMode::Iso(Some(v)),
+                _ => {
+                    return Err(format!(
+                        "render mode {s:?}: expected composite, mip, minip, average, iso or iso:VALUE (a finite number in data units)"
+                    ));
+                }
+            },
+        })
+    }
+}
+
+impl std::fmt::Display for RenderMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RenderMode::Composite => f.write_str("composite"),
+            RenderMode::Mip => f.write_str("mip"),
+            RenderMode::Minip => f.write_str("minip"),
+            RenderMode::Average => f.write_str("average"),
+            RenderMode::Iso(None) => f.write_str("iso"),
+            RenderMode::Iso(Some(v)) => write!(f, "iso:{v}"),
+        }
+    }
+}
+
+impl TryFrom<String> for RenderMode {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        s.parse()
+    }
+}
+
+impl From<RenderMode> for String {
+    fn from(m: RenderMode) -> String {
+        m.to_string()
+    }
+}
+
 /// Render settings that are not the camera or the transfer function.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
 pub struct RenderSettings {
+    /// Composite (the default), an intensity projection or an isosurface.
+    #[serde(skip_serializing_if = "RenderMode::is_composite")]
+    pub mode: RenderMode,
     /// Distance between samples in voxels (of the smallest spacing).
     pub step_voxels: f32,
     pub shading: Shading,
@@ -73,6 +173,7 @@ pub struct RenderSettings {
 impl Default for RenderSettings {
     fn default() -> Self {
         RenderSettings {
+            mode: RenderMode::Composite,
             step_voxels: 0.5,
             shading: Shading::Phong,
             ambient: 0.4,
@@ -111,9 +212,12 @@ pub struct RaycastParams {
     pub image: [u32; 4],
     /// Occupancy grid dims, block edge in voxels.
     pub grid: [u32; 4],
+    /// [`RenderMode::code`], then the map `u = norm · y + z` of the mode's value: the
+    /// grey of the projections (the TF's window → [0, 1]), or value − iso for iso.
+    pub mode: [f32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<RaycastParams>() == 64 + 8 * 16);
+const _: () = assert!(std::mem::size_of::<RaycastParams>() == 64 + 9 * 16);
 
 /// Everything a frame needs besides the volume and the LUT data.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -165,8 +269,24 @@ impl Frame {
             ],
             image: [self.width, self.height, x0, y0],
             grid: [grid[0] as u32, grid[1] as u32, grid[2] as u32, BLOCK as u32],
+            mode: mode_map(s.mode, texels, lut),
         }
     }
+}
+
+/// [`RaycastParams::mode`]: with `value = norm · scale + offset`, projections get
+/// `u = (value − lo) / (hi − lo)` over the LUT's window, iso `u = value − iso`.
+fn mode_map(mode: RenderMode, texels: &VolumeTexels, lut: &Lut) -> [f32; 4] {
+    let (scale, offset) = (texels.value_scale, texels.value_offset);
+    let (a, b) = match mode {
+        RenderMode::Iso(value) => (scale, offset - value.unwrap_or(lut.iso)),
+        _ => {
+            let [lo, hi] = lut.window;
+            let span = (hi - lo).max(f64::MIN_POSITIVE);
+            (scale / span, (offset - lo) / span)
+        }
+    };
+    [mode.code() as f32, a as f32, b as f32, 0.0]
 }
 
 /// Per-pixel jitter in [0, 1): a PCG hash of the pixel, identical on CPU and GPU.

@@ -6,10 +6,10 @@ use super::cpu;
 use super::gpu::{GpuVolume, RayCaster};
 use super::shadow::{LightGpu, LightVolume, light_cpu, light_direction, light_lut, quantise};
 use super::texels::{UploadLimits, VolumeTexels};
-use super::{Frame, Image};
+use super::{Frame, Image, RenderSettings};
 use crate::ao::cao::CaoStats;
 use crate::ao::vao::PositionalAo;
-use crate::ao::{Ambient, AoEngine, AoInput, AoRequest, AoSettings};
+use crate::ao::{Ambient, AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
 use crate::clip::ClipShape;
 use crate::clip::gpu::ClipMaps;
 use crate::gpu::{Gpu, GpuError};
@@ -98,14 +98,48 @@ pub fn render(
             })
         }));
     }
+    // Intensity projections show values, not light: nothing that only lights or
+    // occludes is computed for them.
+    let settings = job.frame.settings;
+    let mut notes = Vec::new();
+    let unlit_frame;
+    let no_ao;
+    let mut job = *job;
+    if !settings.mode.uses_ao()
+        && (job.ao.method != AoMethod::None
+            || settings.shadows
+            || settings.opacity_modulation.is_some())
+    {
+        notes.push(format!(
+            "render mode {}: ambient occlusion, shadows and opacity modulation do not apply; not computed",
+            settings.mode
+        ));
+        unlit_frame = Frame {
+            settings: RenderSettings {
+                shadows: false,
+                opacity_modulation: None,
+                ..settings
+            },
+            ..*job.frame
+        };
+        no_ao = AoSettings {
+            method: AoMethod::None,
+            ..*job.ao
+        };
+        job.frame = &unlit_frame;
+        job.ao = &no_ao;
+    }
     let needs_gpu = !job.clip.is_empty() || job.ao.method.is_clipped();
-    match gpu {
-        Some(g) => render_gpu(g, job, &surfaces, progress),
+    let mut rendered = match gpu {
+        Some(g) => render_gpu(g, &job, &surfaces, progress),
         None if needs_gpu => Err(GpuError::Unsupported {
             what: "clipping, CAO and lao-full need a GPU adapter: the clip shapes' depth maps are rasterised (drop --cpu)".into(),
         }),
-        None => render_cpu(job, &surfaces, progress),
-    }
+        None => render_cpu(&job, &surfaces, progress),
+    }?;
+    notes.append(&mut rendered.notes);
+    rendered.notes = notes;
+    Ok(rendered)
 }
 
 fn render_gpu(

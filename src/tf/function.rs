@@ -181,13 +181,39 @@ impl TransferFunction {
     pub fn bake(&self, min: f64, max: f64, entries: usize) -> Lut {
         let (min, max) = usable_range(min, max);
         let len = entries.max(2);
+        let window = match self.span() {
+            Some((lo, hi)) if hi > lo => [lo, hi],
+            Some((v, _)) => [v - 0.5, v + 0.5],
+            None => [min, max],
+        };
         Lut {
             min,
             max,
             rgba: (0..len)
                 .map(|i| self.eval(entry_value(min, max, len, i)))
                 .collect(),
+            window,
+            iso: self
+                .half_opacity_value()
+                .unwrap_or((window[0] + window[1]) / 2.0),
         }
+    }
+
+    /// The first value at which the opacity reaches half its maximum (linear between
+    /// points), or `None` for a fully transparent function.
+    pub fn half_opacity_value(&self) -> Option<f64> {
+        let peak = self.opacity.iter().map(|p| p.alpha).fold(0.0f32, f32::max);
+        if peak <= 0.0 {
+            return None;
+        }
+        let half = peak / 2.0;
+        let first = self.opacity.iter().position(|p| p.alpha >= half)?;
+        if first == 0 {
+            return Some(self.opacity[0].value);
+        }
+        let (a, b) = (self.opacity[first - 1], self.opacity[first]);
+        let f = ((half - a.alpha) / (b.alpha - a.alpha)) as f64;
+        Some(a.value + (b.value - a.value) * f)
     }
 
     /// Window/level: a copy whose points are linearly remapped so the span of its points

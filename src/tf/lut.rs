@@ -16,6 +16,12 @@ pub struct Lut {
     pub min: f64,
     pub max: f64,
     pub rgba: Vec<[f32; 4]>,
+    /// The function's own window in data units (first to last point value): black to
+    /// white of the intensity projections (MIP, MinIP, average).
+    pub window: [f64; 2],
+    /// The isosurface mode's default value: where the opacity first reaches half its
+    /// maximum (a bone preset's bone, say).
+    pub iso: f64,
 }
 
 /// Data value of entry `i` of a `len`-entry table over `[min, max]`. Multiplying

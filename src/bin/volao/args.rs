@@ -101,6 +101,11 @@ pub struct RenderArgs {
     pub background: Option<String>,
     #[arg(long, value_parser = parse_shading)]
     pub shading: Option<volao::render::Shading>,
+    /// composite (the default), mip, minip, average (greys over the transfer function's
+    /// window), iso or iso:VALUE (the first surface at VALUE, data units; default: where
+    /// the opacity reaches half its maximum).
+    #[arg(long, value_name = "MODE")]
+    pub mode: Option<volao::render::RenderMode>,
     /// Step between samples in voxels.
     #[arg(long)]
     pub step: Option<f32>,

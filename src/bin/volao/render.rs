@@ -189,6 +189,7 @@ impl RenderArgs {
             settings.ambient = k;
         }
         set(&mut settings.shading, self.shading);
+        set(&mut settings.mode, self.mode);
         if let Some(step) = self.step {
             if step.is_nan() || step <= 0.0 || step.is_infinite() {
                 bail!("--step must be positive (voxels between samples)");
