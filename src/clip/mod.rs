@@ -68,7 +68,8 @@ pub struct ClipShape {
     pub shape: Shape,
     /// Centre in mm from the volume's centre.
     pub translation: [f32; 3],
-    /// Rotation in degrees about x, then y, then z.
+    /// Rotation in degrees about x, then y, then z (none when left out).
+    #[serde(default)]
     pub rotation_deg: [f32; 3],
     /// Size in mm per local axis (see [`Shape`]).
     pub scale: [f32; 3],
