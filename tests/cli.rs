@@ -547,3 +547,58 @@ fn convert_writes_nrrd_that_reads_back() {
     assert!(a.data.bits_eq(&b.data));
     assert_eq!(a.orientation.rows(), b.orientation.rows());
 }
+
+#[test]
+fn bench_render_times_the_configurations_asked_for_as_json_lines() {
+    let file = data("nifti/avg152T1_LR_nifti.nii.gz");
+    let out = volao(&[
+        "bench",
+        "render",
+        file.to_str().expect("utf-8 path"),
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--runs",
+        "1",
+        "--mode",
+        "composite,mip",
+        "--shading",
+        "none,phong",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let lines: Vec<serde_json::Value> = text(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+        .collect();
+    assert_eq!(lines.len(), 4, "one object per mode × shading");
+    for (j, (mode, shading)) in lines.iter().zip([
+        ("composite", "none"),
+        ("composite", "phong"),
+        ("mip", "none"),
+        ("mip", "phong"),
+    ]) {
+        assert_eq!(j["mode"], mode);
+        assert_eq!(j["shading"], shading);
+        assert_eq!(j["size"], serde_json::json!([48, 32]));
+        assert!(
+            j["median_frame_ms"].as_f64().is_some_and(|t| t > 0.0),
+            "{j}"
+        );
+        assert!(j["adapter"].as_str().is_some_and(|a| !a.is_empty()), "{j}");
+    }
+    let out = volao(&[
+        "bench",
+        "render",
+        file.to_str().expect("utf-8 path"),
+        "--ao",
+        "cao",
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("no clip shapes"),
+        "{}",
+        text(&out.stderr)
+    );
+}

@@ -9,12 +9,163 @@ use volao::volume::{self, LoadOptions};
 /// Arguments of `volao bench render`.
 #[derive(Debug, clap::Args)]
 pub struct RenderBenchArgs {
+    /// Volumes to time (any format `volao render` reads). Without files and options:
+    /// the fixed tables (engine and cranium CT, 512² and 1024², shading, skipping).
+    pub files: Vec<PathBuf>,
     /// Folder with the shared test data (raw/engine.raw and raw/cranium-ct.raw).
     #[arg(long, default_value = "../shared/data")]
     pub data: PathBuf,
     /// Timed frames per configuration (after one warm-up frame); the median is reported.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+    /// Render modes to time, comma-separated (composite, mip, minip, average, iso[:V]).
+    #[arg(long, value_delimiter = ',', default_value = "composite")]
+    pub mode: Vec<volao::render::RenderMode>,
+    /// Shadings to time, comma-separated (none, phong).
+    #[arg(long, value_delimiter = ',', default_value = "phong", value_parser = crate::args::parse_shading)]
+    pub shading: Vec<volao::render::Shading>,
+    /// AO method, computed once before the frames are timed (no clipping here, so not
+    /// cao or lao-full).
+    #[arg(long, default_value = "none", value_parser = volao::ao::AoMethod::parse)]
+    pub ao: volao::ao::AoMethod,
+    /// Transfer-function preset (default: chosen from the volume's range).
+    #[arg(long)]
+    pub tf: Option<String>,
+    /// One JSON object per configuration on stdout instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl RenderBenchArgs {
+    /// Whether only the fixed tables were asked for.
+    fn is_fixed(&self) -> bool {
+        self.files.is_empty() && !self.json
+    }
+}
+
+/// One configuration's result, as `--json` prints it.
+#[derive(serde::Serialize)]
+struct Timed {
+    file: String,
+    size: [u32; 2],
+    mode: String,
+    shading: volao::render::Shading,
+    ao: volao::ao::AoMethod,
+    median_frame_ms: f64,
+    /// Time to compute the AO volume (once per file and method), 0 without.
+    ao_ms: f64,
+    adapter: String,
+}
+
+/// `volao bench render FILE…`: the configurations asked for, warm frames.
+fn render_files(args: &RenderBenchArgs) -> Result<()> {
+    use std::sync::Arc;
+    use volao::ao::{Ambient, AoEngine, AoInput, AoRequest, AoSettings};
+    use volao::render::RenderSettings;
+    use volao::render::gpu::{GpuVolume, RayCaster};
+    use volao::tf::{Preset, TransferFunction};
+
+    let ao_name = serde_json::to_value(args.ao)?
+        .as_str()
+        .unwrap_or_default()
+        .to_owned();
+    if args.ao.is_clipped() {
+        anyhow::bail!("--ao {ao_name}: bench render has no clip shapes; use lao");
+    }
+    if args.files.is_empty() {
+        anyhow::bail!(
+            "bench render: name the volumes to time (or give no options for the fixed tables)"
+        );
+    }
+    let gpu = Arc::new(volao::gpu::request_device()?);
+    let rc = gpu.stage::<RayCaster>()?;
+    let adapter = gpu.describe();
+    if !args.json {
+        println!("adapter: {adapter}");
+        println!();
+        println!("| volume | size | mode | shading | AO | median frame | AO time |");
+        println!("|---|---|---|---|---|---|---|");
+    }
+    for path in &args.files {
+        let volume = volume::load(path, &LoadOptions::default())?.volume.to_ras();
+        let stats = volume.stats();
+        let preset = match &args.tf {
+            Some(name) => Preset::from_name(name)?,
+            None => Preset::default_for(&stats),
+        };
+        let tf = TransferFunction::preset(preset, &stats);
+        let mut vol = GpuVolume::new(&gpu, &volume, &tf, RenderSettings::default().step_voxels)?;
+        let ao = AoSettings {
+            method: args.ao,
+            ..Default::default()
+        };
+        let start = Instant::now();
+        let request = AoRequest {
+            tf: &tf,
+            settings: &ao,
+            clip: None,
+        };
+        let computed = AoEngine::on(Some(Arc::clone(&gpu))).compute(
+            AoInput::Uploaded(&vol),
+            &request,
+            &|_, _| {},
+        )?;
+        match computed.ambient {
+            Ambient::One | Ambient::Cao(_) => {}
+            Ambient::Live => vol.set_live_vao(&gpu, &tf, Some(&ao.vao))?,
+            Ambient::Values(a) => vol.set_ambient_occlusion(&gpu, &a),
+        }
+        let ao_ms = start.elapsed().as_secs_f64() * 1e3;
+        let name = path.display().to_string();
+        for &mode in &args.mode {
+            for &shading in &args.shading {
+                let settings = RenderSettings {
+                    mode,
+                    shading,
+                    ..Default::default()
+                };
+                let mut frame = super::frame(20.0, settings, args.width);
+                frame.height = args.height;
+                rc.render(&gpu, &vol, &frame, None)?;
+                let mut times = Vec::new();
+                for _ in 0..args.runs.max(1) {
+                    let start = Instant::now();
+                    rc.render(&gpu, &vol, &frame, None)?;
+                    times.push(start.elapsed().as_secs_f64());
+                }
+                let t = Timed {
+                    file: name.clone(),
+                    size: [args.width, args.height],
+                    mode: mode.to_string(),
+                    shading,
+                    ao: args.ao,
+                    median_frame_ms: median(times) * 1e3,
+                    ao_ms,
+                    adapter: adapter.clone(),
+                };
+                if args.json {
+                    println!("{}", serde_json::to_string(&t)?);
+                } else {
+                    println!(
+                        "| {} | {}×{} | {} | {:?} | {} | {:.1} ms | {:.0} ms |",
+                        t.file,
+                        args.width,
+                        args.height,
+                        t.mode,
+                        shading,
+                        ao_name,
+                        t.median_frame_ms,
+                        ao_ms
+                    );
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Ray steps inside the volume box for a whole frame: the work a frame would do with
@@ -50,6 +201,9 @@ fn box_steps(
 
 /// `volao bench render`: frame times of the GPU ray caster.
 pub fn render_bench(args: &RenderBenchArgs) -> Result<()> {
+    if !args.is_fixed() {
+        return render_files(args);
+    }
     use volao::render::gpu::{GpuVolume, RayCaster};
     use volao::render::{RenderSettings, Shading};
     use volao::tf::{Preset, TransferFunction};
