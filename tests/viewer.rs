@@ -295,6 +295,31 @@ fn live_positional_ao_runs_in_the_ray_caster_and_matches_volao_render() {
 }
 
 #[test]
+fn render_modes_from_the_rendering_panel_match_volao_render() {
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    let composite = viewport_pixels(&mut h);
+    click(&mut h, "Rendering");
+    h.run_steps(4);
+    for (label, mode) in [
+        ("Maximum intensity (MIP)", volao::render::RenderMode::Mip),
+        ("Isosurface", volao::render::RenderMode::Iso(None)),
+    ] {
+        choose(&mut h, "Mode", label);
+        settle(&mut h);
+        assert_eq!(h.state().document().expect("doc").render.mode, mode);
+        let scene = dir.path().join(format!("mode_{}.json", mode.code()));
+        let viewport = viewport_is_volao_render(&mut h, &scene, &format!("viewport_{mode}"));
+        assert_ne!(
+            viewport.pixels, composite.pixels,
+            "{mode} looks like composite"
+        );
+    }
+}
+
+#[test]
 fn shadows_from_the_rendering_panel_match_volao_render() {
     let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");

@@ -686,24 +686,21 @@ fn mode_controls(ui: &mut egui::Ui, mode: &mut RenderMode, tf_iso: f64) {
             .find(|(k, ..)| k.code() == m.code())
             .map_or("", |(_, name, _)| *name)
     };
-    ui.horizontal(|ui| {
-        ui.label("Mode");
-        egui::ComboBox::from_id_salt("render_mode")
-            .selected_text(name(*mode))
-            .show_ui(ui, |ui| {
-                for (m, label, tip) in MODES {
-                    let chosen = mode.code() == m.code();
-                    if ui
-                        .selectable_label(chosen, label)
-                        .on_hover_text(tip)
-                        .clicked()
-                        && !chosen
-                    {
-                        *mode = m;
-                    }
+    egui::ComboBox::from_label("Mode")
+        .selected_text(name(*mode))
+        .show_ui(ui, |ui| {
+            for (m, label, tip) in MODES {
+                let chosen = mode.code() == m.code();
+                if ui
+                    .selectable_label(chosen, label)
+                    .on_hover_text(tip)
+                    .clicked()
+                    && !chosen
+                {
+                    *mode = m;
                 }
-            });
-    });
+            }
+        });
     if let RenderMode::Iso(value) = mode {
         ui.horizontal(|ui| {
             let mut auto = value.is_none();
