@@ -174,6 +174,11 @@ fn project(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
         }
         sum = sum + u;
         count = count + 1u;
+        // The grey is clamped to [0, 1]: once MIP reaches white or MinIP black, no
+        // later sample can change the pixel.
+        if (mode == MODE_MIP && best >= 1.0) || (mode == MODE_MINIP && best <= 0.0) {
+            break;
+        }
     }
     if count == 0u {
         return vec4<f32>(0.0);

@@ -120,6 +120,7 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -
 
 const MODE_COMPOSITE: u32 = 0;
 const MODE_MIP: u32 = 1;
+const MODE_MINIP: u32 = 2;
 const MODE_AVERAGE: u32 = 3;
 const MODE_ISO: u32 = 4;
 
@@ -179,6 +180,10 @@ impl Ray<'_> {
             };
             sum += u;
             count += 1;
+            // The grey is clamped to [0, 1]: white MIP or black MinIP is final.
+            if (mode == MODE_MIP && best >= 1.0) || (mode == MODE_MINIP && best <= 0.0) {
+                break;
+            }
         }
         if count == 0 {
             return Vec4::ZERO;
