@@ -30,7 +30,7 @@ struct Params {
 // and the light volume for shadows.
 struct Extras {
     flags: vec4<u32>,  // live positional AO on, shadows on
-    light: vec4<f32>,  // unit direction towards the light (volume space)
+    light: vec4<f32>,  // unit direction towards the light (volume space), w = guard (voxels)
 }
 
 @group(2) @binding(5) var<uniform> extras: Extras;
@@ -45,13 +45,32 @@ fn over(acc: vec4<f32>, rgb: vec3<f32>, a: f32) -> vec4<f32> {
 
 const OPAQUE: f32 = 0.99;
 
-// Shadow factor at a view-ray sample, anti-aliased as Imagire et al. (Eq. 3–4): the light
-// volume at the sample and at the half-step positions on either side, weighted ¼, ½, ¼.
-fn shadow(uvw: vec3<f32>, view: vec3<f32>) -> f32 {
-    let half_step = -view * (0.5 * p.step.x) / (2.0 * p.box_half.xyz);
-    return 0.25 * textureSampleLevel(light_volume, linear_clamp, uvw - half_step, 0.0).r
-        + 0.5 * textureSampleLevel(light_volume, linear_clamp, uvw, 0.0).r
-        + 0.25 * textureSampleLevel(light_volume, linear_clamp, uvw + half_step, 0.0).r;
+// How far `d` (texture coordinates) may be followed from `uvw` inside the box, as a
+// fraction of it in [0, 1].
+fn inside_box(uvw: vec3<f32>, d: vec3<f32>) -> f32 {
+    let room = select(uvw, vec3<f32>(1.0) - uvw, d > vec3<f32>(0.0));
+    let ad = abs(d);
+    let r = select(vec3<f32>(1.0), clamp(room / max(ad, vec3<f32>(1e-20)), vec3<f32>(0.0), vec3<f32>(1.0)), ad > vec3<f32>(0.0));
+    return min(r.x, min(r.y, r.z));
+}
+
+// Shadow factor at a view-ray sample (CPU twin: render::shadow::shadow_factor).
+// Guard limit (Papaioannou et al. §5.1): the light volume is read at a point moved from
+// the sample towards the light by d0 = g / cos θ (g = extras.light.w voxels, θ between the
+// light and the normal, cos θ at least ½), so the surface layer the sample lies in does
+// not shadow itself. Filtered occlusion (Imagire et al. Eq. 3–4): ¼, ½, ¼ of the light
+// volume there and at the half-step positions towards the previous and the next view
+// sample, kept on the valid sampling path (inside the box).
+fn shadow(uvw: vec3<f32>, view: vec3<f32>, cos_theta: f32) -> f32 {
+    let to_uvw = 1.0 / (2.0 * p.box_half.xyz);
+    let guard = extras.light.w * p.voxel_uvw.w / max(cos_theta, 0.5);
+    let o = uvw + extras.light.xyz * guard * to_uvw;
+    let half_step = -view * (0.5 * p.step.x) * to_uvw;
+    let ahead = half_step * inside_box(uvw, half_step);
+    let behind = half_step * inside_box(uvw, -half_step);
+    return 0.25 * textureSampleLevel(light_volume, linear_clamp, o - behind, 0.0).r
+        + 0.5 * textureSampleLevel(light_volume, linear_clamp, o, 0.0).r
+        + 0.25 * textureSampleLevel(light_volume, linear_clamp, o + ahead, 0.0).r;
 }
 
 // PCG hash of the pixel → [0, 1); identical to render::jitter.
@@ -94,10 +113,10 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
     }
     let shadows = extras.flags.y != 0u;
     var lit = 1.0;
-    if shadows {
-        lit = shadow(uvw, view);
-    }
     if p.shading.w == 0.0 {
+        if shadows {
+            lit = shadow(uvw, view, 1.0);
+        }
         return rgb * (k * ao + (1.0 - k) * lit);
     }
     let d = p.voxel_uvw.xyz;
@@ -116,10 +135,13 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
         // Directional light: two-sided Blinn–Phong with the half vector of light and eye.
         let n = normalize(g);
         diffuse = mix(1.0, abs(dot(n, extras.light.xyz)), edge);
+        lit = shadow(uvw, view, diffuse);
         let h = extras.light.xyz + view;
         if dot(h, h) > 1e-12 {
             specular = p.shading.y * pow(abs(dot(n, normalize(h))), p.shading.z) * edge;
         }
+    } else if shadows {
+        lit = shadow(uvw, view, 1.0);
     } else if strength > 0.0 {
         // Headlight: the light comes from the eye, so the half vector is the view vector.
         let n_dot_v = abs(dot(normalize(g), view));

@@ -82,13 +82,13 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -
     if let Some(pao) = &vol.live_vao {
         ao = 1.0 - pao.positional_ao(uvw);
     }
-    let lit = vol.light.as_ref().map_or(1.0, |l| {
-        let half_step = -view * (0.5 * p.step[0])
-            / (2.0 * Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]));
-        super::shadow::shadow_factor(&l.values, vol.dims, uvw, half_step)
-    });
+    let lit_at = |cos_theta: f32| {
+        vol.light.as_ref().map_or(1.0, |l| {
+            super::shadow::shadow_factor(&l.values, vol.dims, p, uvw, view, l.direction, cos_theta)
+        })
+    };
     if p.shading[3] == 0.0 {
-        return rgb * (k * ao + (1.0 - k) * lit);
+        return rgb * (k * ao + (1.0 - k) * lit_at(1.0));
     }
     let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
     let s = |o: Vec3| trilinear(&vol.norm, vol.dims, uvw + o);
@@ -99,14 +99,17 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -
     ) / (2.0 * p.voxel_uvw[3]);
     let strength = g.length() * p.lut_map[0].abs() * p.voxel_uvw[3] * p.lut_map[3];
     let edge = strength.clamp(0.0, 1.0);
-    let (mut diffuse, mut specular) = (1.0, 0.0);
+    let (mut diffuse, mut specular, mut lit) = (1.0, 0.0, 1.0);
     if let (true, Some(l)) = (strength > 0.0, &vol.light) {
         let n = g.normalize();
         diffuse = 1.0 + (n.dot(l.direction).abs() - 1.0) * edge;
+        lit = lit_at(diffuse);
         let h = l.direction + view;
         if h.dot(h) > 1e-12 {
             specular = p.shading[1] * n.dot(h.normalize()).abs().powf(p.shading[2]) * edge;
         }
+    } else if vol.light.is_some() {
+        lit = lit_at(1.0);
     } else if strength > 0.0 {
         let n_dot_v = g.normalize().dot(view).abs();
         diffuse = 1.0 + (n_dot_v - 1.0) * edge;

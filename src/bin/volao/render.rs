@@ -62,6 +62,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if let Some(stats) = &out.cao {
         crate::ao::print_cao(stats);
     }
+    if scene.render.shadows {
+        eprintln!("{}", light_note(&scene.render, &out));
+    }
     if let Some(path) = &args.save_scene {
         scene.save(path)?;
         println!("scene: {}", path.display());
@@ -311,4 +314,22 @@ fn ao_note(ao: &AoSettings, seconds: f64) -> String {
             seconds * 1e3
         )
     }
+}
+
+/// What `--shadows` reports on stderr: the light volume's time, direction and size.
+fn light_note(settings: &RenderSettings, out: &Rendered) -> String {
+    let d = settings.light_direction;
+    format!(
+        "shadows: light volume {:.0} ms (towards the light {:.2}, {:.2}, {:.2}; {}filtered, guard {} voxels)",
+        out.light_seconds * 1e3,
+        d[0],
+        d[1],
+        d[2],
+        if out.downsampled > 0 {
+            "volume halved, "
+        } else {
+            ""
+        },
+        volao::render::shadow::GUARD_VOXELS
+    )
 }
