@@ -14,6 +14,7 @@ struct Params {
     step: vec4<f32>,      // dt (mm), jitter on, max steps, skipping on
     image: vec4<u32>,     // width, height, tile x0, tile y0
     grid: vec4<u32>,      // occupancy grid dims, block edge (voxels)
+    ao: vec4<f32>,        // AO strength, AO on the ambient term only (0/1)
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
@@ -104,9 +105,26 @@ fn sample_norm(uvw: vec3<f32>) -> f32 {
     return textureSampleLevel(volume, linear_clamp, uvw, 0.0).r;
 }
 
-// Blinn–Phong headlight with the ambient term k · A(x) · C_TF(x).
-fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
+// The lit colour of a sample (CPU twin: render::cpu::light), docs/algorithms.md "Shading
+// with ambient occlusion". By default the AO factor A_s = clamp(1 − s(1 − min(2A, 1)), 0, 1)
+// (2A: a surface sees at most half the sphere the AO is taken over) scales ambient and
+// diffuse light, C_TF · A_s · (k + (1 − k) · D · S) + spec · S; with ao.y, the ambient
+// term only, with A_s = clamp(1 − s(1 − A), 0, 1): C_TF · (k · A_s + (1 − k) · D · S) + spec · S.
+fn light(rgb: vec3<f32>, ao: f32, diffuse: f32, specular: f32, lit: f32) -> vec3<f32> {
     let k = p.shading.x;
+    var c: vec3<f32>;
+    if p.ao.y != 0.0 {
+        let a = clamp(1.0 - p.ao.x * (1.0 - ao), 0.0, 1.0);
+        c = rgb * (k * a + (1.0 - k) * diffuse * lit);
+    } else {
+        let a = clamp(1.0 - p.ao.x * (1.0 - min(2.0 * ao, 1.0)), 0.0, 1.0);
+        c = rgb * a * (k + (1.0 - k) * diffuse * lit);
+    }
+    return c + vec3<f32>(specular * lit);
+}
+
+// Blinn–Phong (a headlight, or the directional light of shadows), with the AO factor.
+fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
     var ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
     if extras.flags.x != 0u {
         ao = 1.0 - positional_ao(uvw);  // live mode: Eq. 8 at this very sample
@@ -117,7 +135,7 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
         if shadows {
             lit = shadow(uvw, view, 1.0);
         }
-        return rgb * (k * ao + (1.0 - k) * lit);
+        return light(rgb, ao, 1.0, 0.0, lit);
     }
     let d = p.voxel_uvw.xyz;
     // Central differences in texel units per mm.
@@ -148,7 +166,7 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
         diffuse = mix(1.0, n_dot_v, edge);
         specular = p.shading.y * pow(n_dot_v, p.shading.z) * edge;
     }
-    return rgb * (k * ao + (1.0 - k) * diffuse * lit) + vec3<f32>(specular * lit);
+    return light(rgb, ao, diffuse, specular, lit);
 }
 
 @compute @workgroup_size(8, 8, 1)

@@ -180,7 +180,8 @@ impl RenderArgs {
         Ok(())
     }
 
-    /// Background, ambient coefficient, shading, step and shadows.
+    /// Background, ambient coefficient, AO strength and where it applies, shading, step
+    /// and shadows.
     fn apply_render_settings(&self, settings: &mut RenderSettings) -> Result<()> {
         if let Some(b) = &self.background {
             settings.background = parse_background(b)?;
@@ -191,6 +192,13 @@ impl RenderArgs {
             }
             settings.ambient = k;
         }
+        if let Some(s) = self.ao_strength {
+            if !(0.0..=10.0).contains(&s) {
+                bail!("--ao-strength must be between 0 and 10");
+            }
+            settings.ao_strength = s;
+        }
+        settings.ao_ambient_only |= self.ao_ambient_only;
         if let Some(sh) = self.shading {
             settings.shading = sh;
         }
