@@ -130,41 +130,40 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
         ao = 1.0 - positional_ao(uvw);  // live mode: Eq. 8 at this very sample
     }
     let shadows = extras.flags.y != 0u;
-    var lit = 1.0;
-    if p.shading.w == 0.0 {
-        if shadows {
-            lit = shadow(uvw, view, 1.0);
-        }
-        return light(rgb, ao, 1.0, 0.0, lit);
-    }
-    let d = p.voxel_uvw.xyz;
-    // Central differences in texel units per mm.
-    let g = vec3<f32>(
-        sample_norm(uvw + vec3<f32>(d.x, 0.0, 0.0)) - sample_norm(uvw - vec3<f32>(d.x, 0.0, 0.0)),
-        sample_norm(uvw + vec3<f32>(0.0, d.y, 0.0)) - sample_norm(uvw - vec3<f32>(0.0, d.y, 0.0)),
-        sample_norm(uvw + vec3<f32>(0.0, 0.0, d.z)) - sample_norm(uvw - vec3<f32>(0.0, 0.0, d.z)),
-    ) / (2.0 * p.voxel_uvw.w);
-    // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
-    let strength = length(g) * abs(p.lut_map.x) * p.voxel_uvw.w * p.lut_map.w;
-    let edge = clamp(strength, 0.0, 1.0);
     var diffuse = 1.0;
     var specular = 0.0;
-    if strength > 0.0 && shadows {
-        // Directional light: two-sided Blinn–Phong with the half vector of light and eye.
-        let n = normalize(g);
-        diffuse = mix(1.0, abs(dot(n, extras.light.xyz)), edge);
-        lit = shadow(uvw, view, diffuse);
-        let h = extras.light.xyz + view;
-        if dot(h, h) > 1e-12 {
-            specular = p.shading.y * pow(abs(dot(n, normalize(h))), p.shading.z) * edge;
+    // cos θ of the shadow lookup's guard limit: 1 where there is no normal.
+    var cos_theta = 1.0;
+    if p.shading.w != 0.0 {
+        let d = p.voxel_uvw.xyz;
+        // Central differences in texel units per mm.
+        let g = vec3<f32>(
+            sample_norm(uvw + vec3<f32>(d.x, 0.0, 0.0)) - sample_norm(uvw - vec3<f32>(d.x, 0.0, 0.0)),
+            sample_norm(uvw + vec3<f32>(0.0, d.y, 0.0)) - sample_norm(uvw - vec3<f32>(0.0, d.y, 0.0)),
+            sample_norm(uvw + vec3<f32>(0.0, 0.0, d.z)) - sample_norm(uvw - vec3<f32>(0.0, 0.0, d.z)),
+        ) / (2.0 * p.voxel_uvw.w);
+        // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
+        let strength = length(g) * abs(p.lut_map.x) * p.voxel_uvw.w * p.lut_map.w;
+        let edge = clamp(strength, 0.0, 1.0);
+        if strength > 0.0 && shadows {
+            // Directional light: two-sided Blinn–Phong with the half vector of light and eye.
+            let n = normalize(g);
+            diffuse = mix(1.0, abs(dot(n, extras.light.xyz)), edge);
+            cos_theta = diffuse;
+            let h = extras.light.xyz + view;
+            if dot(h, h) > 1e-12 {
+                specular = p.shading.y * pow(abs(dot(n, normalize(h))), p.shading.z) * edge;
+            }
+        } else if strength > 0.0 {
+            // Headlight: the light comes from the eye, so the half vector is the view vector.
+            let n_dot_v = abs(dot(normalize(g), view));
+            diffuse = mix(1.0, n_dot_v, edge);
+            specular = p.shading.y * pow(n_dot_v, p.shading.z) * edge;
         }
-    } else if shadows {
-        lit = shadow(uvw, view, 1.0);
-    } else if strength > 0.0 {
-        // Headlight: the light comes from the eye, so the half vector is the view vector.
-        let n_dot_v = abs(dot(normalize(g), view));
-        diffuse = mix(1.0, n_dot_v, edge);
-        specular = p.shading.y * pow(n_dot_v, p.shading.z) * edge;
+    }
+    var lit = 1.0;
+    if shadows {
+        lit = shadow(uvw, view, cos_theta);
     }
     return light(rgb, ao, diffuse, specular, lit);
 }
