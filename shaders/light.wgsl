@@ -2,10 +2,12 @@
 // T(x) = Π_i (1 − α(x + L · t_i)) from every voxel centre towards the light, one
 // invocation per voxel of a z-slab. CPU twin: src/render/shadow.rs (`light_voxel`).
 //
-// Samples t_i = (i + j) · h, i = 0, 1, … while inside the box, with one jitter j per
-// voxel (a hash of the voxel): jittered sampling turns the banding of a fixed step into
-// fine noise, which the ray caster's ¼, ½, ¼ filter along the view ray (Imagire et al.
-// Eq. 3–4) then smooths. α is the transfer function's opacity corrected for the step h.
+// Samples t_i = (i + s) · h, i = 0, 1, … while inside the box, s = lut_map.w (1.5: the
+// voxel's own opacity does not dim its light), the same for every voxel (a per-voxel
+// jittered start made T differ from voxel to voxel by up to one sample of the surface
+// the voxel lies in: a speckle in the light itself). α is the transfer function's
+// opacity corrected for the step h. The ray caster samples T filtered
+// (render::shadow::filter_light).
 // A ray stops once T < 1e-4 (nothing further can be seen). Clipped space (clip shapes,
 // clip_common.wgsl) is empty: light passes through what the user carved away.
 //!include clip_common.wgsl
@@ -14,7 +16,7 @@ struct Params {
     dims: vec4<u32>,      // x, y, z, first z of this slab
     work: vec4<u32>,      // voxels in this slab, invocations per row, max steps
     step_uvw: vec4<f32>,  // direction to the light × h, in texture coordinates
-    lut_map: vec4<f32>,   // a, b, entries - 1
+    lut_map: vec4<f32>,   // a, b, entries - 1, first sample (steps from the centre)
     half: vec4<f32>,      // half the volume's extent (mm)
 }
 
@@ -25,15 +27,6 @@ struct Params {
 @group(0) @binding(4) var<storage, read_write> transmittance: array<f32>;
 
 const T_STOP: f32 = 1e-4;
-
-// PCG hash → [0, 1); the same as render::jitter on the CPU.
-fn hash01(x: u32, y: u32) -> f32 {
-    var h = x * 1973u + y * 9277u + 26699u;
-    h = h * 747796405u + 2891336453u;
-    let word = ((h >> ((h >> 28u) + 4u)) ^ h) * 277803737u;
-    let r = (word >> 22u) ^ word;
-    return f32(r >> 8u) / 16777216.0;
-}
 
 fn alpha_at(uvw: vec3<f32>) -> f32 {
     let norm = textureSampleLevel(volume, linear_clamp, uvw, 0.0).r;
@@ -53,10 +46,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let ny = p.dims.y;
     let voxel = vec3<u32>(index % nx, (index / nx) % ny, p.dims.w + index / (nx * ny));
     let centre = (vec3<f32>(voxel) + 0.5) / vec3<f32>(p.dims.xyz);
-    let j = hash01(voxel.x + nx * voxel.z, voxel.y);
     var t = 1.0;
     for (var i = 0u; i < p.work.z; i = i + 1u) {
-        let uvw = centre + p.step_uvw.xyz * (f32(i) + j);
+        let uvw = centre + p.step_uvw.xyz * (f32(i) + p.lut_map.w);
         if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) || t < T_STOP {
             break;
         }

@@ -15,6 +15,7 @@ struct Params {
     image: vec4<u32>,     // width, height, tile x0, tile y0
     grid: vec4<u32>,      // occupancy grid dims, block edge (voxels)
     mode: vec4<f32>,      // render mode (0 composite … 4 iso), u = norm · y + z
+    ao: vec4<f32>,        // AO strength, AO on the ambient term only (0/1)
 }
 
 const MODE_COMPOSITE: u32 = 0u;
@@ -37,7 +38,7 @@ const MODE_ISO: u32 = 4u;
 // and the light volume for shadows.
 struct Extras {
     flags: vec4<u32>,  // live positional AO on, shadows on
-    light: vec4<f32>,  // unit direction towards the light (volume space)
+    light: vec4<f32>,  // unit direction towards the light (volume space), w = guard (voxels)
 }
 
 @group(2) @binding(5) var<uniform> extras: Extras;
@@ -52,13 +53,32 @@ fn over(acc: vec4<f32>, rgb: vec3<f32>, a: f32) -> vec4<f32> {
 
 const OPAQUE: f32 = 0.99;
 
-// Shadow factor at a view-ray sample, anti-aliased as Imagire et al. (Eq. 3–4): the light
-// volume at the sample and at the half-step positions on either side, weighted ¼, ½, ¼.
-fn shadow(uvw: vec3<f32>, view: vec3<f32>) -> f32 {
-    let half_step = -view * (0.5 * p.step.x) / (2.0 * p.box_half.xyz);
-    return 0.25 * textureSampleLevel(light_volume, linear_clamp, uvw - half_step, 0.0).r
-        + 0.5 * textureSampleLevel(light_volume, linear_clamp, uvw, 0.0).r
-        + 0.25 * textureSampleLevel(light_volume, linear_clamp, uvw + half_step, 0.0).r;
+// How far `d` (texture coordinates) may be followed from `uvw` inside the box, as a
+// fraction of it in [0, 1].
+fn inside_box(uvw: vec3<f32>, d: vec3<f32>) -> f32 {
+    let room = select(uvw, vec3<f32>(1.0) - uvw, d > vec3<f32>(0.0));
+    let ad = abs(d);
+    let r = select(vec3<f32>(1.0), clamp(room / max(ad, vec3<f32>(1e-20)), vec3<f32>(0.0), vec3<f32>(1.0)), ad > vec3<f32>(0.0));
+    return min(r.x, min(r.y, r.z));
+}
+
+// Shadow factor at a view-ray sample (CPU twin: render::shadow::shadow_factor).
+// Guard limit (Papaioannou et al. §5.1): the light volume is read at a point moved from
+// the sample towards the light by d0 = g / cos θ (g = extras.light.w voxels, θ between the
+// light and the normal, cos θ at least ½), so the surface layer the sample lies in does
+// not shadow itself. Filtered occlusion (Imagire et al. Eq. 3–4): ¼, ½, ¼ of the light
+// volume there and at the half-step positions towards the previous and the next view
+// sample, kept on the valid sampling path (inside the box).
+fn shadow(uvw: vec3<f32>, view: vec3<f32>, cos_theta: f32) -> f32 {
+    let to_uvw = 1.0 / (2.0 * p.box_half.xyz);
+    let guard = extras.light.w * p.voxel_uvw.w / max(cos_theta, 0.5);
+    let o = uvw + extras.light.xyz * guard * to_uvw;
+    let half_step = -view * (0.5 * p.step.x) * to_uvw;
+    let ahead = half_step * inside_box(uvw, half_step);
+    let behind = half_step * inside_box(uvw, -half_step);
+    return 0.25 * textureSampleLevel(light_volume, linear_clamp, o - behind, 0.0).r
+        + 0.5 * textureSampleLevel(light_volume, linear_clamp, o, 0.0).r
+        + 0.25 * textureSampleLevel(light_volume, linear_clamp, o + ahead, 0.0).r;
 }
 
 // PCG hash of the pixel → [0, 1); identical to render::jitter.
@@ -92,51 +112,70 @@ fn sample_norm(uvw: vec3<f32>) -> f32 {
     return textureSampleLevel(volume, linear_clamp, uvw, 0.0).r;
 }
 
-// Blinn–Phong headlight with the ambient term k · A(x) · C_TF(x).
-fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
+// The lit colour of a sample (CPU twin: render::cpu::light), docs/algorithms.md "Shading
+// with ambient occlusion". By default the AO factor A_s = clamp(1 − s(1 − min(2A, 1)), 0, 1)
+// (2A: a surface sees at most half the sphere the AO is taken over) scales ambient and
+// diffuse light, C_TF · A_s · (k + (1 − k) · D · S) + spec · S; with ao.y, the ambient
+// term only, with A_s = clamp(1 − s(1 − A), 0, 1): C_TF · (k · A_s + (1 − k) · D · S) + spec · S.
+fn light(rgb: vec3<f32>, ao: f32, diffuse: f32, specular: f32, lit: f32) -> vec3<f32> {
     let k = p.shading.x;
+    var c: vec3<f32>;
+    if p.ao.y != 0.0 {
+        let a = clamp(1.0 - p.ao.x * (1.0 - ao), 0.0, 1.0);
+        c = rgb * (k * a + (1.0 - k) * diffuse * lit);
+    } else {
+        let a = clamp(1.0 - p.ao.x * (1.0 - min(2.0 * ao, 1.0)), 0.0, 1.0);
+        c = rgb * a * (k + (1.0 - k) * diffuse * lit);
+    }
+    return c + vec3<f32>(specular * lit);
+}
+
+// Blinn–Phong (a headlight, or the directional light of shadows), with the AO factor.
+fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
     var ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
     if extras.flags.x != 0u {
         ao = 1.0 - positional_ao(uvw);  // live mode: Eq. 8 at this very sample
     }
     let shadows = extras.flags.y != 0u;
-    var lit = 1.0;
-    if shadows {
-        lit = shadow(uvw, view);
-    }
-    if p.shading.w == 0.0 {
-        return rgb * (k * ao + (1.0 - k) * lit);
-    }
-    let d = p.voxel_uvw.xyz;
-    // Central differences in texel units per mm.
-    let g = vec3<f32>(
-        sample_norm(uvw + vec3<f32>(d.x, 0.0, 0.0)) - sample_norm(uvw - vec3<f32>(d.x, 0.0, 0.0)),
-        sample_norm(uvw + vec3<f32>(0.0, d.y, 0.0)) - sample_norm(uvw - vec3<f32>(0.0, d.y, 0.0)),
-        sample_norm(uvw + vec3<f32>(0.0, 0.0, d.z)) - sample_norm(uvw - vec3<f32>(0.0, 0.0, d.z)),
-    ) / (2.0 * p.voxel_uvw.w);
-    // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
-    let strength = length(g) * abs(p.lut_map.x) * p.voxel_uvw.w * p.lut_map.w;
-    var edge = clamp(strength, 0.0, 1.0);
-    if u32(p.mode.x) == MODE_ISO && strength > 0.0 {
-        edge = 1.0;  // an isosurface is a surface however soft its gradient
-    }
     var diffuse = 1.0;
     var specular = 0.0;
-    if strength > 0.0 && shadows {
-        // Directional light: two-sided Blinn–Phong with the half vector of light and eye.
-        let n = normalize(g);
-        diffuse = mix(1.0, abs(dot(n, extras.light.xyz)), edge);
-        let h = extras.light.xyz + view;
-        if dot(h, h) > 1e-12 {
-            specular = p.shading.y * pow(abs(dot(n, normalize(h))), p.shading.z) * edge;
+    // cos θ of the shadow lookup's guard limit: 1 where there is no normal.
+    var cos_theta = 1.0;
+    if p.shading.w != 0.0 {
+        let d = p.voxel_uvw.xyz;
+        // Central differences in texel units per mm.
+        let g = vec3<f32>(
+            sample_norm(uvw + vec3<f32>(d.x, 0.0, 0.0)) - sample_norm(uvw - vec3<f32>(d.x, 0.0, 0.0)),
+            sample_norm(uvw + vec3<f32>(0.0, d.y, 0.0)) - sample_norm(uvw - vec3<f32>(0.0, d.y, 0.0)),
+            sample_norm(uvw + vec3<f32>(0.0, 0.0, d.z)) - sample_norm(uvw - vec3<f32>(0.0, 0.0, d.z)),
+        ) / (2.0 * p.voxel_uvw.w);
+        // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
+        let strength = length(g) * abs(p.lut_map.x) * p.voxel_uvw.w * p.lut_map.w;
+        var edge = clamp(strength, 0.0, 1.0);
+        if u32(p.mode.x) == MODE_ISO && strength > 0.0 {
+            edge = 1.0;  // an isosurface is a surface however soft its gradient
         }
-    } else if strength > 0.0 {
-        // Headlight: the light comes from the eye, so the half vector is the view vector.
-        let n_dot_v = abs(dot(normalize(g), view));
-        diffuse = mix(1.0, n_dot_v, edge);
-        specular = p.shading.y * pow(n_dot_v, p.shading.z) * edge;
+        if strength > 0.0 && shadows {
+            // Directional light: two-sided Blinn–Phong with the half vector of light and eye.
+            let n = normalize(g);
+            diffuse = mix(1.0, abs(dot(n, extras.light.xyz)), edge);
+            cos_theta = diffuse;
+            let h = extras.light.xyz + view;
+            if dot(h, h) > 1e-12 {
+                specular = p.shading.y * pow(abs(dot(n, normalize(h))), p.shading.z) * edge;
+            }
+        } else if strength > 0.0 {
+            // Headlight: the light comes from the eye, so the half vector is the view vector.
+            let n_dot_v = abs(dot(normalize(g), view));
+            diffuse = mix(1.0, n_dot_v, edge);
+            specular = p.shading.y * pow(n_dot_v, p.shading.z) * edge;
+        }
     }
-    return rgb * (k * ao + (1.0 - k) * diffuse * lit) + vec3<f32>(specular * lit);
+    var lit = 1.0;
+    if shadows {
+        lit = shadow(uvw, view, cos_theta);
+    }
+    return light(rgb, ao, diffuse, specular, lit);
 }
 
 // The mode's value at a sample: projections map the TF's window to [0, 1]; iso puts

@@ -498,3 +498,130 @@ fn gpu_matches_cpu_twin_with_lao() {
     assert!(lum(&c) < lum(&unoccluded), "AO must darken");
     assert!(a.iter().all(|&x| (0.0..=1.0).contains(&x)));
 }
+
+#[test]
+fn ao_scales_ambient_and_diffuse_light_or_the_ambient_term_only_gpu_and_cpu() {
+    // A homogeneous opaque cube with A(x) = 0.3 everywhere, unshaded (D = 1, no shadows):
+    // the pixel at the centre is C_TF · α_acc · F with, by default, F = A_s·(k + 1 − k) =
+    // A_s, A_s = clamp(1 − s(1 − min(2A, 1)), 0, 1); with ao_ambient_only F = k·A_s + 1 − k,
+    // A_s = clamp(1 − s(1 − A), 0, 1).
+    let gpu = device();
+    assert_ne!(
+        gpu.info.backend,
+        wgpu::Backend::Gl,
+        "lavapipe or a real GPU, not GL"
+    );
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let n = [24, 24, 24];
+    let v = Volume::new(n, [1.0; 3], volume::VoxelData::U8(vec![200; 24 * 24 * 24]))
+        .expect("valid volume");
+    let tf = TransferFunction {
+        name: "white".into(),
+        opacity: vec![
+            volao::tf::OpacityPoint {
+                value: 0.0,
+                alpha: 0.9,
+            },
+            volao::tf::OpacityPoint {
+                value: 255.0,
+                alpha: 0.9,
+            },
+        ],
+        color: vec![volao::tf::ColorStop {
+            value: 0.0,
+            rgb: [1.0; 3],
+        }],
+    };
+    let t = VolumeTexels::new(&v, UploadLimits::NONE);
+    let ao = vec![0.3f32; n.iter().product()];
+    let mut vol =
+        GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    vol.set_ambient_occlusion(&gpu, &ao);
+    let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
+    cv.ao = Some(ao.clone());
+    let k = 0.4f32;
+    let centre = |img: &Image| img.pixels[(32 * 64 + 32) as usize][1] as f32 / 255.0;
+    let mut unoccluded = None;
+    for (strength, ambient_only) in [
+        (0.0, false),
+        (1.0, false),
+        (1.0, true),
+        (2.0, false),
+        (2.0, true),
+        (1.5, false),
+    ] {
+        let f = Frame {
+            camera: Camera::default(),
+            settings: RenderSettings {
+                shading: Shading::None,
+                ambient: k,
+                ao_strength: strength,
+                ao_ambient_only: ambient_only,
+                ..Default::default()
+            },
+            width: 64,
+            height: 64,
+        };
+        let g = centre(
+            &rc.render(&gpu, &vol, &f, None)
+                .unwrap_or_else(|e| panic!("{e}")),
+        );
+        let c = centre(&cpu::render(&t, &cv, &vol.lut, &occ, &f));
+        assert!(
+            (g - c).abs() <= 1.5 / 255.0,
+            "s = {strength}, ambient only {ambient_only}: GPU {g} vs CPU {c}"
+        );
+        // s = 0 ignores the AO: the reference brightness C_TF · α_acc.
+        let base = *unoccluded.get_or_insert(g);
+        let want = if ambient_only {
+            k * (1.0 - strength * 0.7f32).clamp(0.0, 1.0) + 1.0 - k
+        } else {
+            (1.0 - strength * 0.4f32).clamp(0.0, 1.0)
+        };
+        eprintln!(
+            "s = {strength}, ambient only {ambient_only}: {g:.4} = {:.4} × unoccluded (want {want:.4})",
+            g / base
+        );
+        assert!(
+            (g - want * base).abs() <= 1.5 / 255.0,
+            "s = {strength}, ambient only {ambient_only}: {g} vs {} expected",
+            want * base
+        );
+    }
+    assert!(
+        unoccluded.is_some_and(|b| b > 0.9),
+        "the cube is in view and nearly opaque"
+    );
+}
+
+#[test]
+fn scenes_keep_where_the_ao_applies_and_its_strength_and_old_ones_get_the_new_shading() {
+    use volao::render::DEFAULT_AO_STRENGTH;
+    use volao::scene::Scene;
+    let base = r#"{"version": 1, "volume": {"path": null},
+        "transfer_function": {"name": "t", "opacity": [{"value": 0, "alpha": 0}, {"value": 1, "alpha": 1}],
+                              "color": [{"value": 0, "rgb": [1, 1, 1]}]},
+        "width": 8, "height": 8"#;
+    let path = std::path::Path::new("scene.json");
+    // A scene from before the fields: AO on ambient and diffuse, the default strength.
+    let old = Scene::parse(&format!("{base}, \"render\": {{\"ambient\": 0.6}}}}"), path)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(!old.render.ao_ambient_only);
+    assert_eq!(old.render.ao_strength, DEFAULT_AO_STRENGTH);
+    assert_eq!(old.render.ambient, 0.6);
+    // The old shading, asked for, survives a save and a load.
+    let mut scene = Scene::parse(
+        &format!("{base}, \"render\": {{\"ao_ambient_only\": true, \"ao_strength\": 1.5}}}}"),
+        path,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert!(scene.render.ao_ambient_only);
+    assert_eq!(scene.render.ao_strength, 1.5);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("s.json");
+    scene.render.ao_strength = 0.75;
+    scene.save(&file).unwrap_or_else(|e| panic!("{e}"));
+    let back = Scene::load(&file).unwrap_or_else(|e| panic!("{e}"));
+    assert!(back.render.ao_ambient_only);
+    assert_eq!(back.render.ao_strength, 0.75);
+}

@@ -10,7 +10,8 @@ use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::image::{Tolerance, check};
 use volao::render::shadow::{
-    LightGpu, LightVolume, light_cpu, light_direction, light_lut, quantise, shadow_factor,
+    LIGHT_START_STEPS, LightGpu, LightVolume, filtered_occlusion, light_cpu, light_direction,
+    light_lut,
 };
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
 use volao::tf::TransferFunction;
@@ -37,9 +38,10 @@ fn empty_volume_casts_no_shadow() {
 }
 
 #[test]
-fn uniform_medium_attenuates_by_beers_law_over_the_jittered_samples() {
+fn uniform_medium_attenuates_by_beers_law_over_the_light_samples() {
     // Constant opacity α per voxel step: T = (1 − α)^N with N the light samples
-    // t_i = (i + j)·h (h = 1 mm) before the ray leaves the box.
+    // t_i = (i + s)·h (h = 1 mm, s = LIGHT_START_STEPS, the same for every voxel) before
+    // the ray leaves the box.
     let n = [20, 16, 24];
     let v = u8_volume(n, |_, _, _| 77);
     let alpha = 0.05f32;
@@ -57,8 +59,7 @@ fn uniform_medium_attenuates_by_beers_law_over_the_jittered_samples() {
                 // Distance to the box exit along dir (slab method).
                 let exit = ((Vec3::select(dir.cmpgt(Vec3::ZERO), extent, Vec3::ZERO) - p) / dir)
                     .min_element();
-                let j = volao::render::jitter((x + n[0] * z) as u32, y as u32);
-                let s = exit - j;
+                let s = exit - LIGHT_START_STEPS;
                 // Skip samples that fall within rounding of the box face.
                 if (s - s.round()).abs() < 1e-3 {
                     continue;
@@ -165,10 +166,8 @@ fn shadowed_rendering_gpu_matches_cpu_twin_and_darkens() {
                 .render(&gpu, &vol, &f, None)
                 .unwrap_or_else(|e| panic!("{e}"));
             let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
-            cv.light = Some(LightVolume {
-                direction: dir,
-                values: quantise(&light_cpu(&t, &light_lut(&tf, &t), dir, None, &|_, _| {})),
-            });
+            let c = light_cpu(&t, &light_lut(&tf, &t), dir, None, &|_, _| {});
+            cv.light = Some(LightVolume::new(&c, t.dims, dir));
             assert_eq!(sampled.map(|l| l.values.len()), Some(light.len()));
             let c = cpu::render(&t, &cv, &vol.lut, &occ, &f);
             let label = format!("shadow_twin_{name}_{shading:?}");
@@ -177,7 +176,9 @@ fn shadowed_rendering_gpu_matches_cpu_twin_and_darkens() {
                 "{label}: max diff {}, mean {:.3}, outliers {}",
                 cmp.max_diff, cmp.mean_diff, cmp.outliers
             );
-            // Shadows darken: the same frame lit without them is brighter.
+            // Shadows darken: the same frame lit without them is brighter. (Not by 10 % any
+            // more: most of that was the lit surfaces shadowing themselves, which the
+            // start offset and guard limit remove; the slab test checks both sides.)
             vol.set_light_volume(&gpu, None)
                 .unwrap_or_else(|e| panic!("{e}"));
             let lit = rc
@@ -185,7 +186,7 @@ fn shadowed_rendering_gpu_matches_cpu_twin_and_darkens() {
                 .unwrap_or_else(|e| panic!("{e}"));
             let lum = |img: &Image| img.pixels.iter().map(|p| p[0] as u64).sum::<u64>();
             assert!(
-                (lum(&g) as f64) < 0.9 * lum(&lit) as f64,
+                (lum(&g) as f64) < 0.97 * lum(&lit) as f64,
                 "{label}: shadows must darken ({} vs {})",
                 lum(&g),
                 lum(&lit)
@@ -208,7 +209,7 @@ fn imagire_filter_keeps_linear_light_and_softens_a_hard_edge() {
     // comes back unchanged.
     for i in 4..44 {
         let x = 1.0 + i as f32 * 0.3;
-        let got = shadow_factor(&linear, dims, at(x), half_step);
+        let got = filtered_occlusion(&linear, dims, at(x), half_step, half_step);
         let want = (x - 0.5) / 15.0;
         assert!((got - want).abs() < 1e-5, "x = {x}: {got} vs {want}");
     }
@@ -223,7 +224,7 @@ fn imagire_filter_keeps_linear_light_and_softens_a_hard_edge() {
             .fold(0.0f32, f32::max)
     };
     let plain = steepest(&|x| volao::sample::trilinear(&edge, dims, at(x)));
-    let filtered = steepest(&|x| shadow_factor(&edge, dims, at(x), half_step));
+    let filtered = steepest(&|x| filtered_occlusion(&edge, dims, at(x), half_step, half_step));
     assert!(
         (plain - 1.0).abs() < 1e-6 && (filtered - 0.75).abs() < 1e-6,
         "filtered jump {filtered} vs unfiltered {plain}"
@@ -267,5 +268,301 @@ fn light_passes_through_clipped_space_on_gpu_and_cpu_alike() {
     assert!(
         lit > 0.8 && shaded < 0.5,
         "clipped {lit} vs unclipped {shaded}"
+    );
+}
+
+/// The device for a shadow test: lavapipe in CI, never the GL fallback (whose 3-D
+/// storage writes land in slice 0 only).
+fn vulkan_device() -> Gpu {
+    let gpu = device();
+    assert_ne!(
+        gpu.info.backend,
+        wgpu::Backend::Gl,
+        "shadow tests need Vulkan (lavapipe) or a real GPU backend, not GL"
+    );
+    gpu
+}
+
+/// Two opaque slabs across a 64³ volume, lit head-on along +y: the back one fills
+/// y ∈ [16, 24), the front one (if `front`) y ∈ [40, 46) over x < 32 only, so its shadow
+/// covers x < 32 of the back slab's face.
+fn slabs(front: bool) -> (Volume, TransferFunction) {
+    use volao::tf::{ColorStop, OpacityPoint};
+    let v = u8_volume([64, 64, 64], |x, y, _| {
+        let back = (16..24).contains(&y);
+        let ahead = front && (40..46).contains(&y) && x < 32;
+        if back || ahead { 255 } else { 0 }
+    });
+    let tf = TransferFunction {
+        name: "slab".into(),
+        opacity: vec![
+            OpacityPoint {
+                value: 100.0,
+                alpha: 0.0,
+            },
+            OpacityPoint {
+                value: 255.0,
+                alpha: 0.95,
+            },
+        ],
+        color: vec![ColorStop {
+            value: 0.0,
+            rgb: [0.9, 0.85, 0.8],
+        }],
+    };
+    (v, tf)
+}
+
+/// A view from 40° beside the light, so that the back slab's face shows both in the
+/// front slab's shadow (x < 32) and beside it.
+fn slab_frame() -> Frame {
+    Frame {
+        camera: Camera {
+            azimuth_deg: 40.0,
+            elevation_deg: 10.0,
+            ..Default::default()
+        },
+        settings: RenderSettings {
+            shadows: true,
+            light_direction: [0.0, 1.0, 0.0],
+            ..Default::default()
+        },
+        width: 96,
+        height: 96,
+    }
+}
+
+/// Where each pixel's ray meets the back slab's face (y = 24 voxels), as the voxel x of
+/// the hit; `None` where it misses the face, or the front slab (if `front`) is in the way.
+fn face_hits(
+    t: &volao::render::texels::VolumeTexels,
+    lut: &volao::tf::Lut,
+    f: &Frame,
+    front: bool,
+) -> Vec<Option<f32>> {
+    use glam::{Mat4, Vec4};
+    let p = f.params(t, lut, 0, 0);
+    let inv = Mat4::from_cols_array_2d(&p.inv_view_proj);
+    (0..f.width * f.height)
+        .map(|i| {
+            let (px, py) = (i % f.width, i / f.width);
+            let x = (px as f32 + 0.5) / f.width as f32 * 2.0 - 1.0;
+            let y = 1.0 - (py as f32 + 0.5) / f.height as f32 * 2.0;
+            let near = inv * Vec4::new(x, y, 0.0, 1.0);
+            let far = inv * Vec4::new(x, y, 1.0, 1.0);
+            let o = near.truncate() / near.w;
+            let d = (far.truncate() / far.w - o).normalize();
+            // Voxel coordinates: mm + 32 (unit spacing, box centred on the origin).
+            let at_y = |y_voxel: f32| {
+                let s = (y_voxel - 32.0 - o.y) / d.y;
+                o + d * s + Vec3::splat(32.0)
+            };
+            let hit = at_y(24.0);
+            let inside = |v: f32| (4.0..60.0).contains(&v);
+            let blocked = front && [40.0, 46.0].iter().any(|&y| at_y(y).x < 35.0);
+            (d.y < 0.0 && inside(hit.x) && inside(hit.z) && !blocked).then_some(hit.x)
+        })
+        .collect()
+}
+
+/// Mean luminance ratio `shadowed / unshadowed` over the pixels whose face hit lies in
+/// `range`, with the worst single pixel's ratio and the pixel count.
+fn ratio_over(
+    shadowed: &Image,
+    unshadowed: &Image,
+    hits: &[Option<f32>],
+    range: std::ops::Range<f32>,
+) -> (f64, f64, usize) {
+    let lum = |p: &[u8; 4]| (p[0] as f64 + p[1] as f64 + p[2] as f64) / 3.0;
+    let (mut a, mut b, mut worst, mut n) = (0.0, 0.0, 1.0f64, 0);
+    for (i, h) in hits.iter().enumerate() {
+        if h.is_some_and(|x| range.contains(&x)) {
+            let (s, u) = (lum(&shadowed.pixels[i]), lum(&unshadowed.pixels[i]));
+            a += s;
+            b += u;
+            if (s - u).abs() > 1.0 {
+                // Beyond the rounding of one 8-bit level.
+                worst = worst.min(s / u.max(1.0)).min(2.0 - s / u.max(1.0));
+            }
+            n += 1;
+        }
+    }
+    (a / b.max(1e-9), worst, n)
+}
+
+#[test]
+fn a_lit_slab_does_not_shadow_itself_and_an_occluder_darkens_what_it_hides_gpu_and_cpu() {
+    let gpu = vulkan_device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let dir = light_direction([0.0, 1.0, 0.0]).expect("valid");
+    let f = slab_frame();
+    for front in [false, true] {
+        let (v, tf) = slabs(front);
+        let t = texels(&v);
+        let ones = vec![1.0f32; t.dims.iter().product()];
+        let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let hits = face_hits(&t, &vol.lut, &f, front);
+        // GPU: the light volume of the slabs, and one of no occlusion at all.
+        let light = gpu_light(&gpu, &v, &tf, dir);
+        let mut gpu_frame = |values: &[f32]| {
+            vol.set_light_volume(&gpu, Some((values, dir)))
+                .unwrap_or_else(|e| panic!("{e}"));
+            rc.render(&gpu, &vol, &f, None)
+                .unwrap_or_else(|e| panic!("{e}"))
+        };
+        let g = (gpu_frame(&light), gpu_frame(&ones));
+        // CPU twin: the same from its own light volume.
+        let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
+        let c_light = light_cpu(&t, &light_lut(&tf, &t), dir, None, &|_, _| {});
+        let mut cpu_frame = |values: &[f32]| {
+            cv.light = Some(LightVolume::new(values, t.dims, dir));
+            cpu::render(&t, &cv, &vol.lut, &occ, &f)
+        };
+        let c = (cpu_frame(&c_light), cpu_frame(&ones));
+        for (who, (shadowed, unshadowed)) in [("GPU", &g), ("CPU twin", &c)] {
+            let lit_range = if front { 40.0..60.0 } else { 4.0..60.0 };
+            let (lit, worst, n) = ratio_over(shadowed, unshadowed, &hits, lit_range);
+            eprintln!(
+                "{who}, front slab {front}: lit face {lit:.4} (worst pixel {worst:.4}) over {n} pixels"
+            );
+            assert!(n > 200, "{who}: {n} pixels of the lit face in view");
+            assert!(
+                (lit - 1.0).abs() <= 0.02 && worst >= 0.98,
+                "{who}, front slab {front}: the lit face keeps {lit:.4} of its unshadowed brightness (worst pixel {worst:.4}); a lit surface must not shadow itself"
+            );
+            if front {
+                let (dark, _, n) = ratio_over(shadowed, unshadowed, &hits, 4.0..26.0);
+                eprintln!("{who}: hidden region {dark:.4} over {n} pixels");
+                assert!(n > 100, "{who}: {n} pixels of the hidden region in view");
+                assert!(
+                    dark < 0.7,
+                    "{who}: the region the front slab hides from the light keeps {dark:.4} of its brightness"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn shadows_add_no_high_frequency_energy_to_the_cranium() {
+    // Issue #18's measure (Image::high_frequency_energy: mean |Laplacian| of the
+    // luminance over the object after a 2× box downsampling), with shadows from the eye's
+    // direction (as `volao render --shadows` without --light) against the same frame
+    // without. The cranium halved (128×128×54) at 256² has as many pixels per voxel as
+    // the full one at 512², the size the issue measures, for a quarter of the work.
+    use volao::render::texels::{UploadLimits, VolumeTexels};
+    let gpu = vulkan_device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let volume = volao::volume::load(&common::data("raw/cranium-ct.raw"), &Default::default())
+        .unwrap_or_else(|e| panic!("{e}"))
+        .volume
+        .to_ras();
+    let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &volume.stats());
+    let t = VolumeTexels::new(
+        &volume,
+        UploadLimits {
+            max_dim: 128,
+            max_bytes: 1 << 30,
+        },
+    );
+    assert_eq!((t.dims, t.downsampled), ([128, 128, 54], 1));
+    let camera = Camera {
+        azimuth_deg: 30.0,
+        elevation_deg: 20.0,
+        distance: 3.2,
+        ..Default::default()
+    };
+    let dir = camera.backward();
+    let f = Frame {
+        camera,
+        settings: RenderSettings {
+            shadows: true,
+            light_direction: dir.to_array(),
+            ..Default::default()
+        },
+        width: 256,
+        height: 256,
+    };
+    let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let plain = rc
+        .render(&gpu, &vol, &f, None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let light = gpu
+        .stage::<LightGpu>()
+        .unwrap_or_else(|e| panic!("{e}"))
+        .compute(&gpu, &t, &light_lut(&tf, &t), dir, None, &|_, _| {})
+        .unwrap_or_else(|e| panic!("{e}"));
+    vol.set_light_volume(&gpu, Some((&light, dir)))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let shadowed = rc
+        .render(&gpu, &vol, &f, None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let energy = |img: &Image| {
+        img.high_frequency_energy([0, 0, 0])
+            .expect("the cranium is in view")
+    };
+    let (off, on) = (energy(&plain), energy(&shadowed));
+    eprintln!(
+        "high-frequency energy: {off:.3} without shadows, {on:.3} with ({:.3}×)",
+        on / off
+    );
+    assert!(
+        off > 5.0,
+        "the unshadowed cranium has texture to measure ({off})"
+    );
+    assert!(
+        on <= off,
+        "shadows add high-frequency energy: {on:.3} vs {off:.3} without ({:.3}×)",
+        on / off
+    );
+    // And they are there: the frame is darker where the light does not reach.
+    let lum = |img: &Image| img.pixels.iter().map(|p| p[1] as u64).sum::<u64>();
+    assert!(lum(&shadowed) < lum(&plain), "shadows darken somewhere");
+}
+
+#[test]
+fn the_light_volume_filter_keeps_linear_light_and_spreads_a_point() {
+    use volao::render::shadow::{FILTER_PASSES, filter_light};
+    let dims = [40, 3, 2];
+    let mut ramp: Vec<f32> = (0..240).map(|i| (i % 40) as f32 / 39.0).collect();
+    let before = ramp.clone();
+    filter_light(&mut ramp, dims);
+    // Unchanged away from the ends (the edge voxel repeats there).
+    for i in 0..240 {
+        let x = i % 40;
+        if (FILTER_PASSES..40 - FILTER_PASSES).contains(&x) {
+            assert!(
+                (ramp[i] - before[i]).abs() < 1e-6,
+                "x = {x}: {} vs {}",
+                ramp[i],
+                before[i]
+            );
+        }
+    }
+    // A single dark voxel in the light becomes a binomial dip: the darkness is kept,
+    // spread over 2·passes + 1 voxels along each axis.
+    let dims = [41, 41, 41];
+    let n: usize = dims.iter().product();
+    let mut t = vec![1.0f32; n];
+    let centre = 20 + 41 * (20 + 41 * 20);
+    t[centre] = 0.0;
+    filter_light(&mut t, dims);
+    let missing: f64 = t.iter().map(|&v| 1.0 - v as f64).sum();
+    assert!((missing - 1.0).abs() < 1e-3, "total darkness {missing}");
+    let peak = 1.0 - t[centre] as f64;
+    // Binomial centre weight C(2p, p) / 4^p per axis, cubed.
+    let p = FILTER_PASSES as u32;
+    let w = (1..=p).fold(1.0f64, |c, k| c * (p + k) as f64 / k as f64) / 4f64.powi(p as i32);
+    assert!(
+        (peak - w.powi(3)).abs() < 1e-4,
+        "dip {peak} vs {}",
+        w.powi(3)
+    );
+    assert_eq!(
+        t[centre + FILTER_PASSES + 1],
+        1.0,
+        "nothing beyond the kernel"
     );
 }

@@ -159,8 +159,10 @@ impl Document {
             Light::Headlight => self.camera.backward().to_array(),
         };
         if self.ao_only {
+            // The ambient term alone: C_TF · A_s with A_s = 1 − s·(1 − A).
             s.ambient = 1.0;
             s.shading = Shading::None;
+            s.ao_ambient_only = true;
         }
         s
     }

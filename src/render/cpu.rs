@@ -74,7 +74,6 @@ fn classify(p: &RaycastParams, lut: &Lut, norm: f32) -> Vec4 {
 }
 
 fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -> Vec3 {
-    let k = p.shading[0];
     let mut ao = vol
         .ao
         .as_ref()
@@ -82,13 +81,13 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -
     if let Some(pao) = &vol.live_vao {
         ao = 1.0 - pao.positional_ao(uvw);
     }
-    let lit = vol.light.as_ref().map_or(1.0, |l| {
-        let half_step = -view * (0.5 * p.step[0])
-            / (2.0 * Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]));
-        super::shadow::shadow_factor(&l.values, vol.dims, uvw, half_step)
-    });
+    let lit_at = |cos_theta: f32| {
+        vol.light.as_ref().map_or(1.0, |l| {
+            super::shadow::shadow_factor(&l.values, vol.dims, p, uvw, view, l.direction, cos_theta)
+        })
+    };
     if p.shading[3] == 0.0 {
-        return rgb * (k * ao + (1.0 - k) * lit);
+        return light(p, rgb, ao, 1.0, 0.0, lit_at(1.0));
     }
     let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
     let s = |o: Vec3| trilinear(&vol.norm, vol.dims, uvw + o);
@@ -102,20 +101,40 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -
     if p.mode[0] as u32 == MODE_ISO && strength > 0.0 {
         edge = 1.0; // an isosurface is a surface however soft its gradient
     }
-    let (mut diffuse, mut specular) = (1.0, 0.0);
+    let (mut diffuse, mut specular, mut lit) = (1.0, 0.0, 1.0);
     if let (true, Some(l)) = (strength > 0.0, &vol.light) {
         let n = g.normalize();
         diffuse = 1.0 + (n.dot(l.direction).abs() - 1.0) * edge;
+        lit = lit_at(diffuse);
         let h = l.direction + view;
         if h.dot(h) > 1e-12 {
             specular = p.shading[1] * n.dot(h.normalize()).abs().powf(p.shading[2]) * edge;
         }
+    } else if vol.light.is_some() {
+        lit = lit_at(1.0);
     } else if strength > 0.0 {
         let n_dot_v = g.normalize().dot(view).abs();
         diffuse = 1.0 + (n_dot_v - 1.0) * edge;
         specular = p.shading[1] * n_dot_v.powf(p.shading[2]) * edge;
     }
-    rgb * (k * ao + (1.0 - k) * diffuse * lit) + Vec3::splat(specular * lit)
+    light(p, rgb, ao, diffuse, specular, lit)
+}
+
+/// The lit colour of a sample, as `light` in raycast.wgsl: by default the AO factor
+/// `A_s = clamp(1 − s(1 − min(2A, 1)), 0, 1)` on ambient and diffuse light,
+/// `C_TF · A_s · (k + (1 − k) · D · S) + spec · S`; with `ao_ambient_only`, on the ambient
+/// term only with `A_s = clamp(1 − s(1 − A), 0, 1)`, `C_TF · (k · A_s + (1 − k) · D · S) +
+/// spec · S`.
+fn light(p: &RaycastParams, rgb: Vec3, ao: f32, diffuse: f32, specular: f32, lit: f32) -> Vec3 {
+    let k = p.shading[0];
+    let c = if p.ao[1] != 0.0 {
+        let a = (1.0 - p.ao[0] * (1.0 - ao)).clamp(0.0, 1.0);
+        rgb * (k * a + (1.0 - k) * diffuse * lit)
+    } else {
+        let a = (1.0 - p.ao[0] * (1.0 - (2.0 * ao).min(1.0))).clamp(0.0, 1.0);
+        rgb * a * (k + (1.0 - k) * diffuse * lit)
+    };
+    c + Vec3::splat(specular * lit)
 }
 
 const MODE_COMPOSITE: u32 = 0;

@@ -31,7 +31,8 @@ pub struct GpuLight {
 pub struct ExtrasParams {
     /// Live positional AO on, shadows on, surfaces on (0/1).
     pub flags: [u32; 4],
-    /// Unit direction towards the light.
+    /// Unit direction towards the light; w: the shadow lookup's guard limit in voxels
+    /// ([`crate::render::shadow::GUARD_VOXELS`]).
     pub light: [f32; 4],
 }
 
@@ -47,7 +48,7 @@ impl RayExtras {
                 u32::from(!self.surfaces.is_empty()),
                 0,
             ],
-            light: [d.x, d.y, d.z, 0.0],
+            light: [d.x, d.y, d.z, crate::render::shadow::GUARD_VOXELS],
         }
     }
 }

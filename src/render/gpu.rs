@@ -3,7 +3,7 @@
 //! a [`Frame`] is all that changes per frame.
 
 use super::extras::GpuLight;
-use super::shadow::{LightVolume, quantise};
+use super::shadow::LightVolume;
 use super::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use super::{Frame, Image};
 use crate::gpu::{
@@ -637,8 +637,8 @@ impl GpuVolume {
     }
 
     /// Uses `values` (transmittance per voxel, x fastest) as the light volume for shadows
-    /// from `direction` (unit, towards the light); `None` turns shadows off. Returns the
-    /// values as the GPU samples them (for the CPU twin).
+    /// from `direction` (unit, towards the light), filtered ([`LightVolume::new`]); `None`
+    /// turns shadows off. Returns the values as the GPU samples them (for the CPU twin).
     pub fn set_light_volume(
         &mut self,
         gpu: &Gpu,
@@ -662,18 +662,18 @@ impl GpuVolume {
                 ),
             });
         }
-        let bits: Vec<u16> = values
+        // Filtered and rounded as the CPU twin gets it.
+        let sampled = LightVolume::new(values, dims, direction);
+        let bits: Vec<u16> = sampled
+            .values
             .iter()
-            .map(|&v| half::f16::from_f32(v.clamp(0.0, 1.0)).to_bits())
+            .map(|&v| half::f16::from_f32(v).to_bits())
             .collect();
         let view = validated(&gpu.device, "GpuVolume::set_light_volume", || {
             crate::gpu::f16_texture(&gpu.device, &gpu.queue, "GpuVolume::light", &[(bits, dims)])
                 .create_view(&Default::default())
         })?;
         self.extras.light = Some(GpuLight { view, direction });
-        Ok(Some(LightVolume {
-            direction,
-            values: quantise(values),
-        }))
+        Ok(Some(sampled))
     }
 }

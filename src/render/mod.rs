@@ -5,11 +5,11 @@
 //! ray through the pixel centre → box intersection in physical space → jittered start →
 //! fixed steps of `step_voxels` voxels, the last one shortened to the box exit and its
 //! opacity corrected for its true length (Imagire et al.'s valid sampling path) →
-//! transfer-function lookup → optional Blinn–Phong headlight with the ambient term
-//! `k · A(x) · C_TF(x)` → front-to-back compositing, stopping at α > 0.99. The other
-//! [`RenderMode`]s walk the same samples: MIP, MinIP and average reduce the values of
-//! the unclipped ones to a grey; iso stops at the first one inside the surface, places
-//! the hit by bisection and shades it there.
+//! transfer-function lookup → optional Blinn–Phong headlight, the AO factor on ambient
+//! and diffuse light (docs/algorithms.md, "Shading") → front-to-back compositing,
+//! stopping at α > 0.99. The other [`RenderMode`]s walk the same samples: MIP, MinIP
+//! and average reduce the values of the unclipped ones to a grey; iso stops at the
+//! first one inside the surface, places the hit by bisection and shades it there.
 
 pub mod camera;
 pub mod cpu;
@@ -134,6 +134,8 @@ impl From<RenderMode> for String {
         m.to_string()
     }
 }
+/// The default AO strength of [`RenderSettings::ao_strength`].
+pub const DEFAULT_AO_STRENGTH: f32 = 1.0;
 
 /// Render settings that are not the camera or the transfer function.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -145,8 +147,17 @@ pub struct RenderSettings {
     /// Distance between samples in voxels (of the smallest spacing).
     pub step_voxels: f32,
     pub shading: Shading,
-    /// Ambient coefficient `k` of `k · A(x) · C_TF(x)`; the directional part gets `1 − k`.
+    /// Ambient coefficient `k`: the ambient part of the light; the directional part gets
+    /// `1 − k` (see [`RenderSettings::ao_ambient_only`] for where the AO applies).
     pub ambient: f32,
+    /// AO strength `s`: the AO factor is `A_s = clamp(1 − s · (1 − A'), 0, 1)`; 0 ignores
+    /// the AO, 1 uses it as computed, above 1 deepens it (docs/algorithms.md).
+    pub ao_strength: f32,
+    /// The AO factor scales the ambient term only, `C = C_TF · (k · A_s + (1 − k) · D · S)
+    /// + spec · S` with `A' = A` (volao before issue #18); when false (the default) it
+    /// scales ambient and diffuse light, `C = C_TF · A_s · (k + (1 − k) · D · S) + spec · S`
+    /// with `A' = min(2A, 1)` (a surface sees at most half the sphere AO is taken over).
+    pub ao_ambient_only: bool,
     pub specular: f32,
     pub shininess: f32,
     /// Per-pixel jittered ray start (removes wood-grain rings).
@@ -177,6 +188,8 @@ impl Default for RenderSettings {
             step_voxels: 0.5,
             shading: Shading::Phong,
             ambient: 0.4,
+            ao_strength: DEFAULT_AO_STRENGTH,
+            ao_ambient_only: false,
             specular: 0.3,
             shininess: 24.0,
             jitter: true,
@@ -215,9 +228,11 @@ pub struct RaycastParams {
     /// [`RenderMode::code`], then the map `u = norm · y + z` of the mode's value: the
     /// grey of the projections (the TF's window → [0, 1]), or value − iso for iso.
     pub mode: [f32; 4],
+    /// AO strength, AO on the ambient term only (0/1), unused, unused.
+    pub ao: [f32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<RaycastParams>() == 64 + 9 * 16);
+const _: () = assert!(std::mem::size_of::<RaycastParams>() == 64 + 10 * 16);
 
 /// Everything a frame needs besides the volume and the LUT data.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -270,6 +285,12 @@ impl Frame {
             image: [self.width, self.height, x0, y0],
             grid: [grid[0] as u32, grid[1] as u32, grid[2] as u32, BLOCK as u32],
             mode: mode_map(s.mode, texels, lut),
+            ao: [
+                s.ao_strength,
+                f32::from(u8::from(s.ao_ambient_only)),
+                0.0,
+                0.0,
+            ],
         }
     }
 }

@@ -4,7 +4,7 @@
 
 use super::cpu;
 use super::gpu::{GpuVolume, RayCaster};
-use super::shadow::{LightGpu, LightVolume, light_cpu, light_direction, light_lut, quantise};
+use super::shadow::{LightGpu, LightVolume, light_cpu, light_direction, light_lut};
 use super::texels::{UploadLimits, VolumeTexels};
 use super::{Frame, Image, RenderSettings};
 use crate::ao::cao::CaoStats;
@@ -27,6 +27,9 @@ pub struct Rendered {
     pub downsampled: u32,
     /// Seconds spent computing ambient occlusion (0 without).
     pub ao_seconds: f64,
+    /// Seconds spent on the light volume of shadows, filter and upload included (0
+    /// without shadows).
+    pub light_seconds: f64,
     /// CAO / LAO-every-frame figures for the frame.
     pub cao: Option<CaoStats>,
     /// Clip shapes left out, with why (the others clipped).
@@ -195,6 +198,8 @@ fn render_gpu(
         maps = Some(m);
     }
     let clip_maps = cao_state.as_ref().map(|c| &c.clip).or(maps.as_ref());
+    let ao_seconds = start.elapsed().as_secs_f64();
+    let light_start = std::time::Instant::now();
     if frame.settings.shadows {
         let dir = light_dir(frame)?;
         let t = g.stage::<LightGpu>()?.compute(
@@ -207,13 +212,14 @@ fn render_gpu(
         )?;
         vol.set_light_volume(g, Some((&t, dir)))?;
     }
-    let ao_seconds = start.elapsed().as_secs_f64();
+    let light_seconds = light_start.elapsed().as_secs_f64();
     let image = rc.render(g, &vol, frame, clip_maps)?;
     Ok(Rendered {
         image,
         device: g.describe(),
         downsampled: vol.texels.downsampled,
         ao_seconds,
+        light_seconds,
         cao: computed.cao,
         clip_errors,
         notes: computed.notes,
@@ -252,15 +258,14 @@ fn render_cpu(
     if let Some(m) = &frame.settings.opacity_modulation {
         cv.modulation = Some(quantise16(&crate::ao::fast::modulation_cpu(&texels, tf, m)));
     }
+    let ao_seconds = start.elapsed().as_secs_f64();
+    let light_start = std::time::Instant::now();
     if frame.settings.shadows {
         let dir = light_dir(frame)?;
         let t = light_cpu(&texels, &light_lut(tf, &texels), dir, None, progress);
-        cv.light = Some(LightVolume {
-            direction: dir,
-            values: quantise(&t),
-        });
+        cv.light = Some(LightVolume::new(&t, texels.dims, dir));
     }
-    let ao_seconds = start.elapsed().as_secs_f64();
+    let light_seconds = light_start.elapsed().as_secs_f64();
     let threads = rayon::current_num_threads();
     let image = cpu::render(&texels, &cv, &lut, &occ, frame);
     Ok(Rendered {
@@ -268,6 +273,7 @@ fn render_cpu(
         device: format!("CPU twin ({threads} threads)"),
         downsampled: 0,
         ao_seconds,
+        light_seconds,
         cao: None,
         clip_errors: Vec::new(),
         notes: computed.notes,

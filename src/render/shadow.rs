@@ -2,14 +2,16 @@
 //! from each voxel centre towards the light) on the GPU (`shaders/light.wgsl`) and on the
 //! CPU (twin: [`light_cpu`]), and the anti-aliased shadow factor the ray caster reads.
 //!
-//! Anti-aliasing follows Imagire et al. (2007, §3.3): the shadow at a view-ray sample
-//! `s_i` is `¼ T(s_i − Δs/2) + ½ T(s_i) + ¼ T(s_i + Δs/2)` (their Eq. 3–4, the half-step
-//! positions between neighbouring samples), and the light rays start at a per-voxel
-//! jittered offset, so no stair-steps appear at shadow boundaries.
+//! No self-shadowing, no speckle: light rays start [`LIGHT_START_STEPS`] out of the
+//! voxel (the same for every voxel: a per-voxel jittered start put a speckle into the
+//! light itself); the light volume is low-pass filtered ([`filter_light`]) before the ray
+//! caster samples it; the lookup is moved from the sample towards the light by a guard
+//! limit (Papaioannou et al. §5.1, [`GUARD_VOXELS`]); and the shadow at a view-ray sample
+//! `s_i` is `¼ T(s_i − Δs/2) + ½ T(s_i) + ¼ T(s_i + Δs/2)` (Imagire et al. 2007, Eq. 3–4,
+//! the half-step positions between neighbouring samples on the valid sampling path).
 
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
 use crate::gpu::{Gpu, GpuError, output_buffer, readback_buffer, storage_buffer, validated};
-use crate::render::jitter;
 use crate::render::texels::VolumeTexels;
 use crate::sample::bake_lut;
 use crate::sample::{alpha_column, lut_lerp, per_voxel, trilinear, voxel_centre};
@@ -18,6 +20,11 @@ use glam::Vec3;
 
 /// Distance between samples along a light ray, in voxels of the smallest spacing.
 pub const LIGHT_STEP_VOXELS: f32 = 1.0;
+
+/// Where a light ray's first sample lies, in steps from the voxel centre; the next ones
+/// follow one step apart. One and a half: the voxel's own opacity (its trilinear
+/// footprint reaches one voxel) does not dim the light that reaches it.
+pub const LIGHT_START_STEPS: f32 = 1.5;
 
 /// A light ray stops once its transmittance falls below this.
 pub const T_STOP: f32 = 1e-4;
@@ -61,7 +68,8 @@ pub struct LightParams {
     pub lut_scale: f32,
     pub lut_offset: f32,
     pub lut_last: f32,
-    pub _pad1: f32,
+    /// Where light rays start, in steps from the voxel centre ([`LIGHT_START_STEPS`]).
+    pub start: f32,
     /// Half the volume's extent (mm), for the clip test.
     pub half: [f32; 3],
     pub _pad2: f32,
@@ -88,7 +96,7 @@ fn params(texels: &VolumeTexels, lut: &Lut, direction: Vec3) -> LightParams {
         lut_scale: a,
         lut_offset: b,
         lut_last: (lut.rgba.len().max(2) - 1) as f32,
-        _pad1: 0.0,
+        start: LIGHT_START_STEPS,
         half: [extent[0] * 0.5, extent[1] * 0.5, extent[2] * 0.5],
         _pad2: 0.0,
     }
@@ -104,11 +112,10 @@ fn light_voxel(
     clip: Option<&crate::clip::cpu::ClipMapsCpu>,
 ) -> f32 {
     let centre = voxel_centre(voxel, dims);
-    let j = jitter((voxel[0] + dims[0] * voxel[2]) as u32, voxel[1] as u32);
     let step = Vec3::from(p.step_uvw);
     let mut t = 1.0f32;
     for i in 0..p.max_steps {
-        let uvw = centre + step * (i as f32 + j);
+        let uvw = centre + step * (i as f32 + p.start);
         if uvw.cmplt(Vec3::ZERO).any() || uvw.cmpgt(Vec3::ONE).any() || t < T_STOP {
             break;
         }
@@ -213,20 +220,123 @@ pub fn quantise(values: &[f32]) -> Vec<f32> {
         .collect()
 }
 
+/// Passes of the (¼, ½, ¼) filter along each axis that [`filter_light`] makes: eight
+/// make a binomial kernel of 17 taps, σ = 2 voxels (chosen on the cranium CT: fewer leave
+/// the light volume's slice stair-steps and hard shadow edges in the image, see
+/// docs/benchmarks.md, "Shadows").
+pub const FILTER_PASSES: usize = 8;
+
+/// Low-pass filters a light volume (x fastest) in place: [`FILTER_PASSES`] passes of
+/// (¼, ½, ¼) along x, y and z, the edge voxel repeated. The transmittance computed at the
+/// voxel centres changes by a whole surface's opacity from one voxel to the next where a
+/// light ray grazes a surface, and the stair-steps of slices show in it; read back at
+/// the samples of a view ray that alias. The filter keeps linear variation unchanged.
+pub fn filter_light(values: &mut [f32], dims: [usize; 3]) {
+    use rayon::prelude::*;
+    let mut tmp = vec![0.0f32; values.len()];
+    for _ in 0..FILTER_PASSES {
+        for axis in 0..3 {
+            let stride = [1, dims[0], dims[0] * dims[1]][axis];
+            let n = dims[axis];
+            if n < 2 {
+                continue;
+            }
+            let src: &[f32] = values;
+            tmp.par_iter_mut().enumerate().for_each(|(i, out)| {
+                let c = (i / stride) % n;
+                let lo = if c > 0 { i - stride } else { i };
+                let hi = if c + 1 < n { i + stride } else { i };
+                *out = 0.25 * src[lo] + 0.5 * src[i] + 0.25 * src[hi];
+            });
+            values.copy_from_slice(&tmp);
+        }
+    }
+}
+
 /// A light volume for the CPU twin of the ray caster: values as the GPU samples them.
 #[derive(Debug, Clone)]
 pub struct LightVolume {
     /// Unit direction towards the light.
     pub direction: Vec3,
-    /// Transmittance per voxel (x fastest), rounded as [`quantise`] does.
+    /// Transmittance per voxel (x fastest), filtered ([`filter_light`]) and rounded as
+    /// [`quantise`] does.
     pub values: Vec<f32>,
 }
 
-/// The anti-aliased shadow factor at a view-ray sample (Imagire et al. Eq. 3–4):
-/// `¼ T(uvw − half_step) + ½ T(uvw) + ¼ T(uvw + half_step)`, `half_step` = half the view
-/// ray's step in texture coordinates.
-pub fn shadow_factor(light: &[f32], dims: [usize; 3], uvw: Vec3, half_step: Vec3) -> f32 {
-    0.25 * trilinear(light, dims, uvw - half_step)
-        + 0.5 * trilinear(light, dims, uvw)
-        + 0.25 * trilinear(light, dims, uvw + half_step)
+impl LightVolume {
+    /// The light volume the ray caster samples for the transmittance `t` computed at the
+    /// voxel centres of a `dims` volume (by [`LightGpu`] or [`light_cpu`]): filtered,
+    /// then rounded to f16.
+    pub fn new(t: &[f32], dims: [usize; 3], direction: Vec3) -> LightVolume {
+        let mut values = t.to_vec();
+        filter_light(&mut values, dims);
+        LightVolume {
+            direction,
+            values: quantise(&values),
+        }
+    }
+}
+
+/// The guard limit `g` of the shadow lookup, in voxels of the smallest spacing: the
+/// light volume is read `g / cos θ` from the sample towards the light (see
+/// [`shadow_factor`]). Three voxels: one for the depth a view ray reaches into an opaque
+/// surface before it stops, one for the trilinear footprint of the light volume, one for
+/// what [`filter_light`] spreads of the dark inside of a surface.
+pub const GUARD_VOXELS: f32 = 3.0;
+
+/// How far `d` (texture coordinates) may be followed from `uvw` inside the box, as a
+/// fraction of it in [0, 1].
+fn inside_box(uvw: Vec3, d: Vec3) -> f32 {
+    let room = Vec3::select(d.cmpgt(Vec3::ZERO), Vec3::ONE - uvw, uvw);
+    let ad = d.abs();
+    let r = Vec3::select(
+        ad.cmpgt(Vec3::ZERO),
+        (room / ad.max(Vec3::splat(1e-20))).clamp(Vec3::ZERO, Vec3::ONE),
+        Vec3::ONE,
+    );
+    r.min_element()
+}
+
+/// The shadow factor at a view-ray sample `uvw` (CPU twin of `shadow` in raycast.wgsl).
+///
+/// Guard limit (Papaioannou et al. §5.1): the light volume is read at `o`, the sample
+/// moved towards the light (`direction`) by `d0 = g / cos θ` mm (g = [`GUARD_VOXELS`] of
+/// the smallest spacing, cos θ between the light and the normal, at least ½), so the
+/// surface layer the sample lies in does not shadow itself. Filtered occlusion (Imagire et
+/// al. Eq. 3–4): `¼ T(o − Δs/2) + ½ T(o) + ¼ T(o + Δs/2)`, Δs the view ray's step, the
+/// half steps kept on the valid sampling path (inside the box).
+pub fn shadow_factor(
+    light: &[f32],
+    dims: [usize; 3],
+    p: &crate::render::RaycastParams,
+    uvw: Vec3,
+    view: Vec3,
+    direction: Vec3,
+    cos_theta: f32,
+) -> f32 {
+    let to_uvw = Vec3::ONE / (2.0 * Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]));
+    let guard = GUARD_VOXELS * p.voxel_uvw[3] / cos_theta.max(0.5);
+    let o = uvw + direction * guard * to_uvw;
+    let half_step = -view * (0.5 * p.step[0]) * to_uvw;
+    filtered_occlusion(
+        light,
+        dims,
+        o,
+        half_step * inside_box(uvw, -half_step),
+        half_step * inside_box(uvw, half_step),
+    )
+}
+
+/// Imagire et al.'s filtered occlusion (Eq. 3–4) at `o`: `¼ T(o − behind) + ½ T(o) +
+/// ¼ T(o + ahead)`, the offsets being half the view ray's step back and forth.
+pub fn filtered_occlusion(
+    light: &[f32],
+    dims: [usize; 3],
+    o: Vec3,
+    behind: Vec3,
+    ahead: Vec3,
+) -> f32 {
+    0.25 * trilinear(light, dims, o - behind)
+        + 0.5 * trilinear(light, dims, o)
+        + 0.25 * trilinear(light, dims, o + ahead)
 }

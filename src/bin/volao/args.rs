@@ -109,9 +109,17 @@ pub struct RenderArgs {
     /// Step between samples in voxels.
     #[arg(long)]
     pub step: Option<f32>,
-    /// Ambient coefficient k of k·A(x)·C_TF(x), 0 to 1 (1: ambient occlusion only).
+    /// Ambient coefficient k, 0 to 1: the ambient share of the light, C_TF·A_s·(k + (1 − k)·D) (1: ambient occlusion only).
     #[arg(long)]
     pub ambient: Option<f32>,
+    /// AO strength s: the AO factor is clamp(1 − s·(1 − A), 0, 1) (0: no AO, 1: as
+    /// computed, above 1: deeper; default 1).
+    #[arg(long, value_name = "S")]
+    pub ao_strength: Option<f32>,
+    /// The AO factor scales the ambient term only (volao's shading before issue #18)
+    /// instead of ambient and diffuse light.
+    #[arg(long)]
+    pub ao_ambient_only: bool,
     /// Ambient occlusion: none, lao, cao (exact under clipping), lao-full (LAO of every
     /// voxel each frame, CAO's baseline), vao / vao-live (positional AO, precomputed or
     /// at every sample), cdf, gauss, penner (filter maps) or cone (cone-traced).

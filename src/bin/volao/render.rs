@@ -62,6 +62,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if let Some(stats) = &out.cao {
         crate::ao::print_cao(stats);
     }
+    if scene.render.shadows {
+        eprintln!("{}", light_note(&scene.render, &out));
+    }
     if let Some(path) = &args.save_scene {
         scene.save(path)?;
         println!("scene: {}", path.display());
@@ -177,7 +180,8 @@ impl RenderArgs {
         Ok(())
     }
 
-    /// Background, ambient coefficient, shading, step and shadows.
+    /// Background, ambient coefficient, AO strength and where it applies, shading, step
+    /// and shadows.
     fn apply_render_settings(&self, settings: &mut RenderSettings) -> Result<()> {
         if let Some(b) = &self.background {
             settings.background = parse_background(b)?;
@@ -188,6 +192,13 @@ impl RenderArgs {
             }
             settings.ambient = k;
         }
+        if let Some(s) = self.ao_strength {
+            if !(0.0..=10.0).contains(&s) {
+                bail!("--ao-strength must be between 0 and 10");
+            }
+            settings.ao_strength = s;
+        }
+        settings.ao_ambient_only |= self.ao_ambient_only;
         set(&mut settings.shading, self.shading);
         set(&mut settings.mode, self.mode);
         if let Some(step) = self.step {
@@ -306,4 +317,22 @@ fn ao_note(ao: &AoSettings, seconds: f64) -> String {
             seconds * 1e3
         )
     }
+}
+
+/// What `--shadows` reports on stderr: the light volume's time, direction and size.
+fn light_note(settings: &RenderSettings, out: &Rendered) -> String {
+    let d = settings.light_direction;
+    format!(
+        "shadows: light volume {:.0} ms (towards the light {:.2}, {:.2}, {:.2}; {}filtered, guard {} voxels)",
+        out.light_seconds * 1e3,
+        d[0],
+        d[1],
+        d[2],
+        if out.downsampled > 0 {
+            "volume halved, "
+        } else {
+            ""
+        },
+        volao::render::shadow::GUARD_VOXELS
+    )
 }

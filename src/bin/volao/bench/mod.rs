@@ -6,6 +6,7 @@ mod lao;
 mod load;
 mod raymarch;
 mod render;
+mod shadows;
 
 use anyhow::Result;
 use clap::Subcommand;
@@ -28,6 +29,9 @@ pub enum BenchCommand {
     /// Ruiz et al.'s Table 1 (filter maps on the cranium CT) and every cheap AO method's
     /// RMS against 512-ray LAO with its compute time.
     Filter(filter::FilterBenchArgs),
+    /// Whether `--shadows` adds texture: high-frequency energy of the cranium CT with and
+    /// without shadows (or of PNG files given by --measure), and the light volume's time.
+    Shadows(shadows::ShadowBenchArgs),
     /// (internal) load one file and print time and peak memory as JSON.
     #[command(hide = true)]
     LoadOne { file: PathBuf },
@@ -42,6 +46,7 @@ pub fn run(command: &BenchCommand) -> Result<()> {
         BenchCommand::Filter(args) => filter::filter_bench(args),
         BenchCommand::Load(args) => load::load_bench(args),
         BenchCommand::Cao(args) => cao::cao_bench(args),
+        BenchCommand::Shadows(args) => shadows::shadow_bench(args),
         BenchCommand::LoadOne { file } => load::load_one(file),
     }
 }
