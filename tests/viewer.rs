@@ -254,8 +254,14 @@ fn ao_method_from_the_panel_matches_volao_render_with_lao() {
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
-    choose(&mut h, "Method", "lao");
+    // By its name for people; the panel explains it in a line (the code is in the tooltip).
+    choose(&mut h, "Method", volao::ao::AoMethod::Lao.label());
     settle(&mut h);
+    assert!(
+        h.query_by_label(volao::ao::AoMethod::Lao.summary())
+            .is_some(),
+        "the panel explains the method"
+    );
     assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
     let doc = h.state().document().expect("doc");
     assert_eq!(doc.ao.method, volao::ao::AoMethod::Lao);
@@ -276,13 +282,13 @@ fn live_positional_ao_runs_in_the_ray_caster_and_matches_volao_render() {
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
-    choose(&mut h, "Method", "vao-live");
+    choose(&mut h, "Method", "Positional AO (live)");
     settle(&mut h);
     assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
     let scene = dir.path().join("live.json");
     let viewport = viewport_is_volao_render(&mut h, &scene, "viewport_vao_live_vs_render");
     // Back to none: the live AO is switched off again.
-    choose(&mut h, "Method", "none");
+    choose(&mut h, "Method", "No AO");
     settle(&mut h);
     let mut none = volao::scene::Scene::load(&scene).expect("scene");
     none.ambient_occlusion.method = volao::ao::AoMethod::None;
@@ -442,7 +448,7 @@ fn filter_ao_and_opacity_modulation_from_the_panels_match_volao_render() {
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
     choose(&mut h, "Preset", "cao-single-color");
-    choose(&mut h, "Method", "gauss");
+    choose(&mut h, "Method", "Ambient map (Gaussian)");
     click(&mut h, "opacity");
     click(&mut h, "Opacity modulation by local variance");
     h.run_steps(2);
@@ -862,7 +868,7 @@ fn add_a_clip_shape_drag_it_and_cao_follows() {
     );
 
     // CAO: exact AO every frame, recomputing a share.
-    choose(&mut h, "Method", "cao");
+    choose(&mut h, "Method", "Contextual AO");
     settle(&mut h);
     assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
     let with_ao = viewport_pixels(&mut h);
