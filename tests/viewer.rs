@@ -879,3 +879,56 @@ fn add_a_clip_shape_drag_it_and_cao_follows() {
     let percent = h.state().cao_percent_recomputed().expect("CAO statistics");
     assert!(percent > 0.0 && percent < 100.0, "{percent} % recomputed");
 }
+
+#[test]
+fn the_demo_opens_carved_with_ambient_occlusion_the_adapter_affords() {
+    let _gpu = one_at_a_time();
+    let gpu = std::sync::Arc::new(device());
+    let cpu_adapter = gpu.info.device_type == wgpu::DeviceType::Cpu;
+    let mut job = volao::app::jobs::Job::spawn("demo", || {}, {
+        let gpu = std::sync::Arc::clone(&gpu);
+        move |p| volao::app::load_document(&gpu, &OpenRequest::Demo, p)
+    });
+    let loaded = job
+        .wait(Duration::from_secs(180))
+        .expect("the demo loads within 3 minutes")
+        .unwrap_or_else(|e| panic!("{e:?}"));
+    let doc = loaded.doc;
+    let note = doc
+        .note
+        .clone()
+        .expect("the status bar says which AO was chosen");
+    eprintln!("{note}");
+    assert_ne!(doc.ao.method, volao::ao::AoMethod::None, "AO is on");
+    // A CPU adapter (lavapipe here) cannot afford CAO per frame: the measured budget
+    // picks a fast ambient map and says so; any GPU affords at least 6-ray CAO.
+    if cpu_adapter {
+        assert_eq!(doc.ao.method, volao::ao::AoMethod::Gauss, "{note}");
+        assert!(note.contains(&gpu.info.name), "{note}");
+    }
+    // One sphere, and it takes bone away: the phantom has skull inside it.
+    assert_eq!(doc.clip_shapes.len(), 1);
+    let s = &doc.clip_shapes[0];
+    assert_eq!(s.shape, volao::clip::Shape::Sphere);
+    let (centre, r) = (glam::Vec3::from(s.translation), s.scale[0]);
+    let v = &doc.volume;
+    let (n, sp) = (v.dims, glam::Vec3::from(v.spacing));
+    let half = glam::Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32) * sp * 0.5;
+    let mut bone_inside = 0;
+    for z in 0..n[2] {
+        for y in 0..n[1] {
+            for x in 0..n[0] {
+                let p = (glam::Vec3::new(x as f32, y as f32, z as f32) + 0.5) * sp - half;
+                if p.distance(centre) < r && v.value(x, y, z).unwrap_or(0.0) > 300.0 {
+                    bone_inside += 1;
+                }
+            }
+        }
+    }
+    assert!(
+        bone_inside > 1000,
+        "the sphere removes only {bone_inside} bone voxels"
+    );
+    // The camera looks down into the cut.
+    assert!(doc.camera.elevation_deg > 10.0);
+}

@@ -20,6 +20,7 @@ mod ao_job;
 pub mod ao_panel;
 pub mod camera_input;
 pub mod clip_panel;
+pub mod demo;
 mod derived;
 mod document;
 pub mod jobs;
