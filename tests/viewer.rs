@@ -932,3 +932,77 @@ fn the_demo_opens_carved_with_ambient_occlusion_the_adapter_affords() {
     // The camera looks down into the cut.
     assert!(doc.camera.elevation_deg > 10.0);
 }
+
+/// Steps until the exact AO is shown and nothing runs; returns the ambient terms the
+/// viewport showed, in order, and the viewport as it looked while the approximation was
+/// shown (with the status bar's words checked then).
+fn watch_ao(h: &mut Harness<'static, Viewer>) -> (Vec<volao::app::AoShown>, Option<Image>) {
+    use volao::app::AoShown;
+    let (mut seen, mut approximate) = (Vec::new(), None);
+    let start = Instant::now();
+    loop {
+        h.step();
+        let s = h.state().ao_shown();
+        if seen.last() != Some(&s) {
+            seen.push(s);
+        }
+        if s == AoShown::Approximate && approximate.is_none() {
+            let method = h.state().document().expect("doc").ao.method;
+            let words = format!(
+                "AO: approximate (ambient map) until {} is ready",
+                method.label()
+            );
+            assert!(
+                h.query_by_label(&words).is_some(),
+                "the status bar says {words:?}"
+            );
+            approximate = Some(viewport_pixels(h));
+        }
+        if s == AoShown::Exact && !h.state().is_busy() {
+            return (seen, approximate);
+        }
+        assert!(start.elapsed() < Duration::from_secs(180), "still {seen:?}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn a_slow_ao_shows_an_ambient_map_first_and_then_never_a_frame_without_ao() {
+    use volao::app::AoShown;
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(bucky(), dir.path());
+    settle(&mut h);
+    assert_eq!(h.state().ao_shown(), AoShown::Nothing);
+    // 512-ray LAO: seconds on lavapipe even for 32³, the ambient map milliseconds.
+    let doc = h.state_mut().document_mut().expect("doc");
+    doc.ao.method = volao::ao::AoMethod::Lao;
+    doc.ao.rays = volao::ao::rays::RaySet::Fibonacci(512);
+    let (seen, approximate) = watch_ao(&mut h);
+    assert_eq!(
+        seen,
+        [AoShown::Nothing, AoShown::Approximate, AoShown::Exact],
+        "the ambient map first, then the exact AO"
+    );
+    let scene = dir.path().join("progressive.json");
+    let exact = viewport_is_volao_render(&mut h, &scene, "viewport_progressive_lao");
+    let approximate = approximate.expect("a frame with the approximation");
+    assert_ne!(
+        approximate.pixels, exact.pixels,
+        "the exact AO was swapped in"
+    );
+
+    // A transfer-function change: the old AO stays until the new map arrives, then the
+    // map until the new exact AO: no frame without AO.
+    let doc = h.state_mut().document_mut().expect("doc");
+    for p in &mut doc.tf.opacity {
+        p.alpha *= 0.8;
+    }
+    let (seen, _) = watch_ao(&mut h);
+    assert!(
+        !seen.contains(&AoShown::Nothing),
+        "a frame without AO: {seen:?}"
+    );
+    assert_eq!(seen.last(), Some(&AoShown::Exact));
+    assert!(seen.contains(&AoShown::Approximate), "{seen:?}");
+}

@@ -32,6 +32,10 @@ pub(super) struct AoKey {
 pub(super) struct Derived {
     /// The AO volume, CAO's state or live positional AO.
     pub(super) ao: Keyed<AoKey, AoResult>,
+    /// The cheap ambient map shown while a slow AO is computed (progressive AO).
+    pub(super) preview: Keyed<AoKey, Vec<f32>>,
+    /// Which ambient term the viewport shows.
+    pub(super) shown: super::preview::AoShown,
     /// Opacity modulation factors (Ruiz et al. §4.2).
     pub(super) modulation: Keyed<ModulationKey, Vec<f32>>,
     /// The light volume of shadows.
@@ -55,6 +59,8 @@ impl Default for Derived {
     fn default() -> Self {
         Derived {
             ao: Keyed::default(),
+            preview: Keyed::default(),
+            shown: Default::default(),
             modulation: Keyed::default(),
             light: Keyed::default(),
             light_wanted: None,

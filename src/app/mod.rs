@@ -25,6 +25,7 @@ mod derived;
 mod document;
 pub mod jobs;
 mod panels;
+mod preview;
 pub mod screenshot;
 mod shots;
 mod sync;
@@ -35,6 +36,7 @@ pub use document::{
     DEMO_SIZE, Document, LoadedDocument, OpenRequest, ViewerOptions, default_recent_file,
     load_document,
 };
+pub use preview::AoShown;
 pub use screenshot::ShotSize;
 
 use crate::gpu::Gpu;
@@ -474,6 +476,8 @@ impl Viewer {
                 self.doc_generation += 1;
                 // The new volume has no AO yet; what was computed for the old one is gone.
                 self.derived.ao.reset();
+                self.derived.preview.reset();
+                self.derived.shown = AoShown::Nothing;
                 self.scripted.ready_frames = 0;
                 self.tf_editor = Default::default();
             }

@@ -385,6 +385,9 @@ impl Viewer {
                 progress_bar(ui, job.fraction());
                 cancel_ao = ui.button("Cancel").clicked();
             }
+            if let Some(text) = self.ao_shown_text() {
+                ui.label(text);
+            }
             if let Some(shot) = &self.shots.pending {
                 ui.label(format!("Rendering {}", file_name(shot.path())));
                 progress_bar(ui, Some(shot.fraction()));

@@ -6,6 +6,7 @@
 use super::ao_job::{AoData, AoInput, compute_ao};
 use super::derived::*;
 use super::jobs::{Job, Polled};
+use super::preview::AoShown;
 use super::{Viewer, ao_panel};
 use crate::ao::AoMethod;
 use crate::ao::filter::StatisticSource;
@@ -26,8 +27,9 @@ impl Viewer {
         })
     }
 
-    /// Keeps the AO on the GPU in step with the settings and the transfer function;
-    /// shows the volume without AO while a new one is computed.
+    /// Keeps the AO on the GPU in step with the settings and the transfer function.
+    /// While a slow one is computed the viewport shows a cheap ambient map
+    /// ([`super::preview`]); until that arrives, the previous AO stays on screen.
     pub(super) fn update_ao(&mut self) {
         let want = self.ao_key();
         match self.derived.ao.poll(want.as_ref()) {
@@ -57,10 +59,13 @@ impl Viewer {
                     .unwrap_or_else(|| Err("no viewport".into()));
                 match applied {
                     Ok(()) => {
-                        // CAO's V_AO is made for the current shapes on the next sync.
+                        // CAO's V_AO is made for the current shapes on the next sync
+                        // (in this frame: the approximation stays until then).
                         self.derived.synced_clip = None;
                         self.derived.ao_seconds = Some((r.seconds, r.device));
                         self.derived.ao.uploaded(key);
+                        self.derived.preview.cancel();
+                        self.derived.shown = AoShown::Exact;
                     }
                     Err(message) => self.derived.ao.fail(key, message),
                 }
@@ -69,25 +74,13 @@ impl Viewer {
                 self.toast(format!("Ambient occlusion failed: {message}"), true)
             }
         }
+        self.poll_preview(want.as_ref());
+        if !self.derived.ao.settled(want.as_ref()) {
+            self.drop_stale_ao(want.as_ref());
+        }
+        self.start_preview(want.as_ref());
         if self.derived.ao.settled(want.as_ref()) {
             return;
-        }
-        // The settings moved on: drop the stale AO at once (never show a wrong one).
-        if self.derived.ao.reset() {
-            let gpu = Arc::clone(&self.gpu);
-            let tf = self.doc.as_ref().map(|d| d.tf.clone());
-            self.with_viewport(|v| {
-                v.cao = None;
-                if let Some(g) = &mut v.volume {
-                    g.clear_ambient_occlusion(&gpu);
-                    if let Some(tf) = &tf {
-                        // Turning live positional AO off cannot fail (nothing is uploaded).
-                        let _ = g.set_live_vao(&gpu, tf, None);
-                    }
-                    v.touch();
-                }
-            });
-            self.derived.synced_clip = None;
         }
         let Some(key) = want else {
             return;
@@ -109,7 +102,10 @@ impl Viewer {
                 Some(r)
             });
             match applied.flatten() {
-                Some(Ok(())) => self.derived.ao.uploaded(key),
+                Some(Ok(())) => {
+                    self.derived.ao.uploaded(key);
+                    self.derived.shown = AoShown::Exact;
+                }
                 Some(Err(message)) => {
                     self.toast(format!("Ambient occlusion failed: {message}"), true);
                     self.derived.ao.fail(key, message);
@@ -141,6 +137,54 @@ impl Viewer {
         };
         let job = Job::spawn(label, self.repaint_fn(), move |p| compute_ao(input, p));
         self.derived.ao.start(key, job);
+    }
+
+    /// The settings moved on: drops the AO on the GPU made for others. When the new
+    /// settings get an ambient map first, the old AO stays on screen until it arrives
+    /// (tens of milliseconds; the status bar says so), so that a frame never lacks AO
+    /// once AO is chosen; otherwise it goes at once (never a wrong AO for long).
+    fn drop_stale_ao(&mut self, want: Option<&AoKey>) {
+        // Live positional AO lives in the ray caster: nothing of it stays on screen.
+        let was_live = self
+            .derived
+            .ao
+            .on_gpu()
+            .is_some_and(|k| k.settings.method == AoMethod::VaoLive);
+        let stale_exact = self.derived.ao.reset();
+        let stale_preview = self
+            .derived
+            .preview
+            .on_gpu()
+            .is_some_and(|k| Some(k) != want);
+        if !(stale_exact || stale_preview) {
+            return;
+        }
+        if stale_preview {
+            self.derived.preview.reset();
+        }
+        let keep =
+            self.preview_key(want).is_some() && self.derived.shown != AoShown::Nothing && !was_live;
+        let gpu = Arc::clone(&self.gpu);
+        let tf = self.doc.as_ref().map(|d| d.tf.clone());
+        self.with_viewport(|v| {
+            v.cao = None;
+            if let Some(g) = &mut v.volume {
+                if !keep {
+                    g.clear_ambient_occlusion(&gpu);
+                }
+                if let Some(tf) = &tf {
+                    // Turning live positional AO off cannot fail (nothing is uploaded).
+                    let _ = g.set_live_vao(&gpu, tf, None);
+                }
+                v.touch();
+            }
+        });
+        self.derived.shown = if keep {
+            AoShown::Previous
+        } else {
+            AoShown::Nothing
+        };
+        self.derived.synced_clip = None;
     }
 
     pub(super) fn modulation_key(&self) -> Option<ModulationKey> {
@@ -321,7 +365,7 @@ impl Viewer {
     }
 
     /// A copy of the texels the viewport's volume was made from.
-    fn uploaded_texels(&self) -> Option<VolumeTexels> {
+    pub(super) fn uploaded_texels(&self) -> Option<VolumeTexels> {
         self.with_viewport(|v| v.volume.as_ref().map(|g| g.texels.clone()))
             .flatten()
     }
