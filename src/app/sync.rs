@@ -5,15 +5,31 @@
 
 use super::ao_job::{AoData, AoInput, compute_ao};
 use super::derived::*;
-use super::jobs::{Job, Polled};
+use super::jobs::{Job, Keyed, Polled};
 use super::preview::AoShown;
 use super::{Viewer, ao_panel};
 use crate::ao::AoMethod;
 use crate::ao::filter::StatisticSource;
+use crate::gpu::Gpu;
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
 use std::sync::Arc;
 use std::time::Instant;
+
+/// Puts a derived result on the GPU volume: `Ok(false)` when it does not fit (dropped).
+type Upload<'a, K> = &'a dyn Fn(&Gpu, &mut GpuVolume, &K, &[f32]) -> Result<bool, String>;
+
+/// How [`Viewer::keep_derived`] handles one derived volume.
+struct DerivedVolume<'a, K> {
+    /// For messages: "Shadows" (failed: …).
+    what: &'static str,
+    slot: fn(&mut Derived) -> &mut Keyed<K, Vec<f32>>,
+    upload: Upload<'a, K>,
+    /// Removes the GPU's copy.
+    clear: &'a dyn Fn(&Gpu, &mut GpuVolume),
+    /// Keep a stale result on screen until the next one arrives.
+    keep_stale: bool,
+}
 
 impl Viewer {
     pub(super) fn ao_key(&self) -> Option<AoKey> {
@@ -203,42 +219,25 @@ impl Viewer {
     /// thread on the uploaded texels.
     pub(super) fn update_modulation(&mut self) {
         let want = self.modulation_key();
-        match self.derived.modulation.poll(want.as_ref()) {
-            Polled::Nothing => {}
-            Polled::Ready(key, values) => {
-                let gpu = Arc::clone(&self.gpu);
-                let fits = |g: &GpuVolume| values.len() == g.texels.dims.iter().product::<usize>();
-                if self.upload(|g| {
-                    let fit = fits(g);
+        let Some((key, texels)) = self.keep_derived(
+            want.as_ref(),
+            DerivedVolume {
+                what: "Opacity modulation",
+                slot: |d| &mut d.modulation,
+                upload: &|gpu, g, _, values| {
+                    let fit = values.len() == g.texels.dims.iter().product::<usize>();
                     if fit {
-                        g.set_opacity_modulation(&gpu, &values);
+                        g.set_opacity_modulation(gpu, values);
                     }
-                    fit
-                }) {
-                    self.derived.modulation.uploaded(key);
-                }
-            }
-            Polled::Failed(message) => {
-                self.toast(format!("Opacity modulation failed: {message}"), true)
-            }
-        }
-        if self.derived.modulation.settled(want.as_ref()) {
-            return;
-        }
-        if self.derived.modulation.reset() {
-            let gpu = Arc::clone(&self.gpu);
-            self.upload(|g| {
-                g.clear_opacity_modulation(&gpu);
-                true
-            });
-        }
-        let Some(key) = want else {
+                    Ok(fit)
+                },
+                clear: &|gpu, g| g.clear_opacity_modulation(gpu),
+                keep_stale: false,
+            },
+        ) else {
             return;
         };
-        if !self.resting() {
-            return;
-        }
-        let (Some(doc), Some(texels)) = (&self.doc, self.uploaded_texels()) else {
+        let Some(doc) = &self.doc else {
             return;
         };
         let (gpu, tf, step, m) = (
@@ -274,39 +273,27 @@ impl Viewer {
     /// lag a moving camera or shape read better than shadows that blink off.
     pub(super) fn update_light(&mut self) {
         let want = self.light_key();
-        match self.derived.light.poll(want.as_ref()) {
-            Polled::Nothing => {}
-            Polled::Ready(key, values) => {
-                let gpu = Arc::clone(&self.gpu);
-                let dir = glam::Vec3::from(key.direction);
-                let mut error = None;
-                let uploaded =
-                    self.upload(|g| match g.set_light_volume(&gpu, Some((&values, dir))) {
-                        Ok(_) => true,
-                        Err(e) => {
-                            error = Some(e.to_string());
-                            false
-                        }
-                    });
-                if uploaded {
-                    self.derived.light.uploaded(key);
-                } else if let Some(e) = error {
-                    self.toast(format!("Shadows failed: {e}"), true);
-                }
-            }
-            Polled::Failed(message) => self.toast(format!("Shadows failed: {message}"), true),
-        }
         if want != self.derived.light_wanted.as_ref().map(|(k, _)| k.clone()) {
             self.derived.light_wanted = want.clone().map(|k| (k, Instant::now()));
         }
-        if self.derived.light.settled(want.as_ref()) {
-            return;
-        }
-        if self.derived.light.reset() && want.is_none() {
-            let gpu = Arc::clone(&self.gpu);
-            self.upload(|g| g.set_light_volume(&gpu, None).is_ok());
-        }
-        let Some(key) = want else {
+        let Some((key, texels)) = self.keep_derived(
+            want.as_ref(),
+            DerivedVolume {
+                what: "Shadows",
+                slot: |d| &mut d.light,
+                upload: &|gpu, g, key: &LightKey, values| {
+                    let dir = glam::Vec3::from(key.direction);
+                    g.set_light_volume(gpu, Some((values, dir)))
+                        .map(|_| true)
+                        .map_err(|e| e.to_string())
+                },
+                clear: &|gpu, g| {
+                    // Turning shadows off cannot fail (nothing is uploaded).
+                    let _ = g.set_light_volume(gpu, None);
+                },
+                keep_stale: true,
+            },
+        ) else {
             return;
         };
         let still = self
@@ -314,11 +301,11 @@ impl Viewer {
             .light_wanted
             .as_ref()
             .is_some_and(|(_, since)| since.elapsed() >= AO_DEBOUNCE);
-        if !self.resting() || !still {
+        if !still {
             self.ctx.request_repaint_after(AO_DEBOUNCE);
             return;
         }
-        let (Some(doc), Some(texels)) = (&self.doc, self.uploaded_texels()) else {
+        let Some(doc) = &self.doc else {
             return;
         };
         let (gpu, tf) = (Arc::clone(&self.gpu), doc.tf.clone());
@@ -351,6 +338,54 @@ impl Viewer {
                 .map_err(|e| e.to_string())
         });
         self.derived.light.start(key, job);
+    }
+
+    /// One frame of a volume derived from the document in the background (opacity
+    /// modulation, the light volume): uploads a finished result, drops a stale one (or
+    /// keeps it on screen with `keep_stale` until the next arrives, clearing it only when
+    /// nothing is wanted), and returns the key and texels to start a job for when one is
+    /// due and the transfer function rests.
+    fn keep_derived<K: Clone + PartialEq>(
+        &mut self,
+        want: Option<&K>,
+        d: DerivedVolume<'_, K>,
+    ) -> Option<(K, VolumeTexels)> {
+        let slot = d.slot;
+        match slot(&mut self.derived).poll(want) {
+            Polled::Nothing => {}
+            Polled::Ready(key, values) => {
+                let gpu = Arc::clone(&self.gpu);
+                let mut error = None;
+                let uploaded = self.upload(|g| match (d.upload)(&gpu, g, &key, &values) {
+                    Ok(fit) => fit,
+                    Err(e) => {
+                        error = Some(e);
+                        false
+                    }
+                });
+                if uploaded {
+                    slot(&mut self.derived).uploaded(key);
+                } else if let Some(e) = error {
+                    self.toast(format!("{} failed: {e}", d.what), true);
+                }
+            }
+            Polled::Failed(message) => self.toast(format!("{} failed: {message}", d.what), true),
+        }
+        if slot(&mut self.derived).settled(want) {
+            return None;
+        }
+        if slot(&mut self.derived).reset() && (!d.keep_stale || want.is_none()) {
+            let gpu = Arc::clone(&self.gpu);
+            self.upload(|g| {
+                (d.clear)(&gpu, g);
+                true
+            });
+        }
+        let key = want?.clone();
+        if !self.resting() {
+            return None;
+        }
+        Some((key, self.uploaded_texels()?))
     }
 
     /// Whether the transfer function has rested long enough to recompute what depends on
