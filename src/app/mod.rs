@@ -137,6 +137,8 @@ struct Scripted {
     bench: Vec<(f64, f64)>,
     bench_last: Option<Instant>,
     bench_warmup: u32,
+    /// When the counted frames began and the viewport's ray-cast frames by then.
+    bench_start: Option<(Instant, u64)>,
 }
 
 impl std::fmt::Debug for Viewer {
@@ -604,6 +606,9 @@ impl Viewer {
             return;
         }
         let now = Instant::now();
+        let rendered = self
+            .with_viewport(|v| v.frames_rendered)
+            .unwrap_or_default();
         // The first two frames build the clip maps and warm up: not counted.
         if let Some(last) = self
             .scripted
@@ -614,6 +619,9 @@ impl Viewer {
             self.scripted
                 .bench
                 .push(((now - last).as_secs_f64(), share));
+        }
+        if self.scripted.bench_warmup == 2 {
+            self.scripted.bench_start = Some((now, rendered));
         }
         self.scripted.bench_last = Some(now);
         self.scripted.bench_warmup += 1;
@@ -633,6 +641,17 @@ impl Viewer {
                 t[0] * 1e3,
                 share,
                 self.gpu.describe()
+            );
+            // The UI thread's frames (time between two of them, what the mouse feels) and
+            // how often the viewport's image was ray-cast anew meanwhile.
+            let p95 = t[((t.len() * 95).div_ceil(100)).clamp(1, t.len()) - 1];
+            let updates = self.scripted.bench_start.map_or(0.0, |(since, before)| {
+                rendered.saturating_sub(before) as f64 / since.elapsed().as_secs_f64().max(1e-9)
+            });
+            println!(
+                "ui frame p50 {:.0} ms p95 {:.0} ms; viewport {updates:.1} updates/s",
+                t[t.len() / 2] * 1e3,
+                p95 * 1e3
             );
             self.scripted.exit_requested = true;
             return;
