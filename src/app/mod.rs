@@ -13,8 +13,10 @@
 //! UI around the viewport and `screenshot.rs` takes screenshots; this file has the
 //! viewer's state, its API and one frame's wiring.
 //!
-//! The UI thread never waits for the GPU or a file: loads and AO run on worker threads,
-//! screenshots are read back asynchronously and written by a worker.
+//! The UI thread never waits for a file or for AO precomputation: loads and AO run on
+//! worker threads, screenshots are read back asynchronously and written by a worker.
+//! One exception remains: CAO's per-frame update (`sync_clip` → `CaoGpu::update`) waits
+//! for the GPU; docs/ui-never-waits.md says what it takes to remove it.
 
 mod ao_job;
 pub mod ao_panel;
