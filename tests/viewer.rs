@@ -130,7 +130,16 @@ fn choose(h: &mut Harness<'static, Viewer>, combo: &str, option: &str) {
             shot.display()
         );
     }
+    let at = h.get_by_label(option).rect().center();
     h.get_by_label(option).click();
+    // The AO method list opens over the viewport; a pointer left there would be drawn
+    // into the pictures compared with `volao render`: move it to the panel's margin
+    // left of the combo box (no widget, no tooltip).
+    if at.x >= h.state().viewport_rect().min.x {
+        h.run_steps(1);
+        let r = h.get_by_label(combo).rect();
+        h.hover_at(egui::pos2(r.left() - 3.0, r.center().y));
+    }
 }
 
 /// The viewport's pixels from a rendering of the whole window.
