@@ -913,7 +913,7 @@ fn the_demo_opens_carved_with_ambient_occlusion_the_adapter_affords() {
     // picks a fast ambient map and says so; any GPU affords at least 6-ray CAO.
     if cpu_adapter {
         assert_eq!(doc.ao.method, volao::ao::AoMethod::Gauss, "{note}");
-        assert!(note.contains(&gpu.info.name), "{note}");
+        assert!(note.contains("Contextual AO"), "{note}");
     }
     // One sphere, and it takes bone away: the phantom has skull inside it.
     assert_eq!(doc.clip_shapes.len(), 1);

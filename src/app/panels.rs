@@ -388,6 +388,9 @@ impl Viewer {
             if let Some(text) = self.ao_shown_text() {
                 ui.label(text);
             }
+            if let Some(note) = self.doc.as_ref().and_then(|d| d.note.as_deref()) {
+                ui.weak(note);
+            }
             if let Some(shot) = &self.shots.pending {
                 ui.label(format!("Rendering {}", file_name(shot.path())));
                 progress_bar(ui, Some(shot.fraction()));
@@ -409,9 +412,6 @@ impl Viewer {
             }
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
                 ui.weak(&self.gpu.info.name);
-                if let Some(note) = self.doc.as_ref().and_then(|d| d.note.as_deref()) {
-                    ui.weak(note);
-                }
                 if let Some(e) = self.with_viewport(|v| v.last_error.clone()).flatten() {
                     ui.colored_label(ui.visuals().error_fg_color, e);
                 }
