@@ -34,11 +34,11 @@ mod sync;
 pub mod tf_editor;
 pub mod viewport;
 
+pub use derived::AoShown;
 pub use document::{
     DEMO_SIZE, Document, LoadedDocument, OpenRequest, ViewerOptions, default_recent_file,
     load_document,
 };
-pub use preview::AoShown;
 pub use screenshot::ShotSize;
 
 use crate::gpu::Gpu;

@@ -2,31 +2,16 @@
 //! tracing), the viewport shows a cheap ambient term — the Gaussian ambient map of the
 //! transfer function's opacity from the CPU twin of the filter maps, tens of
 //! milliseconds on the demo head — and swaps in the exact one when it is ready. The
-//! status bar says which is shown ([`AoShown`]).
+//! status bar says which is shown ([`super::derived::AoShown`]).
 
 use super::Viewer;
-use super::derived::AoKey;
+use super::derived::{AoKey, AoShown};
 use super::jobs::{Job, Polled};
 use crate::ao::filter::{RadiusUnit, StatisticSource};
 use crate::ao::{Ambient, AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
 use crate::render::texels::VolumeTexels;
 use crate::tf::TransferFunction;
 use std::sync::Arc;
-
-/// What the viewport's ambient term is right now.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum AoShown {
-    /// No AO (none chosen, or nothing computed yet).
-    #[default]
-    Nothing,
-    /// The AO of the previous settings, kept on screen until the approximation for the
-    /// new ones arrives (one ambient map's time).
-    Previous,
-    /// The cheap ambient map, until the exact AO is ready.
-    Approximate,
-    /// The AO the settings ask for.
-    Exact,
-}
 
 /// Whether `method` is slow enough to be previewed by an ambient map (the ambient maps
 /// are that cheap term themselves; live positional AO needs no precomputation).

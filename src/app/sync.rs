@@ -6,7 +6,6 @@
 use super::ao_job::{AoData, AoInput, compute_ao};
 use super::derived::*;
 use super::jobs::{Job, Keyed, Polled};
-use super::preview::AoShown;
 use super::{Viewer, ao_panel};
 use crate::ao::AoMethod;
 use crate::ao::filter::StatisticSource;
