@@ -40,28 +40,163 @@ pub enum AoMethod {
     Cone,
 }
 
+/// What an AO method is for, the way the viewer groups them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AoGroup {
+    /// No ambient occlusion.
+    Off,
+    /// Exact while clip shapes move (recomputed as they do).
+    FollowsCuts,
+    /// Precomputed once per transfer function; clip shapes do not change it.
+    Precomputed,
+    /// Cheap approximations, precomputed in milliseconds; they ignore cuts too.
+    Approximate,
+}
+
+impl AoGroup {
+    /// Every group, in the order the viewer lists them.
+    pub const ALL: [AoGroup; 4] = [
+        AoGroup::Off,
+        AoGroup::FollowsCuts,
+        AoGroup::Precomputed,
+        AoGroup::Approximate,
+    ];
+
+    /// A heading for the group ("Exact while you cut").
+    pub fn title(self) -> &'static str {
+        match self {
+            AoGroup::Off => "Off",
+            AoGroup::FollowsCuts => "Exact while you cut",
+            AoGroup::Precomputed => "Precomputed (ignore cuts)",
+            AoGroup::Approximate => "Fast approximations (ignore cuts)",
+        }
+    }
+}
+
 impl AoMethod {
+    /// Every method, in the order the viewer lists them (grouped by [`AoGroup`]).
+    pub const ALL: [AoMethod; 10] = [
+        AoMethod::None,
+        AoMethod::Cao,
+        AoMethod::VaoLive,
+        AoMethod::LaoFull,
+        AoMethod::Lao,
+        AoMethod::Vao,
+        AoMethod::Cdf,
+        AoMethod::Gauss,
+        AoMethod::Penner,
+        AoMethod::Cone,
+    ];
+
+    /// The code scene files and the CLI use (`--ao cao`).
+    pub fn code(self) -> &'static str {
+        match self {
+            AoMethod::None => "none",
+            AoMethod::Lao => "lao",
+            AoMethod::Cao => "cao",
+            AoMethod::LaoFull => "lao-full",
+            AoMethod::Vao => "vao",
+            AoMethod::VaoLive => "vao-live",
+            AoMethod::Cdf => "cdf",
+            AoMethod::Gauss => "gauss",
+            AoMethod::Penner => "penner",
+            AoMethod::Cone => "cone",
+        }
+    }
+
+    /// The method's name for people ("Contextual AO").
+    pub fn label(self) -> &'static str {
+        match self {
+            AoMethod::None => "No AO",
+            AoMethod::Cao => "Contextual AO",
+            AoMethod::VaoLive => "Positional AO (live)",
+            AoMethod::LaoFull => "Local AO, recomputed every frame",
+            AoMethod::Lao => "Local AO",
+            AoMethod::Vao => "Positional AO",
+            AoMethod::Cdf => "Ambient map (CDF)",
+            AoMethod::Gauss => "Ambient map (Gaussian)",
+            AoMethod::Penner => "Ambient map (Chebyshev bound)",
+            AoMethod::Cone => "Cone-traced AO",
+        }
+    }
+
+    /// One line on what the method does for the user.
+    pub fn summary(self) -> &'static str {
+        match self {
+            AoMethod::None => "Flat ambient light: no occlusion, the fastest",
+            AoMethod::Cao => "Exact while you cut; recomputes only near the cut",
+            AoMethod::VaoLive => {
+                "Exact while you cut or edit the transfer function; costly every frame"
+            }
+            AoMethod::LaoFull => "Exact while you cut; recomputes every voxel (CAO's baseline)",
+            AoMethod::Lao => "Precomputed, ignores cuts",
+            AoMethod::Vao => "Precomputed with longer reach, ignores cuts",
+            AoMethod::Cdf => "Fast approximation from box statistics, ignores cuts",
+            AoMethod::Gauss => "Fast approximation from box mean and variance, ignores cuts",
+            AoMethod::Penner => "Fast, darker approximation from a variance bound, ignores cuts",
+            AoMethod::Cone => "Fast approximation by cone tracing, ignores cuts",
+        }
+    }
+
+    /// A few sentences for a tooltip: how the method works, its cost, its source.
+    pub fn details(self) -> &'static str {
+        match self {
+            AoMethod::None => "Every sample gets the same ambient light (A = 1).",
+            AoMethod::Cao => {
+                "Local AO kept exact under clipping: when a clip shape moves, only the voxels                  within the ray reach of its surface are recomputed, from a precomputed                  partial AO (V_PAO). Titov et al., Contextual Ambient Occlusion."
+            }
+            AoMethod::VaoLive => {
+                "Positional AO (Papaioannou et al. Eq. 8) evaluated at every ray-cast sample:                  nothing is precomputed, so it follows clip shapes and the transfer function                  at once, at a cost in every frame."
+            }
+            AoMethod::LaoFull => {
+                "The same exact AO under clipping as Contextual AO, by casting Local AO's rays                  from every voxel each frame: the reference CAO is compared with, slow."
+            }
+            AoMethod::Lao => {
+                "K rays of M samples (1 mm apart) from every voxel, accumulating opacity;                  computed once per transfer function. Clip shapes cut the picture but not                  the occlusion."
+            }
+            AoMethod::Vao => {
+                "Positional AO by ray marching (Papaioannou et al. Eq. 8): rays over the whole                  sphere with a longer reach, computed once per transfer function."
+            }
+            AoMethod::Cdf => {
+                "Ambient occlusion from the min/max/mean of a box around each voxel, through                  a reconstructed CDF t^β (Ruiz et al.); computed in milliseconds."
+            }
+            AoMethod::Gauss => {
+                "Ambient occlusion from the mean and variance of a box around each voxel,                  through a Gaussian CDF (Ruiz et al.); computed in milliseconds."
+            }
+            AoMethod::Penner => {
+                "Penner's one-tailed Chebyshev bound on the box statistics (the baseline of                  Ruiz et al.); computed in milliseconds."
+            }
+            AoMethod::Cone => {
+                "Cones with tangent spheres traced through an opacity mip pyramid (Dalla                  Favera & Celes)."
+            }
+        }
+    }
+
+    /// What the method is for.
+    pub fn group(self) -> AoGroup {
+        match self {
+            AoMethod::None => AoGroup::Off,
+            AoMethod::Cao | AoMethod::VaoLive | AoMethod::LaoFull => AoGroup::FollowsCuts,
+            AoMethod::Lao | AoMethod::Vao => AoGroup::Precomputed,
+            AoMethod::Cdf | AoMethod::Gauss | AoMethod::Penner | AoMethod::Cone => {
+                AoGroup::Approximate
+            }
+        }
+    }
+
     /// CAO and its baseline: AO that follows the clip shapes (they need the GPU).
     pub fn is_clipped(self) -> bool {
         matches!(self, AoMethod::Cao | AoMethod::LaoFull)
     }
 
     pub fn parse(s: &str) -> Result<AoMethod, String> {
-        match s {
-            "none" => Ok(AoMethod::None),
-            "lao" => Ok(AoMethod::Lao),
-            "cao" => Ok(AoMethod::Cao),
-            "lao-full" => Ok(AoMethod::LaoFull),
-            "vao" => Ok(AoMethod::Vao),
-            "vao-live" => Ok(AoMethod::VaoLive),
-            "cdf" => Ok(AoMethod::Cdf),
-            "gauss" => Ok(AoMethod::Gauss),
-            "penner" => Ok(AoMethod::Penner),
-            "cone" => Ok(AoMethod::Cone),
-            other => Err(format!(
-                "unknown AO method {other:?} (available: none, lao, cao, lao-full, vao, vao-live, cdf, gauss, penner, cone)"
-            )),
-        }
+        AoMethod::ALL
+            .into_iter()
+            .find(|m| m.code() == s)
+            .ok_or_else(|| {
+                let codes: Vec<&str> = AoMethod::ALL.iter().map(|m| m.code()).collect();
+                format!("unknown AO method {s:?} (available: {})", codes.join(", "))
+            })
     }
 }
 

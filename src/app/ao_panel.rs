@@ -1,48 +1,29 @@
 //! The ambient-occlusion panel: method, parameters, the "AO only" view and live
 //! statistics.
 //!
-//! Methods are listed from [`AoMethod`] itself (the names its parser accepts, written as
-//! scene files write them), so methods appear here as they land in `ao`.
+//! Methods are listed from [`AoMethod::ALL`] by their names for people, grouped by what
+//! they are for ([`AoGroup`]), each with its one-line summary and a tooltip; the codes
+//! scene files and the CLI use (`cao`, `lao`, …) appear in the tooltips.
 
 use crate::ao::cone::{ConePreset, ConeSet};
 use crate::ao::filter::{RadiusUnit, StatisticSource};
 use crate::ao::rays::RaySet;
+use crate::ao::settings::AoGroup;
 use crate::ao::vao::VaoSettings;
 use crate::ao::{AoMethod, AoSettings};
 
-/// Names the issue gives the AO methods; those `AoMethod::parse` accepts are offered,
-/// with any others its error message lists.
-const CANDIDATES: &[&str] = &[
-    "none", "lao", "cao", "lao-full", "vao", "vao-live", "cdf", "gauss", "penner", "cone",
-];
-
-/// Every AO method this build knows, with its scene-file name, in a stable order.
+/// Every AO method this build knows, with its code (as scene files write it), in the
+/// order the panel lists them.
 pub fn methods() -> Vec<(String, AoMethod)> {
-    let mut names: Vec<String> = CANDIDATES.iter().map(|s| (*s).to_owned()).collect();
-    // The parser's error names what it accepts ("… (available: none, lao)").
-    if let Err(msg) = AoMethod::parse("\u{1}")
-        && let Some(list) = msg.split("available: ").nth(1)
-    {
-        let list = list.trim_end_matches(')');
-        names.extend(list.split(',').map(|s| s.trim().to_owned()));
-    }
-    let mut out: Vec<(String, AoMethod)> = Vec::new();
-    for n in names {
-        if let Ok(m) = AoMethod::parse(&n)
-            && !out.iter().any(|(_, k)| *k == m)
-        {
-            out.push((method_name(m), m));
-        }
-    }
-    out
+    AoMethod::ALL
+        .into_iter()
+        .map(|m| (m.code().to_owned(), m))
+        .collect()
 }
 
-/// The method's name as scene files write it ("lao").
+/// The method's code as scene files and the CLI write it ("lao").
 pub fn method_name(m: AoMethod) -> String {
-    serde_json::to_value(m)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_owned))
-        .unwrap_or_else(|| format!("{m:?}").to_lowercase())
+    m.code().to_owned()
 }
 
 /// What the statistics block shows.
@@ -81,13 +62,8 @@ pub fn show(
 ) -> (bool, bool) {
     let before = *settings;
     let view_before = (*ambient, *ao_only);
-    egui::ComboBox::from_label("Method")
-        .selected_text(method_name(settings.method))
-        .show_ui(ui, |ui| {
-            for (name, m) in methods() {
-                ui.selectable_value(&mut settings.method, m, name);
-            }
-        });
+    method_combo(ui, &mut settings.method);
+    ui.weak(settings.method.summary());
     ui.add_enabled_ui(settings.method != AoMethod::None, |ui| {
         if crate::ao::fast::map_of(settings.method).is_some() {
             filter_parameters(ui, settings);
@@ -103,6 +79,44 @@ pub fn show(
     ui.checkbox(ao_only, "AO only (white, ambient term alone)");
     egui::CollapsingHeader::new("Statistics").show(ui, |ui| statistics(ui, stats));
     (*settings != before, (*ambient, *ao_only) != view_before)
+}
+
+/// The method list: each group's heading, then its methods by name with their summary
+/// beside them and the details (and the CLI's code) in a tooltip.
+fn method_combo(ui: &mut egui::Ui, method: &mut AoMethod) {
+    egui::ComboBox::from_label("Method")
+        .selected_text(method.label())
+        .width(190.0)
+        // Tall enough for every entry without a scroll bar.
+        .height(600.0)
+        .show_ui(ui, |ui| {
+            for group in AoGroup::ALL {
+                let members: Vec<AoMethod> = AoMethod::ALL
+                    .into_iter()
+                    .filter(|m| m.group() == group)
+                    .collect();
+                if group != AoGroup::Off {
+                    ui.separator();
+                    ui.strong(group.title());
+                }
+                for m in members {
+                    ui.selectable_value(method, m, m.label())
+                        .on_hover_text(tooltip(m));
+                }
+            }
+        })
+        .response
+        .on_hover_text(tooltip(*method));
+}
+
+/// A method's tooltip: its summary, how it works and its code for scene files and the CLI.
+pub fn tooltip(m: AoMethod) -> String {
+    format!(
+        "{}.\n\n{}\n\nScene files and the CLI: --ao {}",
+        m.summary(),
+        m.details(),
+        m.code()
+    )
 }
 
 /// A slider over the usual range that leaves a value outside it (from a scene file)
@@ -243,13 +257,31 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_method_the_parser_accepts_is_listed_once() {
+    fn every_method_is_listed_once_with_its_code_name_and_group() {
         let m = methods();
-        assert!(m.iter().any(|(n, k)| n == "none" && *k == AoMethod::None));
-        assert!(m.iter().any(|(n, k)| n == "lao" && *k == AoMethod::Lao));
-        for (name, method) in &m {
-            assert_eq!(AoMethod::parse(name), Ok(*method), "{name}");
+        assert_eq!(m.len(), AoMethod::ALL.len());
+        for (code, method) in &m {
+            assert_eq!(AoMethod::parse(code), Ok(*method), "{code}");
             assert_eq!(m.iter().filter(|(_, k)| k == method).count(), 1);
+            // Scene files write the same code.
+            assert_eq!(
+                serde_json::to_value(method).ok(),
+                Some(code.as_str().into())
+            );
+            assert!(tooltip(*method).contains(code.as_str()));
         }
+        let labels: std::collections::HashSet<_> = m.iter().map(|(_, k)| k.label()).collect();
+        assert_eq!(labels.len(), m.len(), "two methods share a label");
+        // The list is grouped: a group's members are consecutive.
+        let groups: Vec<AoGroup> = AoMethod::ALL.iter().map(|k| k.group()).collect();
+        let mut seen: Vec<AoGroup> = Vec::new();
+        for g in groups {
+            if seen.last() != Some(&g) {
+                assert!(!seen.contains(&g), "{g:?} is split");
+                seen.push(g);
+            }
+        }
+        assert_eq!(AoMethod::Cao.group(), AoGroup::FollowsCuts);
+        assert_eq!(AoMethod::Lao.group(), AoGroup::Precomputed);
     }
 }

@@ -32,6 +32,10 @@ pub(super) struct AoKey {
 pub(super) struct Derived {
     /// The AO volume, CAO's state or live positional AO.
     pub(super) ao: Keyed<AoKey, AoResult>,
+    /// The cheap ambient map shown while a slow AO is computed (progressive AO).
+    pub(super) preview: Keyed<AoKey, Vec<f32>>,
+    /// Which ambient term the viewport shows.
+    pub(super) shown: AoShown,
     /// Opacity modulation factors (Ruiz et al. §4.2).
     pub(super) modulation: Keyed<ModulationKey, Vec<f32>>,
     /// The light volume of shadows.
@@ -55,6 +59,8 @@ impl Default for Derived {
     fn default() -> Self {
         Derived {
             ao: Keyed::default(),
+            preview: Keyed::default(),
+            shown: Default::default(),
             modulation: Keyed::default(),
             light: Keyed::default(),
             light_wanted: None,
@@ -85,4 +91,19 @@ pub(super) struct LightKey {
     /// Light passes through what the shapes carve away.
     pub(super) clip: Vec<crate::clip::ClipShape>,
     pub(super) doc_generation: u64,
+}
+
+/// What the viewport's ambient term is right now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AoShown {
+    /// No AO (none chosen, or nothing computed yet).
+    #[default]
+    Nothing,
+    /// The AO of the previous settings, kept on screen until the approximation for the
+    /// new ones arrives (one ambient map's time).
+    Previous,
+    /// The cheap ambient map, until the exact AO is ready.
+    Approximate,
+    /// The AO the settings ask for.
+    Exact,
 }

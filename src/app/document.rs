@@ -136,6 +136,8 @@ pub struct Document {
     pub radius: f32,
     /// How many times the volume was halved to fit the GPU.
     pub downsampled: u32,
+    /// A line for the status bar about how the document was set up (the demo's AO).
+    pub note: Option<String>,
 }
 
 impl Document {
@@ -290,6 +292,8 @@ pub fn load_document(
             Err(e) => warnings.push(format!("mesh left out: {e}")),
         }
     }
+    // The demo opens carved and with AO, the AO chosen from the adapter's measured rate.
+    let demo = matches!(request, OpenRequest::Demo).then(|| super::demo::start(gpu, &volume, &tf));
     let title = match &path {
         Some(p) => file_name(p),
         None => "demo head phantom".into(),
@@ -304,18 +308,27 @@ pub fn load_document(
         stats,
         histogram,
         tf,
-        camera: scene.as_ref().map(|s| s.camera).unwrap_or_default(),
+        camera: match (&scene, &demo) {
+            (Some(s), _) => s.camera,
+            (None, Some(d)) => d.camera,
+            (None, None) => Camera::default(),
+        },
         render,
-        ao: scene
-            .as_ref()
-            .map(|s| s.ambient_occlusion)
-            .unwrap_or_default(),
+        ao: match (&scene, &demo) {
+            (Some(s), _) => s.ambient_occlusion,
+            (None, Some(d)) => d.ao,
+            (None, None) => AoSettings::default(),
+        },
         ao_only: false,
-        clip_shapes,
+        clip_shapes: match &demo {
+            Some(d) => d.clip_shapes.clone(),
+            None => clip_shapes,
+        },
         light,
         meshes,
         radius,
         downsampled,
+        note: demo.map(|d| d.note),
     };
     Ok(LoadedDocument {
         doc,

@@ -13,23 +13,28 @@
 //! UI around the viewport and `screenshot.rs` takes screenshots; this file has the
 //! viewer's state, its API and one frame's wiring.
 //!
-//! The UI thread never waits for the GPU or a file: loads and AO run on worker threads,
-//! screenshots are read back asynchronously and written by a worker.
+//! The UI thread never waits for a file or for AO precomputation: loads and AO run on
+//! worker threads, screenshots are read back asynchronously and written by a worker.
+//! One exception remains: CAO's per-frame update (`sync_clip` → `CaoGpu::update`) waits
+//! for the GPU; docs/ui-never-waits.md says what it takes to remove it.
 
 mod ao_job;
 pub mod ao_panel;
 pub mod camera_input;
 pub mod clip_panel;
+pub mod demo;
 mod derived;
 mod document;
 pub mod jobs;
 mod panels;
+mod preview;
 pub mod screenshot;
 mod shots;
 mod sync;
 pub mod tf_editor;
 pub mod viewport;
 
+pub use derived::AoShown;
 pub use document::{
     DEMO_SIZE, Document, LoadedDocument, OpenRequest, ViewerOptions, default_recent_file,
     load_document,
@@ -134,6 +139,8 @@ struct Scripted {
     bench: Vec<(f64, f64)>,
     bench_last: Option<Instant>,
     bench_warmup: u32,
+    /// When the counted frames began and the viewport's ray-cast frames by then.
+    bench_start: Option<(Instant, u64)>,
 }
 
 impl std::fmt::Debug for Viewer {
@@ -473,6 +480,8 @@ impl Viewer {
                 self.doc_generation += 1;
                 // The new volume has no AO yet; what was computed for the old one is gone.
                 self.derived.ao.reset();
+                self.derived.preview.reset();
+                self.derived.shown = AoShown::Nothing;
                 self.scripted.ready_frames = 0;
                 self.tf_editor = Default::default();
             }
@@ -599,6 +608,9 @@ impl Viewer {
             return;
         }
         let now = Instant::now();
+        let rendered = self
+            .with_viewport(|v| v.frames_rendered)
+            .unwrap_or_default();
         // The first two frames build the clip maps and warm up: not counted.
         if let Some(last) = self
             .scripted
@@ -609,6 +621,9 @@ impl Viewer {
             self.scripted
                 .bench
                 .push(((now - last).as_secs_f64(), share));
+        }
+        if self.scripted.bench_warmup == 2 {
+            self.scripted.bench_start = Some((now, rendered));
         }
         self.scripted.bench_last = Some(now);
         self.scripted.bench_warmup += 1;
@@ -628,6 +643,17 @@ impl Viewer {
                 t[0] * 1e3,
                 share,
                 self.gpu.describe()
+            );
+            // The UI thread's frames (time between two of them, what the mouse feels) and
+            // how often the viewport's image was ray-cast anew meanwhile.
+            let p95 = t[((t.len() * 95).div_ceil(100)).clamp(1, t.len()) - 1];
+            let updates = self.scripted.bench_start.map_or(0.0, |(since, before)| {
+                rendered.saturating_sub(before) as f64 / since.elapsed().as_secs_f64().max(1e-9)
+            });
+            println!(
+                "ui frame p50 {:.0} ms p95 {:.0} ms; viewport {updates:.1} updates/s",
+                t[t.len() / 2] * 1e3,
+                p95 * 1e3
             );
             self.scripted.exit_requested = true;
             return;

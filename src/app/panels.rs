@@ -387,6 +387,12 @@ impl Viewer {
                 progress_bar(ui, job.fraction());
                 cancel_ao = ui.button("Cancel").clicked();
             }
+            if let Some(text) = self.ao_shown_text() {
+                ui.label(text);
+            }
+            if let Some(note) = self.doc.as_ref().and_then(|d| d.note.as_deref()) {
+                ui.weak(note);
+            }
             if let Some(shot) = &self.shots.pending {
                 ui.label(format!("Rendering {}", file_name(shot.path())));
                 progress_bar(ui, Some(shot.fraction()));

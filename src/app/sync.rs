@@ -5,14 +5,30 @@
 
 use super::ao_job::{AoData, AoInput, compute_ao};
 use super::derived::*;
-use super::jobs::{Job, Polled};
+use super::jobs::{Job, Keyed, Polled};
 use super::{Viewer, ao_panel};
 use crate::ao::AoMethod;
 use crate::ao::filter::StatisticSource;
+use crate::gpu::Gpu;
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
 use std::sync::Arc;
 use std::time::Instant;
+
+/// Puts a derived result on the GPU volume: `Ok(false)` when it does not fit (dropped).
+type Upload<'a, K> = &'a dyn Fn(&Gpu, &mut GpuVolume, &K, &[f32]) -> Result<bool, String>;
+
+/// How [`Viewer::keep_derived`] handles one derived volume.
+struct DerivedVolume<'a, K> {
+    /// For messages: "Shadows" (failed: …).
+    what: &'static str,
+    slot: fn(&mut Derived) -> &mut Keyed<K, Vec<f32>>,
+    upload: Upload<'a, K>,
+    /// Removes the GPU's copy.
+    clear: &'a dyn Fn(&Gpu, &mut GpuVolume),
+    /// Keep a stale result on screen until the next one arrives.
+    keep_stale: bool,
+}
 
 impl Viewer {
     pub(super) fn ao_key(&self) -> Option<AoKey> {
@@ -26,8 +42,9 @@ impl Viewer {
         })
     }
 
-    /// Keeps the AO on the GPU in step with the settings and the transfer function;
-    /// shows the volume without AO while a new one is computed.
+    /// Keeps the AO on the GPU in step with the settings and the transfer function.
+    /// While a slow one is computed the viewport shows a cheap ambient map
+    /// ([`super::preview`]); until that arrives, the previous AO stays on screen.
     pub(super) fn update_ao(&mut self) {
         let want = self.ao_key();
         match self.derived.ao.poll(want.as_ref()) {
@@ -57,10 +74,13 @@ impl Viewer {
                     .unwrap_or_else(|| Err("no viewport".into()));
                 match applied {
                     Ok(()) => {
-                        // CAO's V_AO is made for the current shapes on the next sync.
+                        // CAO's V_AO is made for the current shapes on the next sync
+                        // (in this frame: the approximation stays until then).
                         self.derived.synced_clip = None;
                         self.derived.ao_seconds = Some((r.seconds, r.device));
                         self.derived.ao.uploaded(key);
+                        self.derived.preview.cancel();
+                        self.derived.shown = AoShown::Exact;
                     }
                     Err(message) => self.derived.ao.fail(key, message),
                 }
@@ -69,25 +89,13 @@ impl Viewer {
                 self.toast(format!("Ambient occlusion failed: {message}"), true)
             }
         }
+        self.poll_preview(want.as_ref());
+        if !self.derived.ao.settled(want.as_ref()) {
+            self.drop_stale_ao(want.as_ref());
+        }
+        self.start_preview(want.as_ref());
         if self.derived.ao.settled(want.as_ref()) {
             return;
-        }
-        // The settings moved on: drop the stale AO at once (never show a wrong one).
-        if self.derived.ao.reset() {
-            let gpu = Arc::clone(&self.gpu);
-            let tf = self.doc.as_ref().map(|d| d.tf.clone());
-            self.with_viewport(|v| {
-                v.cao = None;
-                if let Some(g) = &mut v.volume {
-                    g.clear_ambient_occlusion(&gpu);
-                    if let Some(tf) = &tf {
-                        // Turning live positional AO off cannot fail (nothing is uploaded).
-                        let _ = g.set_live_vao(&gpu, tf, None);
-                    }
-                    v.touch();
-                }
-            });
-            self.derived.synced_clip = None;
         }
         let Some(key) = want else {
             return;
@@ -109,7 +117,10 @@ impl Viewer {
                 Some(r)
             });
             match applied.flatten() {
-                Some(Ok(())) => self.derived.ao.uploaded(key),
+                Some(Ok(())) => {
+                    self.derived.ao.uploaded(key);
+                    self.derived.shown = AoShown::Exact;
+                }
                 Some(Err(message)) => {
                     self.toast(format!("Ambient occlusion failed: {message}"), true);
                     self.derived.ao.fail(key, message);
@@ -143,6 +154,54 @@ impl Viewer {
         self.derived.ao.start(key, job);
     }
 
+    /// The settings moved on: drops the AO on the GPU made for others. When the new
+    /// settings get an ambient map first, the old AO stays on screen until it arrives
+    /// (tens of milliseconds; the status bar says so), so that a frame never lacks AO
+    /// once AO is chosen; otherwise it goes at once (never a wrong AO for long).
+    fn drop_stale_ao(&mut self, want: Option<&AoKey>) {
+        // Live positional AO lives in the ray caster: nothing of it stays on screen.
+        let was_live = self
+            .derived
+            .ao
+            .on_gpu()
+            .is_some_and(|k| k.settings.method == AoMethod::VaoLive);
+        let stale_exact = self.derived.ao.reset();
+        let stale_preview = self
+            .derived
+            .preview
+            .on_gpu()
+            .is_some_and(|k| Some(k) != want);
+        if !(stale_exact || stale_preview) {
+            return;
+        }
+        if stale_preview {
+            self.derived.preview.reset();
+        }
+        let keep =
+            self.preview_key(want).is_some() && self.derived.shown != AoShown::Nothing && !was_live;
+        let gpu = Arc::clone(&self.gpu);
+        let tf = self.doc.as_ref().map(|d| d.tf.clone());
+        self.with_viewport(|v| {
+            v.cao = None;
+            if let Some(g) = &mut v.volume {
+                if !keep {
+                    g.clear_ambient_occlusion(&gpu);
+                }
+                if let Some(tf) = &tf {
+                    // Turning live positional AO off cannot fail (nothing is uploaded).
+                    let _ = g.set_live_vao(&gpu, tf, None);
+                }
+                v.touch();
+            }
+        });
+        self.derived.shown = if keep {
+            AoShown::Previous
+        } else {
+            AoShown::Nothing
+        };
+        self.derived.synced_clip = None;
+    }
+
     pub(super) fn modulation_key(&self) -> Option<ModulationKey> {
         let doc = self.doc.as_ref()?;
         let settings = doc.render.opacity_modulation?;
@@ -159,42 +218,25 @@ impl Viewer {
     /// thread on the uploaded texels.
     pub(super) fn update_modulation(&mut self) {
         let want = self.modulation_key();
-        match self.derived.modulation.poll(want.as_ref()) {
-            Polled::Nothing => {}
-            Polled::Ready(key, values) => {
-                let gpu = Arc::clone(&self.gpu);
-                let fits = |g: &GpuVolume| values.len() == g.texels.dims.iter().product::<usize>();
-                if self.upload(|g| {
-                    let fit = fits(g);
+        let Some((key, texels)) = self.keep_derived(
+            want.as_ref(),
+            DerivedVolume {
+                what: "Opacity modulation",
+                slot: |d| &mut d.modulation,
+                upload: &|gpu, g, _, values| {
+                    let fit = values.len() == g.texels.dims.iter().product::<usize>();
                     if fit {
-                        g.set_opacity_modulation(&gpu, &values);
+                        g.set_opacity_modulation(gpu, values);
                     }
-                    fit
-                }) {
-                    self.derived.modulation.uploaded(key);
-                }
-            }
-            Polled::Failed(message) => {
-                self.toast(format!("Opacity modulation failed: {message}"), true)
-            }
-        }
-        if self.derived.modulation.settled(want.as_ref()) {
-            return;
-        }
-        if self.derived.modulation.reset() {
-            let gpu = Arc::clone(&self.gpu);
-            self.upload(|g| {
-                g.clear_opacity_modulation(&gpu);
-                true
-            });
-        }
-        let Some(key) = want else {
+                    Ok(fit)
+                },
+                clear: &|gpu, g| g.clear_opacity_modulation(gpu),
+                keep_stale: false,
+            },
+        ) else {
             return;
         };
-        if !self.resting() {
-            return;
-        }
-        let (Some(doc), Some(texels)) = (&self.doc, self.uploaded_texels()) else {
+        let Some(doc) = &self.doc else {
             return;
         };
         let (gpu, tf, step, m) = (
@@ -230,39 +272,27 @@ impl Viewer {
     /// lag a moving camera or shape read better than shadows that blink off.
     pub(super) fn update_light(&mut self) {
         let want = self.light_key();
-        match self.derived.light.poll(want.as_ref()) {
-            Polled::Nothing => {}
-            Polled::Ready(key, values) => {
-                let gpu = Arc::clone(&self.gpu);
-                let dir = glam::Vec3::from(key.direction);
-                let mut error = None;
-                let uploaded =
-                    self.upload(|g| match g.set_light_volume(&gpu, Some((&values, dir))) {
-                        Ok(_) => true,
-                        Err(e) => {
-                            error = Some(e.to_string());
-                            false
-                        }
-                    });
-                if uploaded {
-                    self.derived.light.uploaded(key);
-                } else if let Some(e) = error {
-                    self.toast(format!("Shadows failed: {e}"), true);
-                }
-            }
-            Polled::Failed(message) => self.toast(format!("Shadows failed: {message}"), true),
-        }
         if want != self.derived.light_wanted.as_ref().map(|(k, _)| k.clone()) {
             self.derived.light_wanted = want.clone().map(|k| (k, Instant::now()));
         }
-        if self.derived.light.settled(want.as_ref()) {
-            return;
-        }
-        if self.derived.light.reset() && want.is_none() {
-            let gpu = Arc::clone(&self.gpu);
-            self.upload(|g| g.set_light_volume(&gpu, None).is_ok());
-        }
-        let Some(key) = want else {
+        let Some((key, texels)) = self.keep_derived(
+            want.as_ref(),
+            DerivedVolume {
+                what: "Shadows",
+                slot: |d| &mut d.light,
+                upload: &|gpu, g, key: &LightKey, values| {
+                    let dir = glam::Vec3::from(key.direction);
+                    g.set_light_volume(gpu, Some((values, dir)))
+                        .map(|_| true)
+                        .map_err(|e| e.to_string())
+                },
+                clear: &|gpu, g| {
+                    // Turning shadows off cannot fail (nothing is uploaded).
+                    let _ = g.set_light_volume(gpu, None);
+                },
+                keep_stale: true,
+            },
+        ) else {
             return;
         };
         let still = self
@@ -270,11 +300,11 @@ impl Viewer {
             .light_wanted
             .as_ref()
             .is_some_and(|(_, since)| since.elapsed() >= AO_DEBOUNCE);
-        if !self.resting() || !still {
+        if !still {
             self.ctx.request_repaint_after(AO_DEBOUNCE);
             return;
         }
-        let (Some(doc), Some(texels)) = (&self.doc, self.uploaded_texels()) else {
+        let Some(doc) = &self.doc else {
             return;
         };
         let (gpu, tf) = (Arc::clone(&self.gpu), doc.tf.clone());
@@ -309,6 +339,54 @@ impl Viewer {
         self.derived.light.start(key, job);
     }
 
+    /// One frame of a volume derived from the document in the background (opacity
+    /// modulation, the light volume): uploads a finished result, drops a stale one (or
+    /// keeps it on screen with `keep_stale` until the next arrives, clearing it only when
+    /// nothing is wanted), and returns the key and texels to start a job for when one is
+    /// due and the transfer function rests.
+    fn keep_derived<K: Clone + PartialEq>(
+        &mut self,
+        want: Option<&K>,
+        d: DerivedVolume<'_, K>,
+    ) -> Option<(K, VolumeTexels)> {
+        let slot = d.slot;
+        match slot(&mut self.derived).poll(want) {
+            Polled::Nothing => {}
+            Polled::Ready(key, values) => {
+                let gpu = Arc::clone(&self.gpu);
+                let mut error = None;
+                let uploaded = self.upload(|g| match (d.upload)(&gpu, g, &key, &values) {
+                    Ok(fit) => fit,
+                    Err(e) => {
+                        error = Some(e);
+                        false
+                    }
+                });
+                if uploaded {
+                    slot(&mut self.derived).uploaded(key);
+                } else if let Some(e) = error {
+                    self.toast(format!("{} failed: {e}", d.what), true);
+                }
+            }
+            Polled::Failed(message) => self.toast(format!("{} failed: {message}", d.what), true),
+        }
+        if slot(&mut self.derived).settled(want) {
+            return None;
+        }
+        if slot(&mut self.derived).reset() && (!d.keep_stale || want.is_none()) {
+            let gpu = Arc::clone(&self.gpu);
+            self.upload(|g| {
+                (d.clear)(&gpu, g);
+                true
+            });
+        }
+        let key = want?.clone();
+        if !self.resting() {
+            return None;
+        }
+        Some((key, self.uploaded_texels()?))
+    }
+
     /// Whether the transfer function has rested long enough to recompute what depends on
     /// it (asks for a repaint when it has not).
     fn resting(&self) -> bool {
@@ -321,7 +399,7 @@ impl Viewer {
     }
 
     /// A copy of the texels the viewport's volume was made from.
-    fn uploaded_texels(&self) -> Option<VolumeTexels> {
+    pub(super) fn uploaded_texels(&self) -> Option<VolumeTexels> {
         self.with_viewport(|v| v.volume.as_ref().map(|g| g.texels.clone()))
             .flatten()
     }
