@@ -291,6 +291,10 @@ fn live_positional_ao_runs_in_the_ray_caster_and_matches_volao_render() {
     let dir = tempfile::tempdir().expect("temp dir");
     let mut h = harness(bucky(), dir.path());
     settle(&mut h);
+    // Live AO costs N_dir × N_samples fetches per ray-cast sample: keep the frame well
+    // inside egui_kittest's 10 s GPU wait on a loaded 2-core lavapipe.
+    let vao = &mut h.state_mut().document_mut().expect("doc").ao.vao;
+    (vao.directions, vao.samples) = (6, 4);
     choose(&mut h, "Method", "Positional AO (live)");
     settle(&mut h);
     assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
