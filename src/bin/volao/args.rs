@@ -207,6 +207,23 @@ impl FastAoArgs {
     }
 }
 
+/// Overrides `setting` with a flag's value when the flag was given, refusing a value
+/// outside `range` (NaN included) with `message`.
+pub fn set_within<T: PartialOrd>(
+    setting: &mut T,
+    flag: Option<T>,
+    range: std::ops::RangeInclusive<T>,
+    message: &str,
+) -> Result<()> {
+    if let Some(v) = flag {
+        if !range.contains(&v) {
+            bail!("{message}");
+        }
+        *setting = v;
+    }
+    Ok(())
+}
+
 /// Overrides `setting` with a flag's value when the flag was given.
 pub fn set<T>(setting: &mut T, flag: Option<T>) {
     if let Some(v) = flag {
@@ -431,19 +448,18 @@ impl ClipArgs {
     }
 
     pub fn apply(&self, ao: &mut volao::ao::AoSettings) -> Result<()> {
-        if let Some(n) = self.msaa {
-            if n > 256 {
-                bail!("--msaa: at most 256 extra samples");
-            }
-            ao.msaa = n;
-        }
-        if let Some(r) = self.clip_resolution {
-            if !(16..=8192).contains(&r) {
-                bail!("--clip-resolution must be 16 to 8192 pixels");
-            }
-            ao.clip_resolution = r;
-        }
-        Ok(())
+        set_within(
+            &mut ao.msaa,
+            self.msaa,
+            0..=256,
+            "--msaa: at most 256 extra samples",
+        )?;
+        set_within(
+            &mut ao.clip_resolution,
+            self.clip_resolution,
+            16..=8192,
+            "--clip-resolution must be 16 to 8192 pixels",
+        )
     }
 }
 

@@ -4,7 +4,7 @@
 //! volume file. Flags given on the command line are applied onto it (they override the
 //! scene; flags left out keep it), and `--save-scene` writes exactly the scene rendered.
 
-use crate::args::{RenderArgs, parse_background, set};
+use crate::args::{RenderArgs, parse_background, set, set_within};
 use crate::progress::{load_with_bar, slice_bar};
 use anyhow::{Result, bail};
 use volao::ao::{AoMethod, AoSettings};
@@ -186,18 +186,18 @@ impl RenderArgs {
         if let Some(b) = &self.background {
             settings.background = parse_background(b)?;
         }
-        if let Some(k) = self.ambient {
-            if !(0.0..=1.0).contains(&k) {
-                bail!("--ambient must be between 0 and 1");
-            }
-            settings.ambient = k;
-        }
-        if let Some(s) = self.ao_strength {
-            if !(0.0..=10.0).contains(&s) {
-                bail!("--ao-strength must be between 0 and 10");
-            }
-            settings.ao_strength = s;
-        }
+        set_within(
+            &mut settings.ambient,
+            self.ambient,
+            0.0..=1.0,
+            "--ambient must be between 0 and 1",
+        )?;
+        set_within(
+            &mut settings.ao_strength,
+            self.ao_strength,
+            0.0..=10.0,
+            "--ao-strength must be between 0 and 10",
+        )?;
         settings.ao_ambient_only |= self.ao_ambient_only;
         set(&mut settings.shading, self.shading);
         set(&mut settings.mode, self.mode);

@@ -47,6 +47,25 @@ impl RenderBenchArgs {
     }
 }
 
+/// The median time of `runs` frames after one warm-up frame (pipelines, caches), in
+/// seconds, image readback included.
+fn warm_frame(
+    gpu: &volao::gpu::Gpu,
+    rc: &volao::render::gpu::RayCaster,
+    vol: &volao::render::gpu::GpuVolume,
+    frame: &volao::render::Frame,
+    runs: usize,
+) -> Result<f64> {
+    rc.render(gpu, vol, frame, None)?;
+    let mut times = Vec::new();
+    for _ in 0..runs.max(1) {
+        let start = Instant::now();
+        rc.render(gpu, vol, frame, None)?;
+        times.push(start.elapsed().as_secs_f64());
+    }
+    Ok(median(times))
+}
+
 /// One configuration's result, as `--json` prints it.
 #[derive(serde::Serialize)]
 struct Timed {
@@ -130,20 +149,14 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
                 };
                 let mut frame = super::frame(20.0, settings, args.width);
                 frame.height = args.height;
-                rc.render(&gpu, &vol, &frame, None)?;
-                let mut times = Vec::new();
-                for _ in 0..args.runs.max(1) {
-                    let start = Instant::now();
-                    rc.render(&gpu, &vol, &frame, None)?;
-                    times.push(start.elapsed().as_secs_f64());
-                }
+                let seconds = warm_frame(&gpu, &rc, &vol, &frame, args.runs)?;
                 let t = Timed {
                     file: name.clone(),
                     size: [args.width, args.height],
                     mode: mode.to_string(),
                     shading,
                     ao: args.ao,
-                    median_frame_ms: median(times) * 1e3,
+                    median_frame_ms: seconds * 1e3,
                     ao_ms,
                     adapter: adapter.clone(),
                 };
@@ -234,14 +247,7 @@ pub fn render_bench(args: &RenderBenchArgs) -> Result<()> {
                         ..Default::default()
                     };
                     let frame = super::frame(20.0, settings, size);
-                    rc.render(&gpu, &vol, &frame, None)?;
-                    let mut times = Vec::new();
-                    for _ in 0..args.runs.max(1) {
-                        let start = Instant::now();
-                        rc.render(&gpu, &vol, &frame, None)?;
-                        times.push(start.elapsed().as_secs_f64());
-                    }
-                    let t = median(times);
+                    let t = warm_frame(&gpu, &rc, &vol, &frame, args.runs)?;
                     let steps = box_steps(&frame, &vol.texels, &vol.lut);
                     println!(
                         "| {name} | {size}² | {shading:?} | {} | {:.1} ms | {:.2e} |",
