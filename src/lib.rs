@@ -18,11 +18,14 @@
 //!    (LAO, CAO, positional AO, filter maps, cone tracing; each a GPU pass with its CPU
 //!    twin beside it) and the GPU or the twin. [`clip`] turns clip shapes into the depth
 //!    and dilation maps CAO and the ray caster clip with.
-//! 6. [`render`] ray-casts the volume with the AO term, shadows (`render::shadow`, the
-//!    light volume) and surfaces into an image; [`render::offscreen`] does one frame for
-//!    the CLI and tests on the device it is given.
+//! 6. [`render`] ray-casts the volume into an image in one of its [`render::RenderMode`]s
+//!    (compositing with the AO factor on ambient and diffuse light, shadows from
+//!    `render::shadow`'s filtered light volume and surfaces; MIP, MinIP, average;
+//!    isosurface); [`render::offscreen`] does one frame for the CLI and tests on the
+//!    device it is given.
 //! 7. [`app`] is the eframe viewer: the same texels, stages and ray caster behind a UI
-//!    whose background jobs compute AO, modulation and light volumes.
+//!    whose background jobs compute AO (shown first as an ambient-map preview),
+//!    modulation and light volumes; the demo opens carved, with AO.
 //!
 //! The command-line interface and the benchmarks live in the binary (`src/bin/volao`);
 //! [`process`] holds the few process-wide settings it makes at start.
