@@ -123,7 +123,7 @@ pub struct RenderArgs {
     /// Ambient occlusion: none, lao, cao (exact under clipping), lao-full (LAO of every
     /// voxel each frame, CAO's baseline), vao / vao-live (positional AO, precomputed or
     /// at every sample), cdf, gauss, penner (filter maps) or cone (cone-traced).
-    #[arg(long, value_parser = volao::ao::AoMethod::parse)]
+    #[arg(long, value_parser = ao_method())]
     pub ao: Option<volao::ao::AoMethod>,
     /// AO ray pattern: 6, 14, 26, 54 (the CAO paper's) or fib:N (Fibonacci lattice).
     #[arg(long, value_parser = parse_rays)]
@@ -205,6 +205,20 @@ impl FastAoArgs {
         set(&mut ao.cone_preset, self.cone_preset);
         Ok(())
     }
+}
+
+/// `--ao` / `--method`: the method codes, each listed by `--help` with the name the
+/// viewer's AO panel gives it.
+pub fn ao_method() -> impl clap::builder::TypedValueParser<Value = volao::ao::AoMethod> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    use volao::ao::AoMethod;
+    PossibleValuesParser::new(AoMethod::ALL.map(|m| PossibleValue::new(m.code()).help(m.label())))
+        .map(|code| {
+            AoMethod::ALL
+                .into_iter()
+                .find(|m| m.code() == code)
+                .unwrap_or_default()
+        })
 }
 
 /// Overrides `setting` with a flag's value when the flag was given, refusing a value
@@ -386,7 +400,7 @@ pub struct AoArgs {
     pub output: PathBuf,
     /// AO method: lao, cao, lao-full (with --clip), vao (positional AO; vao-live gives the
     /// same volume), cdf, gauss, penner or cone.
-    #[arg(long, alias = "ao", default_value = "lao", value_parser = volao::ao::AoMethod::parse)]
+    #[arg(long, alias = "ao", default_value = "lao", value_parser = ao_method())]
     pub method: volao::ao::AoMethod,
     /// Ray pattern: 6, 14, 26, 54 or fib:N.
     #[arg(long, default_value = "54", value_parser = parse_rays)]

@@ -30,7 +30,7 @@ pub struct RenderBenchArgs {
     pub shading: Vec<volao::render::Shading>,
     /// AO method, computed once before the frames are timed (no clipping here, so not
     /// cao or lao-full).
-    #[arg(long, default_value = "none", value_parser = volao::ao::AoMethod::parse)]
+    #[arg(long, default_value = "none", value_parser = crate::args::ao_method())]
     pub ao: volao::ao::AoMethod,
     /// Transfer-function preset (default: chosen from the volume's range).
     #[arg(long)]
