@@ -33,6 +33,8 @@ const MODE_ISO: u32 = 4u;
 @group(0) @binding(6) var out_image: texture_storage_2d<rgba8unorm, write>;
 // min(σ²/σ²_max, 1) per voxel (Ruiz et al. §4.2); a single texel of 1 when off.
 @group(0) @binding(7) var opacity_modulation: texture_3d<f32>;
+// (min, max) of the texel values a trilinear sample in each occupancy block can read.
+@group(0) @binding(8) var block_range: texture_3d<f32>;
 
 // Group 2 (src/render/shadow.rs): live positional AO (vao_common.wgsl, bindings 0–4)
 // and the light volume for shadows.
@@ -203,6 +205,8 @@ fn project(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
         if !visible(pos) {
             continue;
         }
+        // No block skipping here: measured on lavapipe, the loop that can jump ran MIP
+        // slower (702 against 572 ms on the cranium) and the average too.
         let u = mode_value(pos / (2.0 * p.box_half.xyz) + 0.5);
         if count == 0u {
             best = u;
@@ -228,6 +232,30 @@ fn project(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
     return vec4<f32>(vec3<f32>(clamp(best, 0.0, 1.0)), 1.0);
 }
 
+// The occupancy block of a sample.
+fn block_at(uvw: vec3<f32>) -> vec3<u32> {
+    let dims = vec3<f32>(textureDimensions(volume));
+    return min(vec3<u32>(clamp(uvw, vec3<f32>(0.0), vec3<f32>(1.0)) * dims) / p.grid.w, p.grid.xyz - vec3<u32>(1u));
+}
+
+// The mode value's range (lo, hi) over every sample a block can give.
+fn block_u(block: vec3<u32>) -> vec2<f32> {
+    let r = textureLoad(block_range, block, 0).rg;
+    let a = r.x * p.mode.y + p.mode.z;
+    let b = r.y * p.mode.y + p.mode.z;
+    return vec2<f32>(min(a, b), max(a, b));
+}
+
+// The first regular sample index past `block` along the ray (as compositing skips).
+fn past_block(origin: vec3<f32>, dir: vec3<f32>, block: vec3<u32>, t_enter: f32, offset: f32) -> u32 {
+    let dims = vec3<f32>(textureDimensions(volume));
+    let half = p.box_half.xyz;
+    let lo = vec3<f32>(block * p.grid.w) / dims * 2.0 * half - half;
+    let hi = vec3<f32>((block + vec3<u32>(1u)) * p.grid.w) / dims * 2.0 * half - half;
+    let leave = intersect_box(origin, dir, lo, hi).y;
+    return u32(max(ceil((leave - t_enter) / p.step.x - offset), 0.0));
+}
+
 fn inside_surface(origin: vec3<f32>, dir: vec3<f32>, t: f32) -> bool {
     let pos = origin + dir * t;
     return visible(pos) && mode_value(pos / (2.0 * p.box_half.xyz) + 0.5) >= 0.0;
@@ -244,6 +272,17 @@ fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
         let t = t_enter + (f32(k) + offset) * p.step.x;
         if t >= t_exit {
             break;
+        }
+        if p.step.w != 0.0 {
+            // A block whose values all stay below the iso value holds no hit: jump to
+            // its last sample, which is then the sample before, as without skipping.
+            let block = block_at((origin + dir * t) / (2.0 * p.box_half.xyz) + 0.5);
+            if block_u(block).y < 0.0 {
+                let last = max(k + 1u, past_block(origin, dir, block, t_enter, offset)) - 1u;
+                before = t_enter + (f32(last) + offset) * p.step.x;
+                k = last;
+                continue;
+            }
         }
         if inside_surface(origin, dir, t) {
             var lo = before;

@@ -130,6 +130,49 @@ fn every_mode_on_the_gpu_matches_its_cpu_twin() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
+#[test]
+fn block_skipping_does_not_change_any_mode() {
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    for (name, file) in [
+        ("engine", "raw/engine.raw"),
+        ("cranium", "raw/cranium-ct.raw"),
+    ] {
+        let v = load(file);
+        let texels = VolumeTexels::new(
+            &v,
+            UploadLimits {
+                max_dim: 64,
+                max_bytes: 1 << 30,
+            },
+        );
+        for mode in MODES {
+            let tf = tf_for(mode, &v);
+            let mut f = frame(96, mode, 30.0, 20.0);
+            let vol = GpuVolume::from_texels(&gpu, texels.clone(), &tf, f.settings.step_voxels)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let (cv, occ) = cpu::prepare(&texels, &vol.lut);
+            let mut images = Vec::new();
+            for skipping in [true, false] {
+                f.settings.empty_space_skipping = skipping;
+                let g = rc
+                    .render(&gpu, &vol, &f, None)
+                    .unwrap_or_else(|e| panic!("{e}"));
+                images.push((g, cpu::render(&texels, &cv, &vol.lut, &occ, &f)));
+            }
+            let label = format!("{name} {mode}");
+            assert!(
+                images[0].0.pixels == images[1].0.pixels,
+                "{label}: GPU image changed"
+            );
+            assert!(
+                images[0].1.pixels == images[1].1.pixels,
+                "{label}: CPU image changed"
+            );
+        }
+    }
+}
+
 /// A 33³ volume of zeros with a bright voxel of `value` at the centre. Its 26
 /// neighbours share the value so that trilinear sampling reaches it wherever a sample
 /// falls inside the centre voxel's cell.

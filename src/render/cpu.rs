@@ -27,6 +27,9 @@ pub struct CpuVolume {
     pub modulation: Option<Vec<f32>>,
     /// Clip shapes' maps (read back from the GPU): shadow-test clipping of every sample.
     pub clip: Option<crate::clip::cpu::ClipMapsCpu>,
+    /// (min, max) of `norm` per occupancy block, for the projection and iso modes'
+    /// skipping; `None` skips nothing there.
+    pub block_ranges: Option<BlockRanges>,
 }
 
 /// Surfaces for the CPU twin: the meshes, and the frame and texels that place the camera.
@@ -52,6 +55,7 @@ impl CpuVolume {
             surfaces: None,
             modulation: None,
             clip: None,
+            block_ranges: None,
         }
     }
 }
@@ -162,12 +166,45 @@ impl Ray<'_> {
         Vec3::new(self.p.box_half[0], self.p.box_half[1], self.p.box_half[2])
     }
 
-    /// The samples' positions, as the shader steps them.
-    fn samples(&self) -> impl Iterator<Item = (f32, Vec3)> + '_ {
-        (0..self.p.step[2] as u32)
-            .map(|k| self.t_enter + (k as f32 + self.offset) * self.p.step[0])
-            .take_while(|&t| t < self.t_exit)
-            .map(|t| (t, self.origin + self.dir * t))
+    /// Sample `k`'s distance along the ray and position.
+    fn sample(&self, k: u32) -> (f32, Vec3) {
+        let t = self.t_enter + (k as f32 + self.offset) * self.p.step[0];
+        (t, self.origin + self.dir * t)
+    }
+
+    /// The occupancy block of a position, and the first regular sample past it.
+    fn block(&self, pos: Vec3) -> (usize, u32) {
+        let p = self.p;
+        let dims = Vec3::new(
+            self.vol.dims[0] as f32,
+            self.vol.dims[1] as f32,
+            self.vol.dims[2] as f32,
+        );
+        let half = self.half();
+        let uvw = pos / (2.0 * half) + Vec3::splat(0.5);
+        let grid = glam::UVec3::new(p.grid[0], p.grid[1], p.grid[2]);
+        let block = ((uvw.clamp(Vec3::ZERO, Vec3::ONE) * dims).as_uvec3() / p.grid[3])
+            .min(grid - glam::UVec3::ONE);
+        let lo = (block * p.grid[3]).as_vec3() / dims * 2.0 * half - half;
+        let hi = ((block + glam::UVec3::ONE) * p.grid[3]).as_vec3() / dims * 2.0 * half - half;
+        let leave = intersect_box(self.origin, self.dir, lo, hi).1;
+        let next = ((leave - self.t_enter) / p.step[0] - self.offset)
+            .ceil()
+            .max(0.0) as u32;
+        let index = block.x as usize
+            + grid.x as usize * (block.y as usize + grid.y as usize * block.z as usize);
+        (index, next)
+    }
+
+    /// The mode value's range (lo, hi) over a block, where skipping is on.
+    fn block_u(&self, index: usize) -> Option<(f32, f32)> {
+        let ranges = self.vol.block_ranges.as_ref()?;
+        (self.p.step[3] != 0.0).then(|| {
+            let (mn, mx) = ranges.ranges[index];
+            let a = mn * self.p.mode[1] + self.p.mode[2];
+            let b = mx * self.p.mode[1] + self.p.mode[2];
+            (a.min(b), a.max(b))
+        })
     }
 
     fn visible(&self, pos: Vec3) -> bool {
@@ -185,7 +222,13 @@ impl Ray<'_> {
     /// MIP, MinIP or average over the unclipped samples (raycast.wgsl's `project`).
     fn project(&self, mode: u32) -> Vec4 {
         let (mut best, mut sum, mut count) = (0.0f32, 0.0f32, 0u32);
-        for (_, pos) in self.samples() {
+        let mut k = 0u32;
+        while k < self.p.step[2] as u32 {
+            let (t, pos) = self.sample(k);
+            if t >= self.t_exit {
+                break;
+            }
+            k += 1;
             if !self.visible(pos) {
                 continue;
             }
@@ -221,7 +264,23 @@ impl Ray<'_> {
     /// The first point inside the isosurface, refined (raycast.wgsl's `iso_hit`).
     fn iso_hit(&self) -> Option<f32> {
         let mut before = self.t_enter;
-        for (t, _) in self.samples() {
+        let mut k = 0u32;
+        while k < self.p.step[2] as u32 {
+            let (t, pos) = self.sample(k);
+            if t >= self.t_exit {
+                break;
+            }
+            // A block whose values all stay below the iso value holds no hit: jump to its
+            // last sample, which is then the sample before, as without skipping.
+            let (index, next) = self.block(pos);
+            if let Some((_, hi)) = self.block_u(index)
+                && hi < 0.0
+            {
+                let last = (k + 1).max(next) - 1;
+                before = self.sample(last).0;
+                k = last + 1;
+                continue;
+            }
             if self.inside_surface(t) {
                 let (mut lo, mut hi) = (before, t);
                 for _ in 0..ISO_REFINE {
@@ -235,6 +294,7 @@ impl Ray<'_> {
                 return Some(hi);
             }
             before = t;
+            k += 1;
         }
         None
     }
@@ -422,6 +482,11 @@ pub fn render(
 
 /// Convenience: texels, CPU volume and occupancy for a TF in one go (tests, fallback).
 pub fn prepare(texels: &VolumeTexels, lut: &Lut) -> (CpuVolume, Vec<u8>) {
-    let occupancy = BlockRanges::new(texels).occupancy(texels, lut);
-    (CpuVolume::new(texels), occupancy)
+    let ranges = BlockRanges::new(texels);
+    let occupancy = ranges.occupancy(texels, lut);
+    let volume = CpuVolume {
+        block_ranges: Some(ranges),
+        ..CpuVolume::new(texels)
+    };
+    (volume, occupancy)
 }

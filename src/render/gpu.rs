@@ -66,6 +66,8 @@ pub struct GpuVolume {
     modulation_view: wgpu::TextureView,
     occupancy: wgpu::Texture,
     occupancy_view: wgpu::TextureView,
+    /// (min, max) of `norm` per occupancy block: the projection and iso modes' skip test.
+    block_range_view: wgpu::TextureView,
     lut_buffer: wgpu::Buffer,
     /// The baked LUT currently on the GPU (alpha corrected for `lut_step`).
     pub lut: Lut,
@@ -178,6 +180,20 @@ impl GpuVolume {
                 wgpu::TextureFormat::R8Uint,
             );
             write_3d(queue, &occupancy, grid, 1, &occ);
+            let block_range = texture_3d(
+                device,
+                "GpuVolume::block_range",
+                grid,
+                wgpu::TextureFormat::Rg32Float,
+            );
+            let range_texels: Vec<[f32; 2]> = ranges.ranges.iter().map(|&(a, b)| [a, b]).collect();
+            write_3d(
+                queue,
+                &block_range,
+                grid,
+                8,
+                bytemuck::cast_slice(&range_texels),
+            );
             let lut_buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("GpuVolume::lut"),
                 size: (lut.rgba.len() * 16) as u64,
@@ -190,6 +206,7 @@ impl GpuVolume {
                 ao_view: ao.create_view(&Default::default()),
                 modulation_view: no_modulation(device, queue),
                 occupancy_view: occupancy.create_view(&Default::default()),
+                block_range_view: block_range.create_view(&Default::default()),
                 occupancy,
                 lut_buffer,
                 lut,
@@ -340,6 +357,7 @@ impl RayCaster {
                     entry::texture(5, c, D3, None),
                     entry::storage_texture(6, c, wgpu::TextureFormat::Rgba8Unorm, D2),
                     entry::texture(7, c, D3, Some(true)),
+                    entry::texture(8, c, D3, Some(false)),
                 ],
             });
             let clip_layout = crate::clip::gpu::bind_group_layout(device);
@@ -484,7 +502,8 @@ impl RayCaster {
         })
     }
 
-    /// Bind groups 0 (volume, LUT, AO, occupancy, target, modulation) and 2 (extras).
+    /// Bind groups 0 (volume, LUT, AO, occupancy, target, modulation, block ranges) and
+    /// 2 (extras).
     fn bind_groups(
         &self,
         device: &wgpu::Device,
@@ -508,6 +527,7 @@ impl RayCaster {
                 wgpu::BindingResource::TextureView(&vol.occupancy_view),
                 wgpu::BindingResource::TextureView(&target_view),
                 wgpu::BindingResource::TextureView(&vol.modulation_view),
+                wgpu::BindingResource::TextureView(&vol.block_range_view),
             ],
         );
         let group_2 = super::extras::bind_group_2(
