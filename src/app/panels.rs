@@ -227,6 +227,7 @@ impl Viewer {
                     ui,
                     &mut doc.ao,
                     &mut doc.render.ambient,
+                    &mut doc.render.ao_strength,
                     &mut doc.ao_only,
                     &ao_stats,
                 );
