@@ -368,7 +368,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             offset = jitter(px, py);
         }
         let max_steps = u32(p.step.z);
-        let dims = vec3<f32>(textureDimensions(volume));
         var k = 0u;
         loop {
             if k >= max_steps {
@@ -391,13 +390,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let uvw = pos / (2.0 * half) + 0.5;
             if p.step.w != 0.0 {
                 // Empty-space skipping: jump to the first sample past a transparent block.
-                let block = min(vec3<u32>(clamp(uvw, vec3<f32>(0.0), vec3<f32>(1.0)) * dims) / p.grid.w, p.grid.xyz - vec3<u32>(1u));
+                let block = block_at(uvw);
                 if textureLoad(occupancy, block, 0).r == 0u {
-                    let lo = vec3<f32>(block * p.grid.w) / dims * 2.0 * half - half;
-                    let hi = vec3<f32>((block + vec3<u32>(1u)) * p.grid.w) / dims * 2.0 * half - half;
-                    let leave = intersect_box(origin, dir, lo, hi).y;
-                    let next = u32(max(ceil((leave - t_enter) / dt - offset), 0.0));
-                    k = max(k + 1u, next);
+                    k = max(k + 1u, past_block(origin, dir, block, t_enter, offset));
                     continue;
                 }
             }

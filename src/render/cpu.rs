@@ -141,6 +141,33 @@ fn light(p: &RaycastParams, rgb: Vec3, ao: f32, diffuse: f32, specular: f32, lit
     c + Vec3::splat(specular * lit)
 }
 
+/// The occupancy block of the sample at `uvw` and its index in the grid (raycast.wgsl's
+/// `block_at`).
+fn block_at(p: &RaycastParams, dims: Vec3, uvw: Vec3) -> (glam::UVec3, usize) {
+    let grid = glam::UVec3::new(p.grid[0], p.grid[1], p.grid[2]);
+    let block = ((uvw.clamp(Vec3::ZERO, Vec3::ONE) * dims).as_uvec3() / p.grid[3])
+        .min(grid - glam::UVec3::ONE);
+    let index = block.x as usize
+        + grid.x as usize * (block.y as usize + grid.y as usize * block.z as usize);
+    (block, index)
+}
+
+/// The first regular sample past `block` along the ray (raycast.wgsl's `past_block`).
+fn past_block(
+    p: &RaycastParams,
+    dims: Vec3,
+    (origin, dir): (Vec3, Vec3),
+    block: glam::UVec3,
+    t_enter: f32,
+    offset: f32,
+) -> u32 {
+    let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
+    let lo = (block * p.grid[3]).as_vec3() / dims * 2.0 * half - half;
+    let hi = ((block + glam::UVec3::ONE) * p.grid[3]).as_vec3() / dims * 2.0 * half - half;
+    let leave = intersect_box(origin, dir, lo, hi).1;
+    ((leave - t_enter) / p.step[0] - offset).ceil().max(0.0) as u32
+}
+
 const MODE_COMPOSITE: u32 = 0;
 const MODE_MIP: u32 = 1;
 const MODE_MINIP: u32 = 2;
@@ -172,39 +199,23 @@ impl Ray<'_> {
         (t, self.origin + self.dir * t)
     }
 
-    /// The occupancy block of a position, and the first regular sample past it.
-    fn block(&self, pos: Vec3) -> (usize, u32) {
-        let p = self.p;
-        let dims = Vec3::new(
-            self.vol.dims[0] as f32,
-            self.vol.dims[1] as f32,
-            self.vol.dims[2] as f32,
-        );
-        let half = self.half();
-        let uvw = pos / (2.0 * half) + Vec3::splat(0.5);
-        let grid = glam::UVec3::new(p.grid[0], p.grid[1], p.grid[2]);
-        let block = ((uvw.clamp(Vec3::ZERO, Vec3::ONE) * dims).as_uvec3() / p.grid[3])
-            .min(grid - glam::UVec3::ONE);
-        let lo = (block * p.grid[3]).as_vec3() / dims * 2.0 * half - half;
-        let hi = ((block + glam::UVec3::ONE) * p.grid[3]).as_vec3() / dims * 2.0 * half - half;
-        let leave = intersect_box(self.origin, self.dir, lo, hi).1;
-        let next = ((leave - self.t_enter) / p.step[0] - self.offset)
-            .ceil()
-            .max(0.0) as u32;
-        let index = block.x as usize
-            + grid.x as usize * (block.y as usize + grid.y as usize * block.z as usize);
-        (index, next)
-    }
-
-    /// The mode value's range (lo, hi) over a block, where skipping is on.
-    fn block_u(&self, index: usize) -> Option<(f32, f32)> {
+    /// Where skipping is on: the mode value's range (lo, hi) over the occupancy block of
+    /// `pos`, and the first regular sample past that block.
+    fn block_u(&self, pos: Vec3) -> Option<((f32, f32), u32)> {
         let ranges = self.vol.block_ranges.as_ref()?;
-        (self.p.step[3] != 0.0).then(|| {
-            let (mn, mx) = ranges.ranges[index];
-            let a = mn * self.p.mode[1] + self.p.mode[2];
-            let b = mx * self.p.mode[1] + self.p.mode[2];
-            (a.min(b), a.max(b))
-        })
+        if self.p.step[3] == 0.0 {
+            return None;
+        }
+        let d = self.vol.dims;
+        let dims = Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32);
+        let uvw = pos / (2.0 * self.half()) + Vec3::splat(0.5);
+        let (block, index) = block_at(self.p, dims, uvw);
+        let (mn, mx) = ranges.ranges[index];
+        let a = mn * self.p.mode[1] + self.p.mode[2];
+        let b = mx * self.p.mode[1] + self.p.mode[2];
+        let ray = (self.origin, self.dir);
+        let next = past_block(self.p, dims, ray, block, self.t_enter, self.offset);
+        Some(((a.min(b), a.max(b)), next))
     }
 
     fn visible(&self, pos: Vec3) -> bool {
@@ -272,8 +283,7 @@ impl Ray<'_> {
             }
             // A block whose values all stay below the iso value holds no hit: jump to its
             // last sample, which is then the sample before, as without skipping.
-            let (index, next) = self.block(pos);
-            if let Some((_, hi)) = self.block_u(index)
+            if let Some(((_, hi), next)) = self.block_u(pos)
                 && hi < 0.0
             {
                 let last = (k + 1).max(next) - 1;
@@ -371,8 +381,6 @@ pub fn pixel(
         };
         let max_steps = p.step[2] as u32;
         let dims = Vec3::new(vol.dims[0] as f32, vol.dims[1] as f32, vol.dims[2] as f32);
-        let grid = [p.grid[0], p.grid[1], p.grid[2]];
-        let block_edge = p.grid[3];
         let mut k = 0u32;
         while k < max_steps {
             let t = t_enter + (k as f32 + offset) * dt;
@@ -389,17 +397,9 @@ pub fn pixel(
             let pos = origin + dir * t;
             let uvw = pos / (2.0 * half) + Vec3::splat(0.5);
             if p.step[3] != 0.0 {
-                let cell = (uvw.clamp(Vec3::ZERO, Vec3::ONE) * dims).as_uvec3() / block_edge;
-                let block = cell.min(glam::UVec3::new(grid[0] - 1, grid[1] - 1, grid[2] - 1));
-                let index = block.x as usize
-                    + grid[0] as usize * (block.y as usize + grid[1] as usize * block.z as usize);
+                let (block, index) = block_at(p, dims, uvw);
                 if occupancy[index] == 0 {
-                    let lo = (block * block_edge).as_vec3() / dims * 2.0 * half - half;
-                    let hi =
-                        ((block + glam::UVec3::ONE) * block_edge).as_vec3() / dims * 2.0 * half
-                            - half;
-                    let leave = intersect_box(origin, dir, lo, hi).1;
-                    let next = ((leave - t_enter) / dt - offset).ceil().max(0.0) as u32;
+                    let next = past_block(p, dims, (origin, dir), block, t_enter, offset);
                     k = (k + 1).max(next);
                     continue;
                 }
