@@ -13,7 +13,6 @@ use volao::clip::{ClipMode, ClipShape, Shape};
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::image::{Tolerance, check};
 use volao::render::offscreen::{self, RenderJob};
-use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, Image, RenderMode, RenderSettings, cpu};
 use volao::tf::{ColorStop, OpacityPoint, Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume};
@@ -92,13 +91,7 @@ fn every_mode_on_the_gpu_matches_its_cpu_twin() {
         ("cranium", "raw/cranium-ct.raw"),
     ] {
         let v = load(file);
-        let texels = VolumeTexels::new(
-            &v,
-            UploadLimits {
-                max_dim: 64,
-                max_bytes: 1 << 30,
-            },
-        );
+        let texels = common::small_texels(&v);
         for mode in MODES {
             let tf = tf_for(mode, &v);
             let f = frame(96, mode, 30.0, 20.0);
@@ -139,13 +132,7 @@ fn block_skipping_does_not_change_any_mode() {
         ("cranium", "raw/cranium-ct.raw"),
     ] {
         let v = load(file);
-        let texels = VolumeTexels::new(
-            &v,
-            UploadLimits {
-                max_dim: 64,
-                max_bytes: 1 << 30,
-            },
-        );
+        let texels = common::small_texels(&v);
         for mode in MODES {
             let tf = tf_for(mode, &v);
             let mut f = frame(96, mode, 30.0, 20.0);
@@ -283,17 +270,6 @@ fn iso_finds_the_surface_between_samples() {
     }
 }
 
-fn golden_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden")
-}
-
-/// As in tests/render.rs: another LLVM or Mesa may round texture filtering differently.
-const GOLDEN: Tolerance = Tolerance {
-    max_channel_diff: 3,
-    max_outlier_fraction: 0.01,
-    max_outlier_diff: 80,
-};
-
 #[test]
 fn golden_images_of_each_mode() {
     let gpu = Arc::new(device());
@@ -325,20 +301,8 @@ fn golden_images_of_each_mode() {
                 .unwrap_or_else(|e| panic!("{e}"))
                 .image;
             let mode_name = mode.to_string().replace(':', "_");
-            let path = golden_dir().join(format!("mode_{name}_{mode_name}.png"));
-            if std::env::var_os("VOLAO_BLESS").is_some() {
-                image.save_png(&path).unwrap_or_else(|e| panic!("{e}"));
-                continue;
-            }
-            let expected = Image::load_png(&path)
-                .unwrap_or_else(|e| panic!("{e} (run with VOLAO_BLESS=1 to create it)"));
-            if let Err(e) = check(
-                &format!("golden_{name}_{mode_name}"),
-                &image,
-                &expected,
-                GOLDEN,
-                &out_dir(),
-            ) {
+            let stem = format!("mode_{name}_{mode_name}");
+            if let Err(e) = common::golden(&stem, &image, &out_dir()) {
                 failures.push(e);
             }
         }

@@ -19,17 +19,7 @@ fn out_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("render")
 }
 
-/// Real volumes shrunk (by the renderer's own downsampling) to ≤ 64 voxels per axis,
-/// so CPU twins stay fast in CI.
-fn small(volume: &Volume) -> VolumeTexels {
-    VolumeTexels::new(
-        volume,
-        UploadLimits {
-            max_dim: 64,
-            max_bytes: 1 << 30,
-        },
-    )
-}
+use common::small_texels as small;
 
 fn load(rel: &str) -> Volume {
     volume::load(&data(rel), &LoadOptions::default())
@@ -119,19 +109,6 @@ fn gpu_matches_cpu_twin() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-fn golden_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden")
-}
-
-/// Golden images are lavapipe renders committed to the repository. A different LLVM or
-/// Mesa version may round texture filtering differently, shifting surface edges by a
-/// fraction of a step: allow small differences and a few edge pixels.
-const GOLDEN: Tolerance = Tolerance {
-    max_channel_diff: 3,
-    max_outlier_fraction: 0.01,
-    max_outlier_diff: 80,
-};
-
 #[test]
 fn golden_images_with_the_ct_bone_preset() {
     let gpu = device();
@@ -159,20 +136,7 @@ fn golden_images_with_the_ct_bone_preset() {
         let image = rc
             .render(&gpu, &vol, &f, None)
             .unwrap_or_else(|e| panic!("{e}"));
-        let path = golden_dir().join(format!("{name}_ct_bone.png"));
-        if std::env::var_os("VOLAO_BLESS").is_some() {
-            image.save_png(&path).unwrap_or_else(|e| panic!("{e}"));
-            continue;
-        }
-        let expected = Image::load_png(&path)
-            .unwrap_or_else(|e| panic!("{e} (run with VOLAO_BLESS=1 to create it)"));
-        if let Err(e) = check(
-            &format!("golden_{name}"),
-            &image,
-            &expected,
-            GOLDEN,
-            &out_dir(),
-        ) {
+        if let Err(e) = common::golden(&format!("{name}_ct_bone"), &image, &out_dir()) {
             failures.push(e);
         }
     }

@@ -177,3 +177,44 @@ pub fn flat_tf(alpha: f32) -> volao::tf::TransferFunction {
         }],
     }
 }
+
+/// A real volume's texels shrunk (by the renderer's own downsampling) to ≤ 64 voxels per
+/// axis, so CPU twins stay fast in CI.
+pub fn small_texels(volume: &volao::volume::Volume) -> volao::render::texels::VolumeTexels {
+    volao::render::texels::VolumeTexels::new(
+        volume,
+        volao::render::texels::UploadLimits {
+            max_dim: 64,
+            max_bytes: 1 << 30,
+        },
+    )
+}
+
+/// Golden images are lavapipe renders committed to the repository. A different LLVM or
+/// Mesa version may round texture filtering differently, shifting surface edges by a
+/// fraction of a step: allow small differences and a few edge pixels.
+pub const GOLDEN: volao::render::image::Tolerance = volao::render::image::Tolerance {
+    max_channel_diff: 3,
+    max_outlier_fraction: 0.01,
+    max_outlier_diff: 80,
+};
+
+/// Checks `image` against `tests/golden/{stem}.png` within [`GOLDEN`] (differences
+/// written to `out_dir`), or writes it there when `VOLAO_BLESS` is set.
+pub fn golden(
+    stem: &str,
+    image: &volao::render::Image,
+    out_dir: &std::path::Path,
+) -> Result<(), String> {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/golden")
+        .join(format!("{stem}.png"));
+    if std::env::var_os("VOLAO_BLESS").is_some() {
+        image.save_png(&path).unwrap_or_else(|e| panic!("{e}"));
+        return Ok(());
+    }
+    let expected = volao::render::Image::load_png(&path)
+        .unwrap_or_else(|e| panic!("{e} (run with VOLAO_BLESS=1 to create it)"));
+    volao::render::image::check(&format!("golden_{stem}"), image, &expected, GOLDEN, out_dir)
+        .map(|_| ())
+}
