@@ -419,7 +419,7 @@ fn gpu_matches_cpu_twin_for_every_map_on_real_data() {
 fn offscreen_render_gpu_matches_cpu_for_every_method_and_modulation() {
     use volao::ao::filter::OpacityModulation;
     use volao::ao::{AoMethod, AoSettings};
-    use volao::render::image::{Tolerance, check};
+    use volao::render::image::check;
     use volao::render::offscreen::{RenderJob, Rendered};
     // `volao render`'s path on a fresh device (`on_gpu`) or on the CPU twin.
     let render = |v: &volume::Volume,
@@ -433,14 +433,8 @@ fn offscreen_render_gpu_matches_cpu_for_every_method_and_modulation() {
         let job = RenderJob::new(v, tf, frame, ao);
         volao::render::offscreen::render(gpu.as_ref(), &job, progress)
     };
+    use common::TWIN;
     use volao::render::{Camera, Frame, Image, RenderSettings};
-    // As tests/render.rs TWIN: the GPU's reduced-precision filtering weights move a few
-    // surface pixels.
-    const TWIN: Tolerance = Tolerance {
-        max_channel_diff: 3,
-        max_outlier_fraction: 0.01,
-        max_outlier_diff: 64,
-    };
     let out = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("filter");
     let v = volume::demo::head_phantom(48);
     let tf = TransferFunction::preset(Preset::CtBone, &v.stats());

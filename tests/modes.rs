@@ -11,7 +11,7 @@ use std::sync::Arc;
 use volao::ao::AoSettings;
 use volao::clip::{ClipMode, ClipShape, Shape};
 use volao::render::gpu::{GpuVolume, RayCaster};
-use volao::render::image::{Tolerance, check};
+use volao::render::image::Tolerance;
 use volao::render::offscreen::{self, RenderJob};
 use volao::render::{Camera, Frame, Image, RenderMode, RenderSettings, cpu};
 use volao::tf::{ColorStop, OpacityPoint, Preset, TransferFunction};
@@ -65,13 +65,7 @@ fn tf_for(mode: RenderMode, v: &Volume) -> TransferFunction {
     }
 }
 
-/// As in tests/render.rs: lavapipe's reduced-precision filter weights move a surface
-/// by a fraction of a step, so a few edge pixels differ by more than a few levels.
-const TWIN: Tolerance = Tolerance {
-    max_channel_diff: 3,
-    max_outlier_fraction: 0.01,
-    max_outlier_diff: 64,
-};
+use common::TWIN;
 
 /// An isosurface hit is a yes/no per ray: where lavapipe's filter weights put a sample
 /// on the other side of the iso value at a silhouette, the pixel is surface on one side
@@ -111,12 +105,8 @@ fn every_mode_on_the_gpu_matches_its_cpu_twin() {
             } else {
                 TWIN
             };
-            match check(&label, &g, &c, tol, &out_dir()) {
-                Ok(cmp) => eprintln!(
-                    "{label}: max diff {}, mean {:.3}, outliers {}",
-                    cmp.max_diff, cmp.mean_diff, cmp.outliers
-                ),
-                Err(e) => failures.push(e),
+            if let Err(e) = common::twin(&label, &g, &c, tol, &out_dir()) {
+                failures.push(e);
             }
         }
     }

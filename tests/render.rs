@@ -62,15 +62,7 @@ fn frame(size: u32, shading: Shading) -> Frame {
     }
 }
 
-/// GPU texture filtering is not the CPU's f32 trilinear: lavapipe (like real GPUs) uses
-/// reduced-precision interpolation weights, so a sample can differ by ~1/256 of the step
-/// between neighbouring texels. Along a ray these differences shift where a surface
-/// starts by a fraction of a step, which moves a few pixels by more than a few levels.
-const TWIN: Tolerance = Tolerance {
-    max_channel_diff: 3,
-    max_outlier_fraction: 0.01,
-    max_outlier_diff: 64,
-};
+use common::TWIN;
 
 #[test]
 fn gpu_matches_cpu_twin() {
@@ -97,12 +89,8 @@ fn gpu_matches_cpu_twin() {
                 let _ = g.save_png(&out_dir().join(format!("{label}.gpu.png")));
                 let _ = c.save_png(&out_dir().join(format!("{label}.cpu.png")));
             }
-            match check(&label, &g, &c, TWIN, &out_dir()) {
-                Ok(cmp) => eprintln!(
-                    "{label}: max diff {}, mean {:.3}, outliers {}",
-                    cmp.max_diff, cmp.mean_diff, cmp.outliers
-                ),
-                Err(e) => failures.push(e),
+            if let Err(e) = common::twin(&label, &g, &c, TWIN, &out_dir()) {
+                failures.push(e);
             }
         }
     }

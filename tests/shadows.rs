@@ -8,7 +8,6 @@ use common::{device, flat_tf, real_crops, texels, u8_volume};
 use glam::Vec3;
 use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
-use volao::render::image::{Tolerance, check};
 use volao::render::shadow::{
     LIGHT_START_STEPS, LightGpu, LightVolume, filtered_occlusion, light_cpu, light_direction,
     light_lut,
@@ -119,13 +118,7 @@ fn light_volume_gpu_matches_cpu_twin_on_real_data() {
     }
 }
 
-/// As tests/render.rs: lavapipe filters the 8-bit volume texture in fixed point, so a
-/// sample's opacity and colour may differ slightly from the CPU's f32 trilinear.
-const TWIN: Tolerance = Tolerance {
-    max_channel_diff: 3,
-    max_outlier_fraction: 0.01,
-    max_outlier_diff: 64,
-};
+use common::TWIN;
 
 #[test]
 fn shadowed_rendering_gpu_matches_cpu_twin_and_darkens() {
@@ -171,11 +164,7 @@ fn shadowed_rendering_gpu_matches_cpu_twin_and_darkens() {
             assert_eq!(sampled.map(|l| l.values.len()), Some(light.len()));
             let c = cpu::render(&t, &cv, &vol.lut, &occ, &f);
             let label = format!("shadow_twin_{name}_{shading:?}");
-            let cmp = check(&label, &g, &c, TWIN, &out).unwrap_or_else(|e| panic!("{e}"));
-            eprintln!(
-                "{label}: max diff {}, mean {:.3}, outliers {}",
-                cmp.max_diff, cmp.mean_diff, cmp.outliers
-            );
+            common::twin(&label, &g, &c, TWIN, &out).unwrap_or_else(|e| panic!("{e}"));
             // Shadows darken: the same frame lit without them is brighter. (Not by 10 % any
             // more: most of that was the lit surfaces shadowing themselves, which the
             // start offset and guard limit remove; the slab test checks both sides.)

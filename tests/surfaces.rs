@@ -10,7 +10,7 @@ use glam::Vec3;
 use volao::gpu::Gpu;
 use volao::render::cpu::{self, CpuSurfaces};
 use volao::render::gpu::{GpuVolume, RayCaster};
-use volao::render::image::{Tolerance, check};
+use volao::render::image::Tolerance;
 use volao::render::surface::Surface;
 use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading};
@@ -166,11 +166,7 @@ fn surfaces_in_real_data_gpu_matches_cpu_twin() {
             let _ = std::fs::create_dir_all(&out);
             let _ = g.save_png(&out.join(format!("{label}.gpu.png")));
         }
-        let cmp = check(&label, &g, &c, TWIN, &out).unwrap_or_else(|e| panic!("{e}"));
-        eprintln!(
-            "{label}: max diff {}, mean {:.3}, outliers {}",
-            cmp.max_diff, cmp.mean_diff, cmp.outliers
-        );
+        common::twin(&label, &g, &c, TWIN, &out).unwrap_or_else(|e| panic!("{e}"));
         // The surfaces are there: the image differs from the volume alone.
         let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));

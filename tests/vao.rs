@@ -242,13 +242,7 @@ fn out_dir() -> std::path::PathBuf {
     std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("vao")
 }
 
-/// As tests/render.rs: lavapipe filters the 8-bit volume texture in fixed point, so a
-/// sample's opacity and colour may differ slightly from the CPU's f32 trilinear.
-const TWIN: Tolerance = Tolerance {
-    max_channel_diff: 3,
-    max_outlier_fraction: 0.01,
-    max_outlier_diff: 64,
-};
+use common::TWIN;
 
 #[test]
 fn live_mode_gpu_matches_cpu_twin() {
@@ -283,11 +277,7 @@ fn live_mode_gpu_matches_cpu_twin() {
     let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
     cv.live_vao = Some(PositionalAo::new(&t, &tf, &s));
     let c = cpu::render(&t, &cv, &vol.lut, &occ, &f);
-    let cmp = check("live_twin", &g, &c, TWIN, &out_dir()).unwrap_or_else(|e| panic!("{e}"));
-    eprintln!(
-        "live GPU vs CPU: max diff {}, mean {:.3}, outliers {}",
-        cmp.max_diff, cmp.mean_diff, cmp.outliers
-    );
+    common::twin("live_twin", &g, &c, TWIN, &out_dir()).unwrap_or_else(|e| panic!("{e}"));
     // And live AO visibly darkens the image compared with no AO.
     cv.live_vao = None;
     let plain = cpu::render(&t, &cv, &vol.lut, &occ, &f);

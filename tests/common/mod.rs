@@ -218,3 +218,31 @@ pub fn golden(
     volao::render::image::check(&format!("golden_{stem}"), image, &expected, GOLDEN, out_dir)
         .map(|_| ())
 }
+
+/// GPU against CPU twin. GPU texture filtering is not the CPU's f32 trilinear: lavapipe
+/// (like real GPUs) uses reduced-precision interpolation weights, so a sample can differ
+/// by ~1/256 of the step between neighbouring texels. Along a ray these differences shift
+/// where a surface starts by a fraction of a step, which moves a few pixels by more than
+/// a few levels.
+pub const TWIN: volao::render::image::Tolerance = volao::render::image::Tolerance {
+    max_channel_diff: 3,
+    max_outlier_fraction: 0.01,
+    max_outlier_diff: 64,
+};
+
+/// Compares a GPU image with its CPU twin's within `tol` (differences written to
+/// `out_dir`) and prints how close they were.
+pub fn twin(
+    label: &str,
+    gpu: &volao::render::Image,
+    cpu: &volao::render::Image,
+    tol: volao::render::image::Tolerance,
+    out_dir: &std::path::Path,
+) -> Result<(), String> {
+    let cmp = volao::render::image::check(label, gpu, cpu, tol, out_dir)?;
+    eprintln!(
+        "{label}: max diff {}, mean {:.3}, outliers {}",
+        cmp.max_diff, cmp.mean_diff, cmp.outliers
+    );
+    Ok(())
+}
