@@ -145,6 +145,28 @@ pub fn render(
     Ok(rendered)
 }
 
+/// Puts computed AO where the ray caster reads it: a volume, live positional AO, or
+/// CAO's `V_AO` (whose state is returned: it also holds the clip maps the frame clips
+/// with).
+pub fn show_ambient(
+    g: &Gpu,
+    vol: &mut GpuVolume,
+    tf: &TransferFunction,
+    ao: &AoSettings,
+    ambient: Ambient,
+) -> Result<Option<Box<crate::ao::cao::CaoGpu>>, GpuError> {
+    match ambient {
+        Ambient::One => {}
+        Ambient::Live => vol.set_live_vao(g, tf, Some(&ao.vao))?,
+        Ambient::Values(a) => vol.set_ambient_occlusion(g, &a),
+        Ambient::Cao(c) => {
+            vol.set_ambient_occlusion_view(c.ao_view());
+            return Ok(Some(c));
+        }
+    }
+    Ok(None)
+}
+
 fn render_gpu(
     g: &Arc<Gpu>,
     job: &RenderJob<'_>,
@@ -171,16 +193,7 @@ fn render_gpu(
     };
     let computed = engine.compute(AoInput::Uploaded(&vol), &request, progress)?;
     let mut clip_errors = Vec::new();
-    let mut cao_state = None;
-    match computed.ambient {
-        Ambient::One => {}
-        Ambient::Live => vol.set_live_vao(g, tf, Some(&ao.vao))?,
-        Ambient::Values(a) => vol.set_ambient_occlusion(g, &a),
-        Ambient::Cao(c) => {
-            vol.set_ambient_occlusion_view(c.ao_view());
-            cao_state = Some(c);
-        }
-    }
+    let cao_state = show_ambient(g, &mut vol, tf, ao, computed.ambient)?;
     if let Some(stats) = &computed.cao {
         clip_errors = stats.clip_errors.clone();
     }

@@ -83,7 +83,7 @@ struct Timed {
 /// `volao bench render FILE…`: the configurations asked for, warm frames.
 fn render_files(args: &RenderBenchArgs) -> Result<()> {
     use std::sync::Arc;
-    use volao::ao::{Ambient, AoEngine, AoInput, AoRequest, AoSettings};
+    use volao::ao::{AoEngine, AoInput, AoRequest, AoSettings};
     use volao::render::RenderSettings;
     use volao::render::gpu::{GpuVolume, RayCaster};
     use volao::tf::{Preset, TransferFunction};
@@ -133,11 +133,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
             &request,
             &|_, _| {},
         )?;
-        match computed.ambient {
-            Ambient::One | Ambient::Cao(_) => {}
-            Ambient::Live => vol.set_live_vao(&gpu, &tf, Some(&ao.vao))?,
-            Ambient::Values(a) => vol.set_ambient_occlusion(&gpu, &a),
-        }
+        volao::render::offscreen::show_ambient(&gpu, &mut vol, &tf, &ao, computed.ambient)?;
         let ao_ms = start.elapsed().as_secs_f64() * 1e3;
         let name = path.display().to_string();
         for &mode in &args.mode {
