@@ -664,3 +664,111 @@ fn dat_naming_a_missing_or_absurd_file_names_the_dat_and_cuts_the_name() {
     assert!(msg.len() < 600, "{} characters: {msg}", msg.len());
     assert!(!msg.contains('\0'), "raw NUL in {msg:?}");
 }
+
+// ---- DICOM series assembly on plain header values (what fuzz/dicom_assembly drives) ----
+
+/// A single-frame axial slice of 4×3 16-bit pixels at height `z`.
+fn slice_tags(series: &str, sop: &str, z: f64) -> volume::dicom::HeaderTags {
+    volume::dicom::HeaderTags {
+        rows: Some(3),
+        cols: Some(4),
+        series_uid: Some(series.into()),
+        sop_uid: Some(sop.into()),
+        transfer_syntax: "1.2.840.10008.1.2.1".into(),
+        plane: volume::dicom::PlaneTags {
+            position: Some(vec![0.0, 0.0, z]),
+            orientation: Some(vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0]),
+            pixel_spacing: Some(vec![0.5, 0.25]),
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+fn plan_of(
+    tags: &[volume::dicom::HeaderTags],
+) -> (Result<volume::dicom::Assembly, VolumeError>, Vec<String>) {
+    let infos: Vec<_> = tags
+        .iter()
+        .enumerate()
+        .map(|(k, t)| {
+            volume::dicom::FileInfo::from_tags(t, Path::new(&format!("f{k}.dcm"))).expect("valid")
+        })
+        .collect();
+    let mut warnings = Vec::new();
+    let plan = volume::dicom::plan(&infos, None, Path::new("dir"), CAP, &mut warnings);
+    (plan, warnings)
+}
+
+#[test]
+fn dicom_assembly_from_header_values_orders_measures_and_reports_gaps() {
+    // z = 6, 0, 2, 2 (a duplicate), 4, 12: two slices missing, at 8 and 10.
+    let zs = [6.0, 0.0, 2.0, 2.0, 4.0, 12.0];
+    let tags: Vec<_> = zs
+        .iter()
+        .enumerate()
+        .map(|(k, &z)| slice_tags("1.2.3", &k.to_string(), z))
+        .collect();
+    let (plan, warnings) = plan_of(&tags);
+    let a = plan.expect("assembles");
+    assert_eq!(a.dims, [4, 3, 5]);
+    assert_eq!(a.bytes, 4 * 3 * 5 * 2);
+    let s = &a.series[a.chosen];
+    let z: Vec<f64> = a
+        .geometry
+        .order
+        .iter()
+        .map(|&i| s.slices[i].position.expect("positioned").z)
+        .collect();
+    assert_eq!(z, [0.0, 2.0, 4.0, 6.0, 12.0]);
+    assert_eq!(a.geometry.spacing, [0.25, 0.5, 2.0]);
+    assert!(
+        warnings.iter().any(|w| w.contains("1 slice repeat")),
+        "{warnings:?}"
+    );
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("about 2 slice(s) seem to be missing")),
+        "{warnings:?}"
+    );
+    // A NaN position is no position: the stack falls back to instance order, 1 mm.
+    let mut tags = tags;
+    tags[4].plane.position = Some(vec![0.0, f64::NAN, 4.0]);
+    let (plan, warnings) = plan_of(&tags);
+    assert_eq!(plan.expect("assembles").geometry.spacing[2], 1.0);
+    assert!(
+        warnings.iter().any(|w| w.contains("instance order")),
+        "{warnings:?}"
+    );
+}
+
+/// Found by fuzz/dicom_assembly: a SeriesInstanceUID or SeriesDescription with a
+/// newline or an escape sequence went raw into the "several series" warning and the
+/// series list of `volao info`.
+#[test]
+fn dicom_series_text_with_control_characters_stays_on_one_line() {
+    let mut tags = vec![
+        slice_tags("1.2\n3", "1", 0.0),
+        slice_tags("1.2\n3", "2", 1.0),
+        slice_tags("\u{1b}[31m", "3", 0.0),
+    ];
+    tags[2].series_description = Some("two\nlines".into());
+    let (plan, warnings) = plan_of(&tags);
+    let a = plan.expect("assembles");
+    assert_eq!(a.series.len(), 2);
+    let several = warnings
+        .iter()
+        .find(|w| w.contains("series here"))
+        .expect("several series reported");
+    assert!(
+        several.contains(r"1.2\n3") && !several.contains('\n'),
+        "{several:?}"
+    );
+    let list = volume::dicom::describe_series(&a.series, &a.series[a.chosen].id);
+    assert_eq!(list.lines().count(), 2, "{list:?}");
+    assert!(
+        !list.contains('\u{1b}') && list.contains(r"two\nlines"),
+        "{list:?}"
+    );
+}

@@ -285,6 +285,20 @@ pub fn memory_budget() -> u64 {
         .unwrap_or(16 << 30)
 }
 
+/// Text from a file fit for one line: control characters (newlines, escape sequences)
+/// written as Rust escapes, everything else unchanged.
+pub fn escape_controls(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
 /// A user-supplied name or header value fit for a one-line message: quoted, control
 /// characters escaped, cut to 120 characters.
 pub fn short_name(s: &str) -> String {

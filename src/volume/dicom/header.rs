@@ -54,6 +54,45 @@ pub struct Series {
     pub slices: Vec<Slice>,
 }
 
+/// The header values of one file that volao uses, as dicom-rs read them and before any
+/// check ([`FileInfo::from_tags`] makes them a [`FileInfo`]). Plain data, so series
+/// assembly can be tested and fuzzed without DICOM files or dicom-rs.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct HeaderTags {
+    pub rows: Option<i64>,
+    pub cols: Option<i64>,
+    pub number_of_frames: Option<i64>,
+    pub bits_allocated: Option<i64>,
+    pub bits_stored: Option<i64>,
+    pub pixel_representation: Option<i64>,
+    pub samples_per_pixel: Option<i64>,
+    /// Text values are trimmed of spaces and NULs; empty ones are `None`.
+    pub photometric: Option<String>,
+    pub series_uid: Option<String>,
+    pub sop_uid: Option<String>,
+    pub series_description: Option<String>,
+    pub modality: Option<String>,
+    pub transfer_syntax: String,
+    pub instance_number: Option<i64>,
+    pub slice_thickness: Option<Vec<f64>>,
+    /// The top-level plane and rescale elements.
+    pub plane: PlaneTags,
+    /// Enhanced (functional groups) files: frame k's values, from its per-frame
+    /// functional group or else the shared one. `None` without functional groups.
+    pub frames: Option<Vec<PlaneTags>>,
+}
+
+/// Where one image lies and how its values scale, as stored (multi-valued numbers as
+/// read, not yet checked for count or finiteness).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PlaneTags {
+    pub position: Option<Vec<f64>>,
+    pub orientation: Option<Vec<f64>>,
+    pub pixel_spacing: Option<Vec<f64>>,
+    pub rescale_slope: Option<Vec<f64>>,
+    pub rescale_intercept: Option<Vec<f64>>,
+}
+
 fn get_str(obj: &InMemDicomObject, tag: Tag) -> Option<String> {
     let s = obj.get(tag)?.to_str().ok()?;
     let s = s.trim_matches(|c: char| c.is_whitespace() || c == '\0');
@@ -61,8 +100,14 @@ fn get_str(obj: &InMemDicomObject, tag: Tag) -> Option<String> {
 }
 
 fn get_f64s(obj: &InMemDicomObject, tag: Tag) -> Option<Vec<f64>> {
-    let v = obj.get(tag)?.to_multi_float64().ok()?;
-    v.iter().all(|x| x.is_finite()).then_some(v)
+    obj.get(tag)?.to_multi_float64().ok()
+}
+
+/// A multi-valued number only when every value is finite.
+fn finite(v: &Option<Vec<f64>>) -> Option<Vec<f64>> {
+    v.as_ref()
+        .filter(|v| v.iter().all(|x| x.is_finite()))
+        .cloned()
 }
 
 fn get_int(obj: &InMemDicomObject, tag: Tag) -> Option<i64> {
@@ -103,10 +148,10 @@ fn parse_spacing(v: Option<Vec<f64>>) -> Option<[f64; 2]> {
         .map(|v| [v[0], v[1]])
 }
 
-fn rescale_of(obj: Option<&InMemDicomObject>) -> Option<Scaling> {
-    let obj = obj?;
-    let slope = get_f64s(obj, tags::RESCALE_SLOPE).and_then(|v| v.first().copied());
-    let inter = get_f64s(obj, tags::RESCALE_INTERCEPT).and_then(|v| v.first().copied());
+/// RescaleSlope/Intercept of a plane; `None` when it has neither.
+fn rescale_of(p: &PlaneTags) -> Option<Scaling> {
+    let slope = finite(&p.rescale_slope).and_then(|v| v.first().copied());
+    let inter = finite(&p.rescale_intercept).and_then(|v| v.first().copied());
     if slope.is_none() && inter.is_none() {
         return None;
     }
@@ -143,119 +188,192 @@ pub(super) fn contained<T>(
 
 /// Reads what [`FileInfo`] needs from an opened object.
 pub fn info_from_object(obj: &DefaultDicomObject, path: &Path) -> Result<FileInfo, VolumeError> {
+    FileInfo::from_tags(&tags_of_object(obj), path)
+}
+
+fn plane_of(obj: Option<&InMemDicomObject>, tag: Tag) -> Option<Vec<f64>> {
+    obj.and_then(|o| get_f64s(o, tag))
+}
+
+/// The header values volao uses, read from an opened object without checking them.
+pub fn tags_of_object(obj: &DefaultDicomObject) -> HeaderTags {
     let rows = get_int(obj, tags::ROWS);
     let cols = get_int(obj, tags::COLUMNS);
-    let (Some(rows), Some(cols)) = (rows, cols) else {
-        return Err(VolumeError::unsupported(
-            path,
-            "DICOM file without Rows/Columns: not an image (a report, structured data or DICOMDIR?)",
-        ));
-    };
-    let dim = |v: i64, what: &str| {
-        u32::try_from(v)
-            .ok()
-            .filter(|v| (1..=65535).contains(v))
-            .ok_or_else(|| VolumeError::invalid(path, format!("{what} = {v} is not 1 … 65535")))
-    };
-    let (rows, cols) = (dim(rows, "Rows")?, dim(cols, "Columns")?);
-    let frames = match get_int(obj, tags::NUMBER_OF_FRAMES) {
-        None => 1,
-        Some(n) => u32::try_from(n)
-            .ok()
-            .filter(|n| (1..=1_000_000).contains(n))
-            .ok_or_else(|| {
-                VolumeError::invalid(path, format!("NumberOfFrames = {n} is not 1 … 1000000"))
-            })?,
-    };
-    let bits_allocated = get_int(obj, tags::BITS_ALLOCATED).unwrap_or(16);
-    let bits_allocated = u16::try_from(bits_allocated)
-        .ok()
-        .filter(|b| matches!(b, 8 | 16 | 32))
-        .ok_or_else(|| {
-            VolumeError::unsupported(
-                path,
-                format!("BitsAllocated = {bits_allocated}: volao reads 8-, 16- and 32-bit pixels"),
-            )
-        })?;
-    let bits_stored = get_int(obj, tags::BITS_STORED)
-        .and_then(|b| u16::try_from(b).ok())
-        .filter(|b| (1..=bits_allocated).contains(b))
-        .unwrap_or(bits_allocated);
-    let signed = get_int(obj, tags::PIXEL_REPRESENTATION) == Some(1);
-    let samples_per_pixel = get_int(obj, tags::SAMPLES_PER_PIXEL)
-        .and_then(|s| u16::try_from(s).ok())
-        .unwrap_or(1);
-    let photometric = get_str(obj, tags::PHOTOMETRIC_INTERPRETATION).unwrap_or_default();
-    let series_uid = get_str(obj, tags::SERIES_INSTANCE_UID).unwrap_or_default();
-    let sop_uid = get_str(obj, tags::SOP_INSTANCE_UID).unwrap_or_default();
-    let top_position = parse_position(get_f64s(obj, tags::IMAGE_POSITION_PATIENT));
-    let top_orientation = parse_orientation(get_f64s(obj, tags::IMAGE_ORIENTATION_PATIENT));
-    let top_spacing = parse_spacing(get_f64s(obj, tags::PIXEL_SPACING));
-    let top_rescale = rescale_of(Some(obj)).unwrap_or(Scaling::IDENTITY);
-    let instance_number = get_int(obj, tags::INSTANCE_NUMBER);
-    let slice_thickness = get_f64s(obj, tags::SLICE_THICKNESS)
-        .and_then(|v| v.first().copied())
-        .filter(|t| *t > 0.0);
+    let number_of_frames = get_int(obj, tags::NUMBER_OF_FRAMES);
     let functional = obj
         .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
         .is_some()
         || obj.get(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE).is_some();
-    let slices = (0..frames)
-        .map(|frame| {
-            if !functional {
-                return Slice {
-                    file: 0,
-                    frame,
-                    rows,
-                    cols,
-                    // One position for several frames describes only the first.
-                    position: if frames == 1 { top_position } else { None },
-                    orientation: top_orientation,
-                    pixel_spacing: top_spacing,
-                    rescale: top_rescale,
-                    instance_number,
-                };
-            }
-            let g = |seq| group(obj, frame, seq);
-            Slice {
-                file: 0,
-                frame,
-                rows,
-                cols,
-                position: g(tags::PLANE_POSITION_SEQUENCE)
-                    .and_then(|o| parse_position(get_f64s(o, tags::IMAGE_POSITION_PATIENT))),
-                orientation: g(tags::PLANE_ORIENTATION_SEQUENCE)
-                    .and_then(|o| parse_orientation(get_f64s(o, tags::IMAGE_ORIENTATION_PATIENT)))
-                    .or(top_orientation),
-                pixel_spacing: g(tags::PIXEL_MEASURES_SEQUENCE)
-                    .and_then(|o| parse_spacing(get_f64s(o, tags::PIXEL_SPACING)))
-                    .or(top_spacing),
-                rescale: rescale_of(g(tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE))
-                    .unwrap_or(top_rescale),
-                instance_number,
-            }
-        })
-        .collect();
-    Ok(FileInfo {
-        path: path.to_owned(),
-        series_uid,
-        sop_uid,
-        series_description: get_str(obj, tags::SERIES_DESCRIPTION).unwrap_or_default(),
-        modality: get_str(obj, tags::MODALITY).unwrap_or_default(),
+    // Per-frame values only for a frame count that FileInfo::from_tags accepts.
+    let frame_count = match number_of_frames {
+        _ if rows.is_none() || cols.is_none() => 0,
+        None => 1,
+        Some(n) => u32::try_from(n)
+            .ok()
+            .filter(|n| (1..=MAX_FRAMES).contains(n))
+            .unwrap_or(0),
+    };
+    let frames = functional.then(|| {
+        (0..frame_count)
+            .map(|frame| {
+                let g = |seq| group(obj, frame, seq);
+                let rescale = g(tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE);
+                PlaneTags {
+                    position: plane_of(
+                        g(tags::PLANE_POSITION_SEQUENCE),
+                        tags::IMAGE_POSITION_PATIENT,
+                    ),
+                    orientation: plane_of(
+                        g(tags::PLANE_ORIENTATION_SEQUENCE),
+                        tags::IMAGE_ORIENTATION_PATIENT,
+                    ),
+                    pixel_spacing: plane_of(g(tags::PIXEL_MEASURES_SEQUENCE), tags::PIXEL_SPACING),
+                    rescale_slope: plane_of(rescale, tags::RESCALE_SLOPE),
+                    rescale_intercept: plane_of(rescale, tags::RESCALE_INTERCEPT),
+                }
+            })
+            .collect()
+    });
+    HeaderTags {
+        rows,
+        cols,
+        number_of_frames,
+        bits_allocated: get_int(obj, tags::BITS_ALLOCATED),
+        bits_stored: get_int(obj, tags::BITS_STORED),
+        pixel_representation: get_int(obj, tags::PIXEL_REPRESENTATION),
+        samples_per_pixel: get_int(obj, tags::SAMPLES_PER_PIXEL),
+        photometric: get_str(obj, tags::PHOTOMETRIC_INTERPRETATION),
+        series_uid: get_str(obj, tags::SERIES_INSTANCE_UID),
+        sop_uid: get_str(obj, tags::SOP_INSTANCE_UID),
+        series_description: get_str(obj, tags::SERIES_DESCRIPTION),
+        modality: get_str(obj, tags::MODALITY),
         transfer_syntax: obj
             .meta()
             .transfer_syntax()
             .trim_end_matches('\0')
             .to_owned(),
+        instance_number: get_int(obj, tags::INSTANCE_NUMBER),
+        slice_thickness: get_f64s(obj, tags::SLICE_THICKNESS),
+        plane: PlaneTags {
+            position: get_f64s(obj, tags::IMAGE_POSITION_PATIENT),
+            orientation: get_f64s(obj, tags::IMAGE_ORIENTATION_PATIENT),
+            pixel_spacing: get_f64s(obj, tags::PIXEL_SPACING),
+            rescale_slope: get_f64s(obj, tags::RESCALE_SLOPE),
+            rescale_intercept: get_f64s(obj, tags::RESCALE_INTERCEPT),
+        },
         frames,
-        bits_allocated,
-        bits_stored,
-        signed,
-        samples_per_pixel,
-        photometric,
-        slice_thickness,
-        slices,
-    })
+    }
+}
+
+/// Most frames a multi-frame file may claim.
+pub const MAX_FRAMES: u32 = 1_000_000;
+
+impl FileInfo {
+    /// Checks a header's values and derives the images (slices) it holds; `path` is the
+    /// file they came from.
+    pub fn from_tags(t: &HeaderTags, path: &Path) -> Result<FileInfo, VolumeError> {
+        let (Some(rows), Some(cols)) = (t.rows, t.cols) else {
+            return Err(VolumeError::unsupported(
+                path,
+                "DICOM file without Rows/Columns: not an image (a report, structured data or DICOMDIR?)",
+            ));
+        };
+        let dim = |v: i64, what: &str| {
+            u32::try_from(v)
+                .ok()
+                .filter(|v| (1..=65535).contains(v))
+                .ok_or_else(|| VolumeError::invalid(path, format!("{what} = {v} is not 1 … 65535")))
+        };
+        let (rows, cols) = (dim(rows, "Rows")?, dim(cols, "Columns")?);
+        let frames = match t.number_of_frames {
+            None => 1,
+            Some(n) => u32::try_from(n)
+                .ok()
+                .filter(|n| (1..=MAX_FRAMES).contains(n))
+                .ok_or_else(|| {
+                    VolumeError::invalid(
+                        path,
+                        format!("NumberOfFrames = {n} is not 1 … {MAX_FRAMES}"),
+                    )
+                })?,
+        };
+        let bits_allocated = t.bits_allocated.unwrap_or(16);
+        let bits_allocated = u16::try_from(bits_allocated)
+            .ok()
+            .filter(|b| matches!(b, 8 | 16 | 32))
+            .ok_or_else(|| {
+                VolumeError::unsupported(
+                    path,
+                    format!(
+                        "BitsAllocated = {bits_allocated}: volao reads 8-, 16- and 32-bit pixels"
+                    ),
+                )
+            })?;
+        let bits_stored = t
+            .bits_stored
+            .and_then(|b| u16::try_from(b).ok())
+            .filter(|b| (1..=bits_allocated).contains(b))
+            .unwrap_or(bits_allocated);
+        let signed = t.pixel_representation == Some(1);
+        let samples_per_pixel = t
+            .samples_per_pixel
+            .and_then(|s| u16::try_from(s).ok())
+            .unwrap_or(1);
+        let top_position = parse_position(finite(&t.plane.position));
+        let top_orientation = parse_orientation(finite(&t.plane.orientation));
+        let top_spacing = parse_spacing(finite(&t.plane.pixel_spacing));
+        let top_rescale = rescale_of(&t.plane).unwrap_or(Scaling::IDENTITY);
+        let instance_number = t.instance_number;
+        let slice_thickness = finite(&t.slice_thickness)
+            .and_then(|v| v.first().copied())
+            .filter(|t| *t > 0.0);
+        let slices = (0..frames)
+            .map(|frame| {
+                let Some(per_frame) = &t.frames else {
+                    return Slice {
+                        file: 0,
+                        frame,
+                        rows,
+                        cols,
+                        // One position for several frames describes only the first.
+                        position: if frames == 1 { top_position } else { None },
+                        orientation: top_orientation,
+                        pixel_spacing: top_spacing,
+                        rescale: top_rescale,
+                        instance_number,
+                    };
+                };
+                let g = per_frame.get(frame as usize).cloned().unwrap_or_default();
+                Slice {
+                    file: 0,
+                    frame,
+                    rows,
+                    cols,
+                    position: parse_position(finite(&g.position)),
+                    orientation: parse_orientation(finite(&g.orientation)).or(top_orientation),
+                    pixel_spacing: parse_spacing(finite(&g.pixel_spacing)).or(top_spacing),
+                    rescale: rescale_of(&g).unwrap_or(top_rescale),
+                    instance_number,
+                }
+            })
+            .collect();
+        Ok(FileInfo {
+            path: path.to_owned(),
+            series_uid: t.series_uid.clone().unwrap_or_default(),
+            sop_uid: t.sop_uid.clone().unwrap_or_default(),
+            series_description: t.series_description.clone().unwrap_or_default(),
+            modality: t.modality.clone().unwrap_or_default(),
+            transfer_syntax: t.transfer_syntax.clone(),
+            frames,
+            bits_allocated,
+            bits_stored,
+            signed,
+            samples_per_pixel,
+            photometric: t.photometric.clone().unwrap_or_default(),
+            slice_thickness,
+            slices,
+        })
+    }
 }
 
 /// The transfer syntax's name, and whether dicom-rs (as built) decodes it.

@@ -23,10 +23,9 @@ mod series;
 pub use header::*;
 use header::{contained, open_bytes};
 pub use lengths::*;
-use series::choose;
 pub use series::*;
 
-use crate::volume::{Reading, Scaling, Volume, VolumeError, VoxelData, fmt_bytes, fmt_dims};
+use crate::volume::{Reading, Scaling, Volume, VolumeError, VoxelData, escape_controls, fmt_bytes};
 use dicom_dictionary_std::tags;
 use dicom_object::DefaultDicomObject;
 use dicom_pixeldata::PixelDecoder;
@@ -230,61 +229,21 @@ fn assemble(
     decode_file: &(dyn Fn(usize) -> Result<Decoded, VolumeError> + Sync),
     reading: &mut Reading<'_>,
 ) -> Result<(Volume, DicomInfo, usize), VolumeError> {
-    let max_bytes = reading.max_bytes;
     let warnings = &mut *reading.warnings;
     let progress = &mut *reading.progress;
-    let series = group_series(infos, warnings);
-    let chosen = choose(&series, series_wanted, path)?;
-    let files_used: std::collections::BTreeSet<usize> =
-        chosen.slices.iter().map(|s| s.file).collect();
+    let Assembly {
+        series,
+        chosen,
+        files_used,
+        geometry: geo,
+        dims,
+        bytes: total,
+    } = plan(infos, series_wanted, path, reading.max_bytes, warnings)?;
+    let chosen = &series[chosen];
     let first = &infos[chosen.slices[0].file];
-    if series.len() > 1 {
-        warnings.push(format!(
-            "{} series here; loading [{}] {} (choose another with --series N or UID; `volao info` lists them)",
-            series.len(),
-            series.iter().position(|s| s.id == chosen.id).unwrap_or(0),
-            chosen.id
-        ));
-    }
-    if first.samples_per_pixel != 1 {
-        return Err(VolumeError::unsupported(
-            &first.path,
-            format!(
-                "{} samples per pixel ({}): volao renders scalar (greyscale) volumes only",
-                first.samples_per_pixel, first.photometric
-            ),
-        ));
-    }
-    for &k in &files_used {
-        let (name, ok) = transfer_syntax(&infos[k].transfer_syntax);
-        if !ok {
-            return Err(VolumeError::unsupported(
-                &infos[k].path,
-                format!(
-                    "transfer syntax {name} cannot be decoded by this build (dicom-rs without system libraries; JPEG-LS needs CharLS) — convert it with e.g. `gdcmconv --raw` or dcm2niix"
-                ),
-            ));
-        }
-    }
-    let geo = geometry(&chosen.slices, first.slice_thickness, path, warnings)?;
     let (rows, cols) = (chosen.slices[0].rows, chosen.slices[0].cols);
-    let nz = geo.order.len();
-    let dims = [cols as usize, rows as usize, nz];
     let bytes_per = (first.bits_allocated / 8) as usize;
     let slice_px = rows as usize * cols as usize;
-    let total = (slice_px as u64)
-        .checked_mul(nz as u64)
-        .and_then(|v| v.checked_mul(bytes_per as u64))
-        .unwrap_or(u64::MAX);
-    if total > max_bytes {
-        return Err(VolumeError::TooLarge {
-            path: path.to_owned(),
-            dims: fmt_dims(dims),
-            ty: format!("{}-bit", first.bits_allocated),
-            bytes: fmt_bytes(total),
-            limit: fmt_bytes(max_bytes),
-        });
-    }
     let slice_bytes = slice_px * bytes_per;
     let mut raw: Vec<u8> = Vec::new();
     raw.try_reserve_exact(total as usize).map_err(|_| {
@@ -404,14 +363,12 @@ fn assemble(
     if !first.modality.is_empty() || !first.series_description.is_empty() {
         volume.descriptions.push((
             "series".into(),
-            format!("{} {}", first.modality, first.series_description)
-                .trim()
-                .to_owned(),
+            escape_controls(format!("{} {}", first.modality, first.series_description).trim()),
         ));
     }
     volume
         .descriptions
-        .push(("series uid".into(), chosen.id.clone()));
+        .push(("series uid".into(), escape_controls(&chosen.id)));
     if series.len() > 1 {
         volume
             .descriptions
@@ -419,7 +376,7 @@ fn assemble(
     }
     let info = DicomInfo {
         files: files_used.len(),
-        frames: nz,
+        frames: dims[2],
         transfer_syntax: ts_name,
         series_count: series.len(),
     };
@@ -472,26 +429,6 @@ fn apply_per_slice(data: &VoxelData, rescales: &[Scaling], slice_px: usize) -> V
             .map(|i| rescales[i / slice_px].apply(data.get_f64(i)) as f32)
             .collect(),
     )
-}
-
-/// Series assembly from already-scanned headers, without pixels (fuzzing, tests): the
-/// chosen series' id, dims and geometry.
-pub fn assemble_headers(
-    files: &[FileInfo],
-    series_wanted: Option<&str>,
-    path: &Path,
-    warnings: &mut Vec<String>,
-) -> Result<(String, [usize; 3], Geometry), VolumeError> {
-    let series = group_series(files, warnings);
-    let chosen = choose(&series, series_wanted, path)?;
-    let thickness = files[chosen.slices[0].file].slice_thickness;
-    let geo = geometry(&chosen.slices, thickness, path, warnings)?;
-    let s = &chosen.slices[0];
-    Ok((
-        chosen.id.clone(),
-        [s.cols as usize, s.rows as usize, geo.order.len()],
-        geo,
-    ))
 }
 
 /// Parses one in-memory DICOM file's header (fuzzing).

@@ -3,8 +3,9 @@
 
 use super::header::*;
 use crate::volume::orient::{AffineSource, Orientation};
-use crate::volume::{VolumeError, display_path, short_name};
+use crate::volume::{VolumeError, display_path, escape_controls, fmt_bytes, fmt_dims, short_name};
 use glam::{DMat3, DVec3};
+use std::collections::BTreeSet;
 use std::path::Path;
 
 /// Groups scanned files into series candidates, most slices first. Multi-frame files
@@ -234,19 +235,19 @@ pub fn geometry(
     })
 }
 
-/// Which series to load: `None` = the one with most slices.
-pub(super) fn choose<'a>(
-    series: &'a [Series],
+/// Which series to load (its index in `series`): `None` = the one with most slices.
+pub(super) fn choose(
+    series: &[Series],
     want: Option<&str>,
     path: &Path,
-) -> Result<&'a Series, VolumeError> {
+) -> Result<usize, VolumeError> {
     let Some(want) = want else {
-        return series
-            .first()
+        return (!series.is_empty())
+            .then_some(0)
             .ok_or_else(|| VolumeError::invalid(path, "no DICOM images found"));
     };
     if let Ok(k) = want.parse::<usize>() {
-        return series.get(k).ok_or_else(|| {
+        return (k < series.len()).then_some(k).ok_or_else(|| {
             VolumeError::invalid(
                 path,
                 format!(
@@ -257,7 +258,7 @@ pub(super) fn choose<'a>(
             )
         });
     }
-    series.iter().find(|s| s.id == want).ok_or_else(|| {
+    series.iter().position(|s| s.id == want).ok_or_else(|| {
         VolumeError::invalid(
             path,
             format!(
@@ -268,7 +269,8 @@ pub(super) fn choose<'a>(
     })
 }
 
-/// One line per series candidate, for `volao info` and warnings.
+/// One line per series candidate, for `volao info` and warnings (the file's text with
+/// control characters escaped, so a damaged UID or description cannot break a line).
 pub fn describe_series(series: &[Series], chosen: &str) -> String {
     series
         .iter()
@@ -277,7 +279,7 @@ pub fn describe_series(series: &[Series], chosen: &str) -> String {
             format!(
                 "[{k}]{} {} — {} {}×{} slice{}{}",
                 if s.id == chosen { "*" } else { "" },
-                s.id,
+                escape_controls(&s.id),
                 s.slices.len(),
                 s.slices[0].cols,
                 s.slices[0].rows,
@@ -285,10 +287,97 @@ pub fn describe_series(series: &[Series], chosen: &str) -> String {
                 if s.description.is_empty() && s.modality.is_empty() {
                     String::new()
                 } else {
-                    format!(", {} {}", s.modality, s.description)
+                    escape_controls(&format!(", {} {}", s.modality, s.description))
                 }
             )
         })
         .collect::<Vec<_>>()
         .join("\n")
+}
+
+/// What series assembly decides from the headers alone, before any pixel is decoded.
+#[derive(Debug, Clone)]
+pub struct Assembly {
+    /// Every series candidate, most slices first.
+    pub series: Vec<Series>,
+    /// The one to load: an index into `series`.
+    pub chosen: usize,
+    /// The scanned files (indices) whose images form it.
+    pub files_used: BTreeSet<usize>,
+    /// Its slices in stack order, spacing and affine.
+    pub geometry: Geometry,
+    /// Voxels along x (columns), y (rows) and z (slices kept).
+    pub dims: [usize; 3],
+    /// Bytes of stored voxels: `dims` times the bytes of one sample.
+    pub bytes: u64,
+}
+
+/// Series assembly on scanned headers (no pixels): groups the images, chooses the
+/// series, refuses what cannot be decoded or does not fit in `max_bytes`, and derives
+/// the geometry. `path` is what the user gave, for messages.
+pub fn plan(
+    infos: &[FileInfo],
+    series_wanted: Option<&str>,
+    path: &Path,
+    max_bytes: u64,
+    warnings: &mut Vec<String>,
+) -> Result<Assembly, VolumeError> {
+    let series = group_series(infos, warnings);
+    let k = choose(&series, series_wanted, path)?;
+    let chosen = &series[k];
+    let files_used: BTreeSet<usize> = chosen.slices.iter().map(|s| s.file).collect();
+    let first = &infos[chosen.slices[0].file];
+    if series.len() > 1 {
+        warnings.push(format!(
+            "{} series here; loading [{}] {} (choose another with --series N or UID; `volao info` lists them)",
+            series.len(),
+            series.iter().position(|s| s.id == chosen.id).unwrap_or(0),
+            escape_controls(&chosen.id)
+        ));
+    }
+    if first.samples_per_pixel != 1 {
+        return Err(VolumeError::unsupported(
+            &first.path,
+            format!(
+                "{} samples per pixel ({}): volao renders scalar (greyscale) volumes only",
+                first.samples_per_pixel, first.photometric
+            ),
+        ));
+    }
+    for &f in &files_used {
+        let (name, ok) = transfer_syntax(&infos[f].transfer_syntax);
+        if !ok {
+            return Err(VolumeError::unsupported(
+                &infos[f].path,
+                format!(
+                    "transfer syntax {name} cannot be decoded by this build (dicom-rs without system libraries; JPEG-LS needs CharLS) — convert it with e.g. `gdcmconv --raw` or dcm2niix"
+                ),
+            ));
+        }
+    }
+    let geometry = geometry(&chosen.slices, first.slice_thickness, path, warnings)?;
+    let (rows, cols) = (chosen.slices[0].rows, chosen.slices[0].cols);
+    let dims = [cols as usize, rows as usize, geometry.order.len()];
+    let bytes_per = u64::from(first.bits_allocated / 8);
+    let bytes = (u64::from(rows) * u64::from(cols))
+        .checked_mul(dims[2] as u64)
+        .and_then(|v| v.checked_mul(bytes_per))
+        .unwrap_or(u64::MAX);
+    if bytes > max_bytes {
+        return Err(VolumeError::TooLarge {
+            path: path.to_owned(),
+            dims: fmt_dims(dims),
+            ty: format!("{}-bit", first.bits_allocated),
+            bytes: fmt_bytes(bytes),
+            limit: fmt_bytes(max_bytes),
+        });
+    }
+    Ok(Assembly {
+        series,
+        chosen: k,
+        files_used,
+        geometry,
+        dims,
+        bytes,
+    })
 }
