@@ -3,7 +3,7 @@
 use super::pvm::{self, DdsVersion, PvmSamples, PvmVersion, PvmVoxels};
 use super::raw::{self, RawOverrides};
 use super::{Reading, Volume, fmt_dims};
-use super::{VolumeError, VoxelData, analyze, dicom, fmt_bytes, memory_budget, nifti, nrrd};
+use super::{VolumeError, VoxelData, analyze, dicom, fmt_bytes, memory_budget, mgh, nifti, nrrd};
 use std::fmt;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -31,6 +31,10 @@ pub enum Format {
     },
     /// Analyze 7.5 `.hdr`/`.img` (no NIfTI magic).
     Analyze {
+        gzip: bool,
+    },
+    /// FreeSurfer MGH (`.mgh`), or MGZ when gzip-compressed.
+    Mgh {
         gzip: bool,
     },
     Dicom {
@@ -96,6 +100,8 @@ impl fmt::Display for Format {
                 }
                 Ok(())
             }
+            Format::Mgh { gzip: false } => f.write_str("MGH (FreeSurfer)"),
+            Format::Mgh { gzip: true } => f.write_str("MGZ (FreeSurfer MGH, gzip)"),
             Format::Dicom { files, slices } => {
                 if *files == 1 && *slices > 1 {
                     write!(f, "DICOM, one multi-frame file of {slices} frames")
@@ -113,7 +119,7 @@ impl fmt::Display for Format {
 /// What the caller knows beyond the file: which 4-D frame, raw layout flags, a memory cap.
 #[derive(Debug, Clone, Default)]
 pub struct LoadOptions {
-    /// 4-D NIfTI: which 3-D frame (0-based) to load.
+    /// 4-D NIfTI, NRRD or MGH: which 3-D frame (0-based) to load.
     pub frame: usize,
     /// Raw layout given on the command line (overrides a `.dat` sidecar field by field).
     pub raw: RawOverrides,
@@ -145,6 +151,7 @@ enum Kind {
     Pvm,
     Raw,
     Nrrd,
+    Mgh,
     Dicom,
 }
 
@@ -185,6 +192,14 @@ fn detect(path: &Path, opts: &LoadOptions) -> Result<Kind, VolumeError> {
         "pvm" => return Ok(Kind::Pvm),
         "raw" | "dat" => return Ok(Kind::Raw),
         "nrrd" | "nhdr" => return Ok(Kind::Nrrd),
+        "mgh" | "mgz" => return Ok(Kind::Mgh),
+        "gz" if path
+            .to_string_lossy()
+            .to_ascii_lowercase()
+            .ends_with(".mgh.gz") =>
+        {
+            return Ok(Kind::Mgh);
+        }
         "dcm" | "dicom" | "ima" => return Ok(Kind::Dicom),
         _ => {}
     }
@@ -303,6 +318,17 @@ fn load_kind(
                     encoding: h.encoding,
                 },
                 data_path,
+                warnings,
+            })
+        }
+        Kind::Mgh => {
+            let (volume, _) = mgh::load(path, opts.frame, reading)?;
+            Ok(Loaded {
+                volume,
+                format: Format::Mgh {
+                    gzip: is_gzip(path),
+                },
+                data_path: path.to_owned(),
                 warnings,
             })
         }

@@ -16,6 +16,7 @@ pub mod dicom;
 mod fields;
 pub mod format;
 pub mod gzip;
+pub mod mgh;
 pub mod nifti;
 pub mod nrrd;
 pub mod orient;
@@ -95,7 +96,7 @@ pub enum VolumeError {
         limit: String,
     },
     #[error(
-        "{}: unknown volume format (expected .nii, .nii.gz, .hdr/.img, .nrrd/.nhdr, DICOM (.dcm or a folder), .pvm, or .raw with a .dat sidecar or --dims/--type)", display_path(.path)
+        "{}: unknown volume format (expected .nii, .nii.gz, .hdr/.img, .nrrd/.nhdr, .mgh/.mgz, DICOM (.dcm or a folder), .pvm, or .raw with a .dat sidecar or --dims/--type)", display_path(.path)
     )]
     UnknownFormat { path: PathBuf },
     /// A problem in a file that `path` (the one the user gave) refers to.
