@@ -1,23 +1,35 @@
 // CAO step IV (Titov et al. §3.5, Algorithm 2): anti-aliased shadow-test clipping of
-// every voxel into the clipped opacity volume V_o and the mask V_m
-// (0 clipped, ½ recompute, 1 copy V_PAO). One invocation per voxel of a z-slab.
+// the voxels of a brick list (ao::sparse) into the clipped opacity volume V_o, and the
+// mask (0 clipped, ½ recompute, 1 copy V_PAO) written straight into V_AO: a copy of
+// V_PAO, or the marks RECOMPUTE / CLIPPED that step V resolves (the baseline marks
+// every unclipped voxel RECOMPUTE). No mask volume is kept: CAO holds 3 volumes of
+// 2 bytes per voxel. One invocation per voxel.
 // CPU twin: src/ao/cao.rs (`clip_volume_cpu`); keep the two in step.
 //!include clip_common.wgsl
+//!include bricks.wgsl
 
 struct Params {
-    dims: vec4<u32>,      // x, y, z, first z of this slab
+    dims: vec4<u32>,      // x, y, z, unused
+    chunk: vec4<u32>,     // first brick, bricks, workgroups per row, unused
     spacing: vec4<f32>,   // mm per voxel, w: N extra MSAA samples
     half: vec4<f32>,      // half the volume's extent (mm)
     lut_map: vec4<f32>,   // a, b, entries − 1
+    mode: vec4<u32>,      // full (0/1), unused
 }
+
+// Marks in V_AO between steps IV and V (an ambient factor is never negative).
+const RECOMPUTE: f32 = -1.0;
+const CLIPPED: f32 = -2.0;
 
 @group(0) @binding(0) var<uniform> p: Params;
 @group(0) @binding(1) var volume: texture_3d<f32>;
 @group(0) @binding(2) var<storage, read> lut_alpha: array<f32>;
 @group(0) @binding(3) var<storage, read> msaa: array<vec4<f32>>;  // offsets in voxels
-@group(0) @binding(4) var v_o: texture_storage_3d<r32float, write>;
-@group(0) @binding(5) var v_m: texture_storage_3d<r32float, write>;
+@group(0) @binding(4) var v_o: texture_storage_3d<r16float, write>;
+@group(0) @binding(5) var v_ao: texture_storage_3d<r16float, write>;
 @group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>; // recompute, clipped
+@group(0) @binding(7) var<storage, read> bricks: array<u32>;
+@group(0) @binding(8) var v_pao: texture_3d<f32>;
 
 // TF_o: the transfer function's opacity (for a 1 mm step) of the voxel itself.
 fn voxel_opacity(v: vec3<u32>) -> f32 {
@@ -33,11 +45,12 @@ fn position_mm(v: vec3<u32>, offset: vec3<f32>) -> vec3<f32> {
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let v = vec3<u32>(gid.x, gid.y, gid.z + p.dims.w);
-    if any(v >= p.dims.xyz) {
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let at_voxel = brick_voxel(wid, lid);
+    if at_voxel.w == 0u {
         return;
     }
+    let v = at_voxel.xyz;
     var visible = 0u;
     var dilated = 0u;
     // Centre and the 8 corners of the voxel.
@@ -63,16 +76,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         opacity = f32(visible) / f32(n + 9u) * voxel_opacity(v);
     }
-    var mask = 0.0;
+    var ao = RECOMPUTE;
     if dilated == 0u {
-        mask = 1.0;
+        if p.mode.x == 0u {
+            ao = textureLoad(v_pao, v, 0).r;  // unaffected: copy
+        }
     } else if visible > 0u {
-        mask = 0.5;
         atomicAdd(&counters[0], 1u);
     } else {
+        ao = CLIPPED;
         atomicAdd(&counters[1], 1u);
     }
     let at = vec3<i32>(v);
     textureStore(v_o, at, vec4<f32>(opacity, 0.0, 0.0, 1.0));
-    textureStore(v_m, at, vec4<f32>(mask, 0.0, 0.0, 1.0));
+    textureStore(v_ao, at, vec4<f32>(ao, 0.0, 0.0, 1.0));
 }

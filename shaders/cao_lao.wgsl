@@ -1,23 +1,37 @@
-// CAO step V (Titov et al. §3.5): the ambient factor V_AO per voxel from the mask:
-// clipped (0) → 1, unaffected (1) → copy V_PAO, affected (½) → a full LAO ray cast
-// (Eq. 2–3) on the clipped opacity volume V_o. With `full` set every unclipped voxel is
-// ray cast: the "LAO every frame" baseline, and how V_PAO itself is made (no clipping).
+// CAO step V (Titov et al. §3.5): the ambient factor V_AO per voxel from step IV's
+// marks: clipped → 1, unaffected → the copy of V_PAO step IV left, affected → a full
+// LAO ray cast (Eq. 2–3) on the clipped opacity volume V_o. With `full` set every
+// unclipped voxel is ray cast: the "LAO every frame" baseline, and how V_PAO itself is
+// made (no clipping). A list entry without the NEAR bit is a brick no shape is near
+// (listed by the baseline only): nothing clipped, step IV left no mark.
 // Both paths run the very same `lao` function, which is what makes CAO bit-exact.
+// Runs over a brick list (ao::sparse); LAO rays step over empty bricks (lao_ray.wgsl).
 // CPU twin: src/ao/cao.rs (`lao_on_opacity_cpu`).
+//!include bricks.wgsl
+
+const RECOMPUTE: f32 = -1.0;
+//!include lao_ray.wgsl
+//!include readable.wgsl
 
 struct Params {
-    dims: vec4<u32>,       // x, y, z, first z of this slab
+    dims: vec4<u32>,       // x, y, z, unused
+    chunk: vec4<u32>,      // first brick, bricks, workgroups per row, unused
     mm_to_uvw: vec4<f32>,  // 1 / extent in mm per axis
-    counts: vec4<u32>,     // rays K, samples M, full (0/1), unused
+    counts: vec4<u32>,     // rays K, samples M, unused, unused
+    grid: vec4<u32>,       // bricks per axis, skipping (0/1)
+    readable: vec4<f32>,   // voxel readability: LUT index scale, offset, last, on
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
 @group(0) @binding(1) var v_o: texture_3d<f32>;
 @group(0) @binding(2) var linear_clamp: sampler;
 @group(0) @binding(3) var<storage, read> rays: array<vec4<f32>>;  // xyz direction, w weight
-@group(0) @binding(4) var v_m: texture_3d<f32>;
-@group(0) @binding(5) var v_pao: texture_3d<f32>;
-@group(0) @binding(6) var v_ao: texture_storage_3d<r32float, write>;
+@group(0) @binding(4) var v_ao: texture_storage_3d<r16float, read_write>;
+@group(0) @binding(5) var<storage, read> bricks: array<u32>;
+@group(0) @binding(6) var<storage, read> occupied: array<u32>;
+@group(0) @binding(7) var<storage, read_write> counters: array<atomic<u32>, 4>; // [2]: ray cast
+@group(0) @binding(8) var volume: texture_3d<f32>;
+@group(0) @binding(9) var<storage, read> readable_prefix: array<u32>;
 
 fn opacity_at(uvw: vec3<f32>) -> f32 {
     if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) {
@@ -33,31 +47,45 @@ fn lao(v: vec3<u32>) -> f32 {
     for (var k = 0u; k < p.counts.x; k = k + 1u) {
         let ray = rays[k];
         let step = ray.xyz * p.mm_to_uvw.xyz;
-        var transmittance = 1.0;
-        var sum = 0.0;
-        for (var m = 1u; m <= samples; m = m + 1u) {
-            sum = sum + transmittance;
-            if m < samples {
-                transmittance = transmittance * (1.0 - opacity_at(centre + step * f32(m)));
-            }
-        }
-        total = total + ray.w * sum / f32(samples);
+        total = total + ray.w * lao_ray(centre, step, samples) / f32(samples);
     }
     return total / f32(p.counts.x);
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let v = vec3<u32>(gid.x, gid.y, gid.z + p.dims.w);
-    if any(v >= p.dims.xyz) {
-        return;
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    if ray_cast_voxel(wid, lid) {
+        atomicAdd(&ray_cast, 1u);
     }
-    let mask = textureLoad(v_m, v, 0).r;
+    // One global atomic per workgroup: millions on one counter serialise on a CPU driver.
+    workgroupBarrier();
+    if lid.x == 0u && lid.y == 0u {
+        atomicAdd(&counters[2], atomicLoad(&ray_cast));
+    }
+}
+
+var<workgroup> ray_cast: atomic<u32>;
+
+// Step V for one voxel; true if it was ray cast.
+fn ray_cast_voxel(wid: vec3<u32>, lid: vec3<u32>) -> bool {
+    let at_voxel = brick_voxel(wid, lid);
+    if at_voxel.w == 0u {
+        return false;
+    }
+    let v = at_voxel.xyz;
+    let at = vec3<i32>(v);
+    var mark = RECOMPUTE;
+    if brick_near(wid) {
+        mark = textureLoad(v_ao, at).r;
+    }
+    if mark >= 0.0 {
+        return false;  // a copy of V_PAO
+    }
     var a = 1.0;
-    if mask == 1.0 && p.counts.z == 0u {
-        a = textureLoad(v_pao, v, 0).r;
-    } else if mask > 0.0 {
+    let traced = mark == RECOMPUTE && voxel_readable(v);
+    if traced {
         a = lao(v);
     }
-    textureStore(v_ao, vec3<i32>(v), vec4<f32>(a, 0.0, 0.0, 1.0));
+    textureStore(v_ao, at, vec4<f32>(a, 0.0, 0.0, 1.0));
+    return traced;
 }

@@ -51,6 +51,16 @@ pub fn alpha_column(lut: &Lut) -> Vec<f32> {
     lut.rgba.iter().map(|e| e[3]).collect()
 }
 
+/// Distance between samples along an LAO ray (`ao::lao`, `ao::cao`).
+pub const LAO_STEP_MM: f32 = 1.0;
+
+/// The opacity table for LAO: the transfer function's alpha, corrected from its
+/// reference length (one voxel of the smallest spacing) to a 1 mm step.
+pub fn lao_lut(tf: &TransferFunction, texels: &VolumeTexels) -> Lut {
+    let min_spacing = texels.spacing.iter().copied().fold(f32::INFINITY, f32::min);
+    bake_lut(tf, texels, LAO_STEP_MM / min_spacing)
+}
+
 /// Bakes `tf` over the texels' value range with opacity corrected for `step_voxels`.
 pub fn bake_lut(tf: &TransferFunction, texels: &VolumeTexels, step_voxels: f32) -> Lut {
     let (a, b) = (

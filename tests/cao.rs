@@ -1,6 +1,8 @@
-//! Contextual Ambient Occlusion: CAO equals "LAO every frame" bit for bit, for random
-//! poses of every shape, both modes and overlapping shapes; the CPU twins of the clip
-//! maps, the mask and the ray cast; and the dilation margin is what exactness rests on.
+//! Contextual Ambient Occlusion: sparse CAO, sparse "LAO every frame" and the dense,
+//! naive LAO every frame (`--no-skipping`) give the same pixels and, on every voxel the
+//! ray caster can read, the same bits, for random poses of every shape, both modes and
+//! overlapping shapes; the CPU twins of the clip maps, the mask and the ray cast; and
+//! the dilation margin and the readability apron are what exactness rests on.
 //! GPU tests run on lavapipe in CI; never skipped.
 
 mod common;
@@ -12,10 +14,12 @@ use glam::Vec3;
 use volao::ao::cao::{CaoGpu, CaoMode, CaoVolume, clip_volume_cpu, lao_on_opacity_cpu, reach_mm};
 use volao::ao::lao::{Rays, lao_lut};
 use volao::ao::rays::RaySet;
+use volao::ao::sparse::{Bricks, Coverage};
 use volao::clip::camera::EMPTY;
 use volao::clip::{ClipMode, ClipShape, Shape};
 use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::texels::BlockRanges;
 use volao::render::{Camera, Frame, RenderSettings};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume};
@@ -60,7 +64,10 @@ struct Scene {
     gpu: Gpu,
     vol: GpuVolume,
     rc: RayCaster,
+    /// Sparse, as rendering runs it.
     cao: CaoGpu,
+    /// Dense: every voxel and sample (`--no-skipping`).
+    dense: CaoGpu,
     tf: TransferFunction,
     rays: Rays,
     frame: Frame,
@@ -76,8 +83,17 @@ fn scene(v: &Volume, preset: Preset, set: RaySet) -> Scene {
     let vol = GpuVolume::from_texels(&gpu, texels(v), &tf, settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     let rays = Rays::uniform(set.directions());
-    let cao = CaoGpu::new(&gpu, &vol, &tf, &rays, SAMPLES, 32, &|_, _| {})
-        .unwrap_or_else(|e| panic!("{e}"));
+    let make = |bricks: Bricks| {
+        CaoGpu::new(&gpu, &vol, &tf, &rays, SAMPLES, 32, bricks, &|_, _| {})
+            .unwrap_or_else(|e| panic!("{e}"))
+    };
+    let sparse = Coverage::Readable.bricks(&vol.texels, vol.ranges(), &tf);
+    assert!(
+        sparse.readable.contains(&0) && sparse.occupied.contains(&0),
+        "the crop must have bricks to skip"
+    );
+    let cao = make(sparse);
+    let dense = make(Coverage::Dense.bricks(&vol.texels, vol.ranges(), &tf));
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
     let frame = Frame {
         camera: Camera {
@@ -94,6 +110,7 @@ fn scene(v: &Volume, preset: Preset, set: RaySet) -> Scene {
         vol,
         rc,
         cao,
+        dense,
         tf,
         rays,
         frame,
@@ -105,29 +122,142 @@ impl Scene {
         reach_mm(SAMPLES, self.vol.texels.spacing)
     }
 
-    /// V_AO and the rendered image after one frame in `mode`.
+    /// V_AO, the rendered image and the percentage of category-b voxels after one frame
+    /// of sparse CAO in `mode`.
     fn frame(
         &mut self,
         shapes: &[ClipShape],
         mode: CaoMode,
         reach: f32,
     ) -> (Vec<f32>, Vec<[u8; 4]>, f64) {
-        let stats = self
-            .cao
-            .update(&self.gpu, &self.vol.texels, shapes, MAP, reach, mode)
-            .unwrap_or_else(|e| panic!("{e}"));
-        assert!(stats.clip_errors.is_empty(), "{:?}", stats.clip_errors);
-        let ao = self
-            .cao
-            .read(&self.gpu, CaoVolume::Ambient)
-            .unwrap_or_else(|e| panic!("{e}"));
-        self.vol.set_ambient_occlusion_view(self.cao.ao_view());
-        let image = self
-            .rc
-            .render(&self.gpu, &self.vol, &self.frame, Some(&self.cao.clip))
-            .unwrap_or_else(|e| panic!("{e}"));
-        (ao, image.pixels, stats.percent_recomputed())
+        let Scene {
+            gpu,
+            vol,
+            rc,
+            cao,
+            frame,
+            ..
+        } = self;
+        run(gpu, vol, rc, frame, cao, shapes, mode, reach)
     }
+
+    /// The same with the dense CAO.
+    fn frame_dense(
+        &mut self,
+        shapes: &[ClipShape],
+        mode: CaoMode,
+        reach: f32,
+    ) -> (Vec<f32>, Vec<[u8; 4]>, f64) {
+        let Scene {
+            gpu,
+            vol,
+            rc,
+            dense,
+            frame,
+            ..
+        } = self;
+        run(gpu, vol, rc, frame, dense, shapes, mode, reach)
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run(
+    gpu: &Gpu,
+    vol: &mut GpuVolume,
+    rc: &RayCaster,
+    frame: &Frame,
+    cao: &mut CaoGpu,
+    shapes: &[ClipShape],
+    mode: CaoMode,
+    reach: f32,
+) -> (Vec<f32>, Vec<[u8; 4]>, f64) {
+    let stats = cao
+        .update(gpu, &vol.texels, shapes, MAP, reach, mode)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(stats.clip_errors.is_empty(), "{:?}", stats.clip_errors);
+    let ao = cao
+        .read(gpu, CaoVolume::Ambient)
+        .unwrap_or_else(|e| panic!("{e}"));
+    vol.set_ambient_occlusion_view(cao.ao_view());
+    let image = rc
+        .render(gpu, vol, frame, Some(&cao.clip))
+        .unwrap_or_else(|e| panic!("{e}"));
+    // Category b (Algorithm 2's "recompute") among the voxels step IV visited.
+    let category_b = 100.0 * stats.category_b as f64 / stats.voxels.max(1) as f64;
+    (ao, image.pixels, category_b)
+}
+
+/// Per voxel: whether the ray caster can read its AO, found here without the library's
+/// brick and voxel tests: some sample of non-zero opacity weights it, i.e. one of the 8
+/// cells around it has a density range over which the (uncorrected) LUT is not
+/// transparent. A cell's corners are the texels at and above its lower corner.
+fn readable_voxels(
+    texels: &volao::render::texels::VolumeTexels,
+    tf: &TransferFunction,
+) -> Vec<bool> {
+    let lut = volao::sample::bake_lut(tf, texels, 1.0);
+    let d = texels.dims;
+    let at = |x: usize, y: usize, z: usize| texels.norm_at(x + d[0] * (y + d[1] * z));
+    let clamp = |c: isize, n: usize| c.clamp(0, n as isize - 1) as usize;
+    // Cell c spans texels c..=c + 1 (clamped at the faces, as a sampler clamps).
+    let cell_open = |c: [isize; 3]| {
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for k in 0..8 {
+            let t = [0, 1, 2].map(|a| clamp(c[a] + ((k >> a) & 1) as isize, d[a]));
+            let n = at(t[0], t[1], t[2]);
+            lo = lo.min(n);
+            hi = hi.max(n);
+        }
+        let v = |n: f32| n as f64 * texels.value_scale + texels.value_offset;
+        let (a, b) = (v(lo), v(hi));
+        !lut.is_transparent_over(a.min(b), a.max(b))
+    };
+    (0..d.iter().product::<usize>())
+        .map(|i| {
+            let v = volao::volume::voxel_of(i, d).map(|c| c as isize);
+            (0..8).any(|k| cell_open([0, 1, 2].map(|a| v[a] - ((k >> a) & 1) as isize)))
+        })
+        .collect()
+}
+
+/// Voxels whose bits differ between `a` and `b` among the `readable` ones.
+fn differing_readable(a: &[f32], b: &[f32], readable: &[bool]) -> usize {
+    assert_eq!(a.len(), b.len());
+    (0..a.len())
+        .filter(|&i| readable[i] && a[i].to_bits() != b[i].to_bits())
+        .count()
+}
+
+/// Sparse CAO, sparse LAO every frame and dense LAO every frame for `shapes`: 0
+/// differing pixels, and the same bits on every readable voxel.
+fn assert_exact(s: &mut Scene, shapes: &[ClipShape], reach: f32, what: &str) -> f64 {
+    let (cao, cao_img, pct) = s.frame(shapes, CaoMode::Selective, reach);
+    let (full, full_img, _) = s.frame(shapes, CaoMode::Full, reach);
+    let (dense, dense_img, _) = s.frame_dense(shapes, CaoMode::Full, reach);
+    // Readable as found independently of the library's tests, so that making those too
+    // tight fails here (readable_bricks_one_voxel_too_tight_break_exactness).
+    let readable = readable_voxels(&s.vol.texels, &s.tf);
+    assert_eq!(
+        differing_readable(&cao, &full, &readable),
+        0,
+        "{what}: {shapes:?}: sparse CAO's V_AO differs from sparse LAO every frame"
+    );
+    assert_eq!(
+        differing_readable(&full, &dense, &readable),
+        0,
+        "{what}: {shapes:?}: sparse LAO every frame's V_AO differs from the dense one"
+    );
+    assert_eq!(
+        differing(&cao_img, &full_img),
+        0,
+        "{what}: {shapes:?}: sparse CAO's image differs from sparse LAO every frame"
+    );
+    assert_eq!(
+        differing(&cao_img, &dense_img),
+        0,
+        "{what}: {shapes:?}: sparse CAO's image differs from the dense LAO every frame"
+    );
+    pct
 }
 
 /// A random pose for `shape`, sized for a volume of half-extent `half` (mm).
@@ -185,27 +315,17 @@ fn exactness(v: &Volume, preset: Preset, set: RaySet, mode: ClipMode, seed: u64,
         for pose in 0..poses {
             let mut c = random_shape(&mut rng, shape, half, mode);
             c.scale = base.scale;
-            let (cao, cao_img, pct) = s.frame(std::slice::from_ref(&c), CaoMode::Selective, reach);
-            let (full, full_img, _) = s.frame(std::slice::from_ref(&c), CaoMode::Full, reach);
-            let bits = |a: &[f32]| a.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-            assert_eq!(
-                differing(&bits(&cao), &bits(&full)),
-                0,
-                "{set:?} {mode:?} pose {pose}: {c:?}: V_AO differs from LAO every frame"
-            );
-            assert_eq!(
-                differing(&cao_img, &full_img),
-                0,
-                "{set:?} {mode:?} pose {pose}: {c:?}: image differs"
-            );
-            recomputed.push(pct);
+            let what = format!("{set:?} {mode:?} pose {pose}");
+            recomputed.push(assert_exact(&mut s, std::slice::from_ref(&c), reach, &what));
         }
     }
-    // The test means something only if voxels were both copied and recomputed.
+    // The test means something only if voxels were both copied and recomputed. Sparse
+    // CAO visits only bricks of visible material (bone in a CT crop, little of it), so
+    // a probe holding none of it recomputes nothing: a quarter of the poses must.
     let busy = recomputed.iter().filter(|&&p| p > 0.0 && p < 100.0).count();
     assert!(
-        busy * 2 >= recomputed.len(),
-        "most poses should recompute some but not all voxels: {recomputed:?}"
+        busy * 4 >= recomputed.len(),
+        "poses should recompute some but not all voxels: {recomputed:?}"
     );
 }
 
@@ -282,15 +402,7 @@ fn overlapping_shapes_stay_exact() {
                 (Vec3::from(first.translation) + Vec3::splat(half.min_element() * 0.3)).to_array();
             first.translation = (Vec3::from(first.translation) * 0.5).to_array();
             let shapes = [first, second];
-            let (cao, cao_img, pct) = s.frame(&shapes, CaoMode::Selective, reach);
-            let (full, full_img, _) = s.frame(&shapes, CaoMode::Full, reach);
-            let bits = |a: &[f32]| a.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-            assert_eq!(
-                differing(&bits(&cao), &bits(&full)),
-                0,
-                "pose {pose}: {shapes:?}"
-            );
-            assert_eq!(differing(&cao_img, &full_img), 0, "pose {pose}: {shapes:?}");
+            let pct = assert_exact(&mut s, &shapes, reach, &format!("pose {pose}"));
             assert!(pct < 100.0, "{shapes:?}");
         }
     }
@@ -315,6 +427,72 @@ fn a_margin_shorter_than_the_rays_breaks_exactness() {
         wrong > 100,
         "a 40 % margin must miss affected voxels, {wrong} differ"
     );
+}
+
+#[test]
+fn readable_bricks_one_voxel_too_tight_break_exactness() {
+    let v = engine();
+    let mut s = scene(&v, Preset::CaoSingleColor, RaySet::Six);
+    let reach = s.reach();
+    // Block ranges without the one-voxel apron: samples just outside a brick, which
+    // weight its voxels, are no longer counted.
+    let texels = &s.vol.texels;
+    let tight = BlockRanges::with_apron(texels, 0);
+    let render = volao::sample::bake_lut(&s.tf, texels, 1.0);
+    let bricks = Bricks::new(texels, &tight, Some(&render), &lao_lut(&s.tf, texels));
+    assert_ne!(bricks.readable, s.cao.bricks().readable);
+    let mut wrong = CaoGpu::new(
+        &s.gpu,
+        &s.vol,
+        &s.tf,
+        &s.rays,
+        SAMPLES,
+        32,
+        bricks,
+        &|_, _| {},
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    // The per-voxel test one voxel too tight: the 2³ texels at and above each voxel.
+    let mut bricks = s.cao.bricks().clone();
+    if let Some(t) = &mut bricks.voxels {
+        t.below = 0;
+    }
+    let mut wrong_voxels = CaoGpu::new(
+        &s.gpu,
+        &s.vol,
+        &s.tf,
+        &s.rays,
+        SAMPLES,
+        32,
+        bricks,
+        &|_, _| {},
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let shape = ClipShape::new(Shape::Sphere, Vec3::new(2.0, -3.0, 1.0), 9.0);
+    let shapes = std::slice::from_ref(&shape);
+    assert_exact(&mut s, shapes, reach, "the aprons kept");
+    let (exact_ao, exact_img, _) = s.frame_dense(shapes, CaoMode::Full, reach);
+    let readable = readable_voxels(&s.vol.texels, &s.tf);
+    let Scene {
+        gpu,
+        vol,
+        rc,
+        frame,
+        ..
+    } = &mut s;
+    for (what, cao) in [("bricks", &mut wrong), ("voxels", &mut wrong_voxels)] {
+        let (broken_ao, broken, _) =
+            run(gpu, vol, rc, frame, cao, shapes, CaoMode::Selective, reach);
+        let wrong_pixels = differing(&broken, &exact_img);
+        let wrong_voxels = differing_readable(&broken_ao, &exact_ao, &readable);
+        eprintln!(
+            "readable {what} one voxel too tight: {wrong_voxels} readable voxels and {wrong_pixels} pixels differ"
+        );
+        assert!(
+            wrong_voxels > 0,
+            "readable {what} one voxel too tight must break exactness"
+        );
+    }
 }
 
 #[test]
@@ -344,20 +522,21 @@ fn gpu_mask_and_opacity_match_the_cpu_twin() {
                 },
             ],
         ] {
-            s.frame(&shapes, CaoMode::Selective, reach);
+            s.frame_dense(&shapes, CaoMode::Selective, reach);
             let maps = s
-                .cao
+                .dense
                 .clip
                 .read_back(&s.gpu)
                 .unwrap_or_else(|e| panic!("{e}"));
             let lut = lao_lut(&s.tf, &s.vol.texels);
-            let (v_o, v_m) = clip_volume_cpu(&s.vol.texels, &lut, &maps, 32);
+            let (mut v_o, v_m) = clip_volume_cpu(&s.vol.texels, &lut, &maps, 32);
+            s.dense.round_as_stored(&mut v_o);
             let g_o = s
-                .cao
+                .dense
                 .read(&s.gpu, CaoVolume::ClippedOpacity)
                 .unwrap_or_else(|e| panic!("{e}"));
             let g_m = s
-                .cao
+                .dense
                 .read(&s.gpu, CaoVolume::Mask)
                 .unwrap_or_else(|e| panic!("{e}"));
             // The CPU's f32 arithmetic may round a sample lying on a map boundary the
@@ -380,10 +559,11 @@ fn gpu_mask_and_opacity_match_the_cpu_twin() {
                 mask_flips * 1000 <= v_m.len(),
                 "{mask_flips} voxels of V_m differ: {shapes:?}"
             );
+            // (Within one f16 step the two agree: a GPU may round f32 to f16 either way.)
             let flips = v_o
                 .iter()
                 .zip(&g_o)
-                .filter(|(a, b)| (*a - *b).abs() > 1e-6)
+                .filter(|(a, b)| (*a - *b).abs() > a.abs().max(b.abs()) * 1e-3 + 1e-6)
                 .inspect(|(a, b)| {
                     // TF_o ≤ 1, so one sample is at most 1/41.
                     let samples = (*a - *b).abs() * 41.0;
@@ -402,14 +582,14 @@ fn gpu_mask_and_opacity_match_the_cpu_twin() {
             }
             // Step V: the twin ray casts from the GPU's V_o, V_m, V_PAO.
             let pao = s
-                .cao
+                .dense
                 .read(&s.gpu, CaoVolume::Precomputed)
                 .unwrap_or_else(|e| panic!("{e}"));
             let ao = s
-                .cao
+                .dense
                 .read(&s.gpu, CaoVolume::Ambient)
                 .unwrap_or_else(|e| panic!("{e}"));
-            let twin = lao_on_opacity_cpu(
+            let mut twin = lao_on_opacity_cpu(
                 &s.vol.texels,
                 &g_o,
                 &g_m,
@@ -417,13 +597,16 @@ fn gpu_mask_and_opacity_match_the_cpu_twin() {
                 &s.rays,
                 SAMPLES,
                 CaoMode::Selective,
+                s.dense.bricks(),
             );
+            s.dense.round_as_stored(&mut twin);
             let worst = twin
                 .iter()
                 .zip(&ao)
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0, f32::max);
-            assert!(worst <= 1e-4, "V_AO differs from the CPU twin by {worst}");
+            // One f16 step at most (2⁻¹¹ below 1; V_AO is stored as f16 where it can be).
+            assert!(worst <= 1e-3, "V_AO differs from the CPU twin by {worst}");
         }
         assert_eq!(classes, [true; 3], "every mask class occurs");
     }

@@ -602,3 +602,145 @@ fn bench_render_times_the_configurations_asked_for_as_json_lines() {
         text(&out.stderr)
     );
 }
+
+/// The voxels of an f32 volume file, x fastest.
+fn voxels_f32(path: &std::path::Path) -> Vec<f32> {
+    let v = volao::volume::load(path, &Default::default())
+        .unwrap_or_else(|e| panic!("{e}"))
+        .volume;
+    (0..v.voxel_count())
+        .map(|i| v.data.get_f64(i) as f32)
+        .collect()
+}
+
+#[test]
+fn ao_visible_only_computes_the_readable_voxels_bit_for_bit_and_writes_one_elsewhere() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = data("nifti/avg152T1_LR_nifti.nii.gz");
+    let run = |name: &str, extra: &[&str]| {
+        let path = dir.path().join(name);
+        let mut args = vec![
+            "ao",
+            input.to_str().expect("utf-8 path"),
+            "-o",
+            path.to_str().expect("utf-8 path"),
+            "--method",
+            "lao",
+            "--rays",
+            "6",
+            "--samples",
+            "8",
+        ];
+        args.extend(extra);
+        let out = volao(&args);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        voxels_f32(&path)
+    };
+    let every = run("every.nii", &[]);
+    let visible = run("visible.nii", &["--visible-only"]);
+    let (mut kept, mut dropped) = (0, 0);
+    for (a, b) in every.iter().zip(&visible) {
+        if *b == 1.0 && *a != 1.0 {
+            dropped += 1;
+        } else {
+            assert_eq!(a.to_bits(), b.to_bits(), "a computed voxel differs");
+            kept += usize::from(*a < 1.0);
+        }
+    }
+    assert!(
+        kept > 1000 && dropped > 1000,
+        "kept {kept}, dropped {dropped}"
+    );
+}
+
+#[test]
+fn no_skipping_renders_the_same_image_and_is_saved_in_the_scene() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = data("nifti/avg152T1_LR_nifti.nii.gz");
+    let run = |name: &str, extra: &[&str]| {
+        let png = dir.path().join(format!("{name}.png"));
+        let scene = dir.path().join(format!("{name}.json"));
+        let mut args = vec![
+            "render",
+            input.to_str().expect("utf-8 path"),
+            "-o",
+            png.to_str().expect("utf-8 path"),
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--ao",
+            "cao",
+            "--rays",
+            "6",
+            "--samples",
+            "8",
+            "--clip",
+            "sphere:10,0,20,30",
+            "--save-scene",
+            scene.to_str().expect("utf-8 path"),
+        ];
+        args.extend(extra);
+        let out = volao(&args);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let img = image::open(&png).expect("png").to_rgba8().into_raw();
+        let saved: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&scene).expect("scene")).expect("json");
+        (img, saved["render"]["empty_space_skipping"].clone())
+    };
+    let (skipped, on) = run("skipped", &[]);
+    let (naive, off) = run("naive", &["--no-skipping"]);
+    assert!(skipped == naive, "--no-skipping changed the image");
+    assert_eq!(on, serde_json::json!(true));
+    assert_eq!(off, serde_json::json!(false));
+}
+
+#[test]
+fn bench_cao_prints_one_json_object_per_method_with_no_differing_pixels() {
+    let dir = data("README.md");
+    let dir = dir.parent().expect("data folder");
+    let out = volao(&[
+        "bench",
+        "cao",
+        "--data",
+        dir.to_str().expect("utf-8 path"),
+        "--max-dim",
+        "32",
+        "--table2-max-dim",
+        "32",
+        "--frames",
+        "1",
+        "--rays",
+        "6",
+        "--scenes",
+        "engine",
+        "--tables",
+        "2,3",
+        "--size",
+        "32",
+        "--clip-resolution",
+        "64",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let lines: Vec<serde_json::Value> = text(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+        .collect();
+    assert_eq!(lines.len(), 4, "Table 2, then Table 3's three methods");
+    assert_eq!(lines[0]["table"], 2);
+    for (j, method) in lines[1..]
+        .iter()
+        .zip(["lao-every-frame", "cao-paper", "cao"])
+    {
+        assert_eq!(j["table"], 3);
+        assert_eq!(j["scene"], "engine");
+        assert_eq!(j["method"], method);
+        assert_eq!(j["rays"], 6);
+        assert_eq!(j["differing_pixels"], 0, "{j}");
+        for stage in ["clip_mask", "ray_cast", "render"] {
+            assert!(j["stages_ms"][stage].as_f64().is_some(), "{j}");
+        }
+        assert!(j["mean_frame_ms"].as_f64().is_some_and(|t| t > 0.0), "{j}");
+    }
+}

@@ -424,8 +424,11 @@ fn gpu_matches_cpu_twin_with_lao() {
         .unwrap_or_else(|e| panic!("{e}"));
     let rays = Rays::uniform(RaySet::Fourteen.directions());
     let lut = lao_lut(&tf, &texels);
+    // Sparse, as rendering computes it: the readable voxels, rays stepping over empty bricks.
+    let bricks = volao::ao::sparse::Coverage::Readable.bricks(&texels, vol.ranges(), &tf);
+    assert!(bricks.readable.contains(&0) && bricks.occupied.contains(&0));
     let a = lao
-        .compute(&gpu, &vol, &lut, &rays, 10, &|_, _| {})
+        .compute(&gpu, &vol, &lut, &rays, 10, &bricks, &|_, _| {})
         .unwrap_or_else(|e| panic!("{e}"));
     vol.set_ambient_occlusion(&gpu, &a);
     let g = rc
@@ -433,7 +436,7 @@ fn gpu_matches_cpu_twin_with_lao() {
         .unwrap_or_else(|e| panic!("{e}"));
     // The CPU twin computes its own LAO (the GPU keeps it as f32 too).
     let (mut cv, occ) = cpu::prepare(&texels, &vol.lut);
-    let cpu_a = lao_cpu(&texels, &lut, &rays, 10, &|_, _| {});
+    let cpu_a = lao_cpu(&texels, &lut, &rays, 10, &bricks, &|_, _| {});
     cv.ao = Some(cpu_a);
     let c = cpu::render(&texels, &cv, &vol.lut, &occ, &f);
     check("twin_demo_lao", &g, &c, TWIN, &out_dir()).unwrap_or_else(|e| panic!("{e}"));

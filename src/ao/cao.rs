@@ -5,10 +5,10 @@
 //! unclipped opacity volume. Every frame (§3.5):
 //!
 //! - step IV (`shaders/cao_clip.wgsl`, Algorithm 2): anti-aliased shadow-test clipping
-//!   into the clipped opacity volume `V_o` and the mask `V_m` (0 clipped, ½ recompute,
-//!   1 copy);
-//! - step V (`shaders/cao_lao.wgsl`): `V_AO` = 1, a full LAO ray cast on `V_o`, or a copy
-//!   of `V_PAO`, by the mask;
+//!   into the clipped opacity volume `V_o`, and the mask (0 clipped, ½ recompute, 1 copy)
+//!   written into `V_AO` itself: a copy of `V_PAO`, or a mark for step V;
+//! - step V (`shaders/cao_lao.wgsl`): `V_AO` = 1 where clipped, a full LAO ray cast on
+//!   `V_o` where marked for it;
 //! - step VI: the ray caster clips with the same test and reads `V_AO`.
 //!
 //! [`CaoMode::Full`] is the paper's baseline ("LAO every frame"): the same clipping, and
@@ -18,12 +18,20 @@
 //!
 //! LAO here interpolates the classified opacity `V_o` (the paper's `TF_o`), where
 //! `--ao lao` classifies interpolated densities; both use 1 mm steps and Eq. 2–3.
+//!
+//! Both steps run over brick lists ([`super::sparse`]): step IV over the bricks near a
+//! shape now or in the previous frame (their `V_o` and `V_m` change), step V over those
+//! of them the ray caster can read (every readable brick in the baseline), and LAO rays
+//! step over empty bricks. Outside the lists `V_o = α`, `V_m = 1` and `V_AO = V_PAO`
+//! hold from the previous frames; unreadable voxels keep whatever they hold, which no
+//! pixel uses. [`Bricks::dense`] turns all of it off.
 
-use super::lao::{Rays, STEP_MM, lao_lut};
+use super::lao::{Rays, STEP_MM, lao_lut, ray_sum};
+use super::sparse::{Bricks, VoxelTest};
 use crate::clip::ClipShape;
 use crate::clip::cpu::ClipMapsCpu;
 use crate::clip::gpu::{ClipMaps, ClipUpdate};
-use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
+use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
 use crate::gpu::{
     Gpu, GpuError, compute_pipeline, read_buffer, read_texture_f32, readback_buffer, shaders,
     storage_buffer, uniform_group, validated,
@@ -74,8 +82,8 @@ pub fn reach_mm(samples: u32, spacing: [f32; 3]) -> f32 {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct ClipParams {
-    /// The volume's size and this dispatch's first z-slice.
-    slab: SlabOrigin,
+    /// The volume's size and this submission's bricks.
+    bricks: BrickChunk,
     spacing: [f32; 3],
     /// N, the extra anti-aliasing samples.
     msaa: f32,
@@ -87,37 +95,43 @@ struct ClipParams {
     lut_offset: f32,
     lut_last: f32,
     _pad1: f32,
+    /// 1: the baseline (every unclipped voxel marked for a ray cast), 0: CAO.
+    full: u32,
+    _pad2: [u32; 3],
 }
 
-const _: () = assert!(std::mem::size_of::<ClipParams>() == 64);
+const _: () = assert!(std::mem::size_of::<ClipParams>() == 96);
 
-slab_fields!(ClipParams, tiles);
+chunk_fields!(ClipParams);
 
 /// Uniforms of step V. Mirrors `struct Params` in `cao_lao.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct LaoParams {
-    /// The volume's size and this dispatch's first z-slice.
-    slab: SlabOrigin,
+    /// The volume's size and this submission's bricks.
+    bricks: BrickChunk,
     mm_to_uvw: [f32; 3],
     _pad0: f32,
     rays: u32,
     samples: u32,
-    /// 1: ray cast every unclipped voxel (the baseline), 0: only category b.
-    full: u32,
-    _pad1: u32,
+    _pad1: [u32; 2],
+    /// Bricks per axis and whether rays step over empty ones (0/1).
+    grid: [u32; 4],
+    /// The per-voxel readability test ([`VoxelTest::uniform`]).
+    readable: [f32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<LaoParams>() == 48);
+const _: () = assert!(std::mem::size_of::<LaoParams>() == 96);
 
-slab_fields!(LaoParams, tiles);
+chunk_fields!(LaoParams);
 
 /// Which CAO volume to read back.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CaoVolume {
     /// `V_o`, the clipped opacity volume.
     ClippedOpacity,
-    /// `V_m`, the mask (0 clipped, ½ recompute, 1 copy).
+    /// The mask (0 clipped, ½ recompute, 1 copy) of the last frame, over its step-IV
+    /// bricks (1 elsewhere): not kept, so reading it runs steps IV and V again.
     Mask,
     /// `V_PAO`, LAO of the unclipped volume.
     Precomputed,
@@ -129,19 +143,62 @@ pub enum CaoVolume {
 #[derive(Debug)]
 pub struct CaoPipelines {
     clip: wgpu::ComputePipeline,
+    /// Step V with skipping, and its dense variant (`--no-skipping`).
     lao: wgpu::ComputePipeline,
+    lao_dense: wgpu::ComputePipeline,
+    /// Step V of a frame with skipping: readable voxels, every ray sample fetched.
+    lao_frame: wgpu::ComputePipeline,
     sampler: wgpu::Sampler,
+    /// The format of `V_o`, `V_PAO` and `V_AO`: R16Float (2 bytes per voxel each) where
+    /// the adapter can write it from a shader, else R32Float.
+    format: wgpu::TextureFormat,
 }
 
 impl crate::gpu::Stage for CaoPipelines {
     fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let [clip_module, lao_module] =
-            shaders::modules(device, ["cao_clip.wgsl", "cao_lao.wgsl"])?;
-        validated(device, "CaoPipelines::create", || CaoPipelines {
-            clip: compute_pipeline(device, "Cao::clip", &clip_module, "main", None),
-            lao: compute_pipeline(device, "Cao::lao", &lao_module, "main", None),
-            sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
-        })
+        let build = |format: wgpu::TextureFormat| -> Result<Self, GpuError> {
+            let name = if format == wgpu::TextureFormat::R16Float {
+                "r16float"
+            } else {
+                "r32float"
+            };
+            let format_of = |code: String| code.replace("r16float", name);
+            let clip_module = shaders::module_with(device, "cao_clip.wgsl", format_of)?;
+            let lao_module = shaders::module_with(device, "cao_lao.wgsl", format_of)?;
+            let dense_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
+                super::sparse::dense_variant(format_of(code))
+            })?;
+            let frame_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
+                super::sparse::frame_variant(format_of(code))
+            })?;
+            validated(device, "CaoPipelines::create", || CaoPipelines {
+                clip: compute_pipeline(device, "Cao::clip", &clip_module, "main", None),
+                lao: compute_pipeline(device, "Cao::lao", &lao_module, "main", None),
+                lao_dense: compute_pipeline(device, "Cao::lao_dense", &dense_module, "main", None),
+                lao_frame: compute_pipeline(device, "Cao::lao_frame", &frame_module, "main", None),
+                sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
+                format,
+            })
+        };
+        let narrow = device
+            .features()
+            .contains(wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES);
+        match narrow && std::env::var_os("VOLAO_CAO_F32").is_none() {
+            true => build(wgpu::TextureFormat::R16Float)
+                .or_else(|_| build(wgpu::TextureFormat::R32Float)),
+            false => build(wgpu::TextureFormat::R32Float),
+        }
+    }
+}
+
+impl CaoPipelines {
+    /// Step V's pipeline for `bricks`, for `V_PAO` or (`frame`) for a frame.
+    fn lao_for(&self, bricks: &Bricks, frame: bool) -> &wgpu::ComputePipeline {
+        match (bricks.skipping, frame) {
+            (false, _) => &self.lao_dense,
+            (true, false) => &self.lao,
+            (true, true) => &self.lao_frame,
+        }
     }
 }
 
@@ -149,10 +206,17 @@ impl crate::gpu::Stage for CaoPipelines {
 #[derive(Debug, Clone, Default)]
 pub struct CaoStats {
     pub voxels: u64,
-    /// Voxels ray cast this frame (category b; every unclipped voxel in the baseline).
+    /// Voxels ray cast this frame (category b; every unclipped voxel in the baseline),
+    /// among the readable ones when skipping.
     pub recomputed: u64,
-    /// Voxels fully clipped (category a).
+    /// Voxels of category b among those step IV visited (with skipping off: the paper's
+    /// count, the same for CAO and the baseline).
+    pub category_b: u64,
+    /// Voxels fully clipped (category a) among those step IV visited.
     pub clipped: u64,
+    /// Voxels steps IV and V visited.
+    pub clip_voxels: u64,
+    pub lao_voxels: u64,
     /// Seconds: depth/dilation maps (only when a shape's geometry changed), clip + mask
     /// (step IV), ray casting (step V).
     pub maps_seconds: f64,
@@ -168,12 +232,17 @@ impl CaoStats {
     }
 }
 
-fn volume_texture(device: &wgpu::Device, label: &str, dims: [u32; 3]) -> wgpu::Texture {
+fn volume_texture(
+    device: &wgpu::Device,
+    label: &str,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+) -> wgpu::Texture {
     crate::gpu::texture_3d(
         device,
         label,
         dims,
-        wgpu::TextureFormat::R32Float,
+        format,
         wgpu::TextureUsages::STORAGE_BINDING
             | wgpu::TextureUsages::TEXTURE_BINDING
             | wgpu::TextureUsages::COPY_SRC
@@ -187,30 +256,46 @@ pub struct CaoGpu {
     pipelines: std::sync::Arc<CaoPipelines>,
     pub clip: ClipMaps,
     v_o: wgpu::Texture,
-    v_m: wgpu::Texture,
     v_pao: wgpu::Texture,
     v_ao: wgpu::Texture,
-    views: [wgpu::TextureView; 4],
+    views: [wgpu::TextureView; 3],
     counters: wgpu::Buffer,
     counters_readback: wgpu::Buffer,
-    /// Uniforms of steps IV and V, rewritten per slab, and the bind groups reading them.
+    /// This frame's brick lists: step IV's, then step V's (room for two of every brick).
+    lists: wgpu::Buffer,
+    /// Uniforms of steps IV and V, rewritten per submission, and the bind groups reading them.
     clip_uniforms: wgpu::Buffer,
-    lao_uniforms: wgpu::Buffer,
+    /// Step V's uniforms and bind group for `V_PAO` \[0\] and for frames \[1\].
+    lao_uniforms: [wgpu::Buffer; 2],
     clip_group: wgpu::BindGroup,
-    lao_group: wgpu::BindGroup,
+    lao_group: [wgpu::BindGroup; 2],
     clip_params: ClipParams,
     lao_params: LaoParams,
     dims: [u32; 3],
     rays: usize,
     samples: u32,
     msaa: u32,
+    bricks: Bricks,
+    /// Bricks near a shape in the previous frame: their `V_o` and `V_AO` must be brought
+    /// back this frame if no shape is near them now.
+    was_near: Vec<bool>,
+    /// The last frame's lists and mode (to read its mask back).
+    last: (Lists, CaoMode),
     /// Seconds spent on `V_PAO`.
     pub precompute_seconds: f64,
 }
 
+/// What one frame's steps IV and V visit.
+#[derive(Debug, Clone, Default)]
+struct Lists {
+    clip: Vec<u32>,
+    lao: Vec<u32>,
+}
+
 impl CaoGpu {
-    /// Allocates the five CAO volumes (V, V_o, V_m, V_PAO, V_AO; V is `vol`'s) and
-    /// precomputes `V_PAO` for `tf`.
+    /// Allocates the four CAO volumes (V, V_o, V_PAO, V_AO; V is `vol`'s) and
+    /// precomputes `V_PAO` for `tf` over `bricks` ([`Bricks::dense`]: every voxel).
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         gpu: &Gpu,
         vol: &GpuVolume,
@@ -218,6 +303,7 @@ impl CaoGpu {
         rays: &Rays,
         samples: u32,
         msaa: u32,
+        bricks: Bricks,
         progress: &dyn Fn(usize, usize),
     ) -> Result<Self, GpuError> {
         let device = &gpu.device;
@@ -232,6 +318,7 @@ impl CaoGpu {
         }
         let texels = &vol.texels;
         let dims = texels.dims.map(|d| d as u32);
+        assert_eq!(bricks.grid, super::sparse::grid_of(texels.dims));
         let pipelines = gpu.stage::<CaoPipelines>()?;
         let lut = lao_lut(tf, texels);
         let alpha = crate::sample::alpha_column(&lut);
@@ -245,11 +332,12 @@ impl CaoGpu {
             .zip(&rays.weights)
             .map(|(d, w)| [d.x, d.y, d.z, *w])
             .collect();
+        let occupied: Vec<u32> = bricks.occupied.iter().map(|&o| o as u32).collect();
         let clip = ClipMaps::new(gpu)?;
         let extent = texels.extent();
         let (a, b) = texels.lut_map(&lut);
         let clip_params = ClipParams {
-            slab: SlabOrigin::of(dims),
+            bricks: BrickChunk::of(dims),
             spacing: texels.spacing,
             msaa: msaa as f32,
             half: [extent[0] * 0.5, extent[1] * 0.5, extent[2] * 0.5],
@@ -258,28 +346,41 @@ impl CaoGpu {
             lut_offset: b,
             lut_last: (lut.rgba.len().max(2) - 1) as f32,
             _pad1: 0.0,
+            full: 0,
+            _pad2: [0; 3],
         };
+        let grid = bricks.grid.map(|g| g as u32);
         let lao_params = LaoParams {
-            slab: SlabOrigin::of(dims),
+            bricks: BrickChunk::of(dims),
             mm_to_uvw: super::lao::mm_to_uvw(texels),
             _pad0: 0.0,
             rays: rays.directions.len() as u32,
             samples: samples.max(1),
-            full: 0,
-            _pad1: 0,
+            _pad1: [0; 2],
+            grid: [grid[0], grid[1], grid[2], u32::from(bricks.skipping)],
+            readable: VoxelTest::uniform(bricks.voxels.as_ref()),
         };
         let mut cao = validated(device, "CaoGpu::new", || {
             let storage = |label, bytes: &[u8]| {
                 storage_buffer(gpu, label, bytes, wgpu::BufferUsages::empty())
             };
-            let v_o = volume_texture(device, "Cao::v_o", dims);
-            let v_m = volume_texture(device, "Cao::v_m", dims);
-            let v_pao = volume_texture(device, "Cao::v_pao", dims);
-            let v_ao = volume_texture(device, "Cao::v_ao", dims);
-            let views = [&v_o, &v_m, &v_pao, &v_ao].map(|t| t.create_view(&Default::default()));
+            let format = pipelines.format;
+            let v_o = volume_texture(device, "Cao::v_o", dims, format);
+            let v_pao = volume_texture(device, "Cao::v_pao", dims, format);
+            let v_ao = volume_texture(device, "Cao::v_ao", dims, format);
+            let views = [&v_o, &v_pao, &v_ao].map(|t| t.create_view(&Default::default()));
             let lut_buffer = storage("Cao::lut_alpha", bytemuck::cast_slice(&alpha));
             let msaa_buffer = storage("Cao::msaa", bytemuck::cast_slice(&offsets));
             let ray_buffer = storage("Cao::rays", bytemuck::cast_slice(&packed));
+            let occupied_buffer = storage("Cao::occupied", bytemuck::cast_slice(&occupied));
+            let prefix = VoxelTest::prefix_of(bricks.voxels.as_ref());
+            let prefix_buffer = storage("Cao::readable_prefix", bytemuck::cast_slice(&prefix));
+            let lists = storage_buffer(
+                gpu,
+                "Cao::lists",
+                &vec![0u8; 8 * bricks.count()],
+                wgpu::BufferUsages::COPY_DST,
+            );
             let counters = storage_buffer(
                 gpu,
                 "Cao::counters",
@@ -297,52 +398,70 @@ impl CaoGpu {
                     lut_buffer.as_entire_binding(),
                     msaa_buffer.as_entire_binding(),
                     wgpu::BindingResource::TextureView(&views[0]),
-                    wgpu::BindingResource::TextureView(&views[1]),
-                    counters.as_entire_binding(),
-                ],
-            );
-            let (lao_uniforms, lao_group) = uniform_group(
-                gpu,
-                "Cao::lao",
-                &pipelines.lao,
-                &lao_params,
-                &[
-                    wgpu::BindingResource::TextureView(&views[0]),
-                    wgpu::BindingResource::Sampler(&pipelines.sampler),
-                    ray_buffer.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&views[1]),
                     wgpu::BindingResource::TextureView(&views[2]),
-                    wgpu::BindingResource::TextureView(&views[3]),
+                    counters.as_entire_binding(),
+                    lists.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&views[1]),
                 ],
             );
+            let lao_group = |frame: bool| {
+                uniform_group(
+                    gpu,
+                    "Cao::lao",
+                    pipelines.lao_for(&bricks, frame),
+                    &lao_params,
+                    &[
+                        wgpu::BindingResource::TextureView(&views[0]),
+                        wgpu::BindingResource::Sampler(&pipelines.sampler),
+                        ray_buffer.as_entire_binding(),
+                        wgpu::BindingResource::TextureView(&views[2]),
+                        lists.as_entire_binding(),
+                        occupied_buffer.as_entire_binding(),
+                        counters.as_entire_binding(),
+                        wgpu::BindingResource::TextureView(volume_view),
+                        prefix_buffer.as_entire_binding(),
+                    ],
+                )
+            };
+            // Auto layouts are per pipeline: one bind group (and uniforms) for each.
+            let lao_groups = [lao_group(false), lao_group(true)];
             CaoGpu {
                 pipelines,
                 clip,
                 v_o,
-                v_m,
                 v_pao,
                 v_ao,
                 views,
                 counters,
                 counters_readback: readback_buffer(device, "Cao::counters_readback", 16),
+                lists,
                 clip_uniforms,
-                lao_uniforms,
+                lao_uniforms: [lao_groups[0].0.clone(), lao_groups[1].0.clone()],
                 clip_group,
-                lao_group,
+                lao_group: [lao_groups[0].1.clone(), lao_groups[1].1.clone()],
                 clip_params,
                 lao_params,
                 dims,
                 rays: rays.directions.len(),
                 samples: samples.max(1),
                 msaa,
+                was_near: vec![false; bricks.count()],
+                last: (Lists::default(), CaoMode::Selective),
+                bricks,
                 precompute_seconds: 0.0,
             }
         })?;
         let start = Instant::now();
-        // V_PAO: the baseline pipeline with nothing clipped, copied aside.
+        // V_PAO: the baseline pipeline with nothing clipped, copied aside. Step IV writes
+        // every brick whose V_o or V_m is read; unwritten texels stay 0 (V_o's α there).
         cao.clip.update(gpu, &[], 1.0, 1.0, 16)?;
-        cao.step_iv(gpu)?;
-        cao.step_v(gpu, CaoMode::Full, progress)?;
+        let b = &cao.bricks;
+        let lists = Lists {
+            clip: b.list(|i| b.used(i)),
+            lao: b.list(|i| b.readable[i] != 0),
+        };
+        cao.run(gpu, &lists, CaoMode::Full, progress)?;
+        cao.last = (lists, CaoMode::Full);
         validated(device, "Cao::v_pao", || {
             let mut encoder = device.create_command_encoder(&Default::default());
             encoder.copy_texture_to_texture(
@@ -360,6 +479,11 @@ impl CaoGpu {
     /// How far a clipped point can reach (mm): the dilation radius before pixel margins.
     pub fn reach_mm(&self, texels: &VolumeTexels) -> f32 {
         reach_mm(self.samples, texels.spacing)
+    }
+
+    /// The bricks this CAO processes.
+    pub fn bricks(&self) -> &Bricks {
+        &self.bricks
     }
 
     /// One frame: update the clip maps for `shapes` (moved shapes only change matrices),
@@ -382,39 +506,109 @@ impl CaoGpu {
             .update(gpu, shapes, radius, reach_mm, resolution)?;
         crate::gpu::wait(device, "Cao::maps", crate::gpu::WAIT)?;
         let t1 = Instant::now();
-        let (recomputed, clipped) = self.step_iv(gpu)?;
-        let t2 = Instant::now();
-        self.step_v(gpu, mode, &|_, _| {})?;
-        crate::gpu::wait(device, "Cao::lao", crate::gpu::WAIT)?;
-        let t3 = Instant::now();
-        let voxels = self.dims.iter().map(|&d| d as u64).product::<u64>();
-        Ok(CaoStats {
-            voxels,
-            recomputed: match mode {
-                CaoMode::Selective => recomputed,
-                CaoMode::Full => voxels - clipped,
+        let b = &self.bricks;
+        let cameras = self.clip.cameras();
+        let near = b.near(texels.dims, texels.spacing, &self.clip.uniforms, &cameras);
+        let touched: Vec<bool> = near
+            .iter()
+            .zip(&self.was_near)
+            .map(|(a, b)| *a || *b)
+            .collect();
+        let lists = Lists {
+            clip: b.list(|i| touched[i] && b.used(i)),
+            lao: match mode {
+                CaoMode::Selective => {
+                    b.list_flagged(|i| touched[i] && b.readable[i] != 0, |_| true)
+                }
+                CaoMode::Full => b.list_flagged(|i| b.readable[i] != 0, |i| touched[i]),
             },
-            clipped,
-            maps_seconds: (t1 - t0).as_secs_f64(),
+        };
+        self.was_near = near;
+        let mut stats = self.run_timed(gpu, &lists, mode)?;
+        self.last = (lists, mode);
+        stats.maps_seconds = (t1 - t0).as_secs_f64();
+        stats.clip_errors = errors.iter().map(|e| e.to_string()).collect();
+        Ok(stats)
+    }
+
+    fn run_timed(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<CaoStats, GpuError> {
+        let device = &gpu.device;
+        let dims = self.dims.map(|d| d as usize);
+        let t1 = Instant::now();
+        self.write_lists(gpu, lists);
+        self.step_iv(gpu, lists, mode)?;
+        crate::gpu::wait(device, "Cao::clip", crate::gpu::WAIT)?;
+        let t2 = Instant::now();
+        self.step_v(gpu, lists, true, &|_, _| {})?;
+        let c = self.read_counters(gpu)?;
+        let t3 = Instant::now();
+        Ok(CaoStats {
+            voxels: dims.iter().map(|&d| d as u64).product(),
+            recomputed: c[2],
+            category_b: c[0],
+            clipped: c[1],
+            clip_voxels: Bricks::voxels_in(&lists.clip, dims),
+            lao_voxels: Bricks::voxels_in(&lists.lao, dims),
+            maps_seconds: 0.0,
             clip_seconds: (t2 - t1).as_secs_f64(),
             lao_seconds: (t3 - t2).as_secs_f64(),
-            clip_errors: errors.iter().map(|e| e.to_string()).collect(),
+            clip_errors: Vec::new(),
         })
     }
 
-    /// Step IV over the whole volume; returns (voxels to recompute, voxels clipped).
-    fn step_iv(&self, gpu: &Gpu) -> Result<(u64, u64), GpuError> {
+    /// Steps IV and V over `lists` without timing (the precomputation).
+    fn run(
+        &self,
+        gpu: &Gpu,
+        lists: &Lists,
+        mode: CaoMode,
+        progress: &dyn Fn(usize, usize),
+    ) -> Result<(), GpuError> {
+        self.write_lists(gpu, lists);
+        self.step_iv(gpu, lists, mode)?;
+        self.step_v(gpu, lists, false, progress)
+    }
+
+    fn write_lists(&self, gpu: &Gpu, lists: &Lists) {
+        gpu.queue.write_buffer(&self.counters, 0, &[0u8; 16]);
+        if !lists.clip.is_empty() {
+            gpu.queue
+                .write_buffer(&self.lists, 0, bytemuck::cast_slice(&lists.clip));
+        }
+        if !lists.lao.is_empty() {
+            gpu.queue.write_buffer(
+                &self.lists,
+                4 * lists.clip.len() as u64,
+                bytemuck::cast_slice(&lists.lao),
+            );
+        }
+    }
+
+    /// (category b, clipped, ray cast) of the steps just submitted.
+    fn read_counters(&self, gpu: &Gpu) -> Result<[u64; 3], GpuError> {
+        let device = &gpu.device;
+        validated(device, "Cao::counters", || {
+            let mut encoder = device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(&self.counters, 0, &self.counters_readback, 0, 16);
+            gpu.queue.submit([encoder.finish()]);
+        })?;
+        let bytes = read_buffer(device, &self.counters_readback, "Cao::counters")?;
+        let c: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
+        Ok([c[0] as u64, c[1] as u64, c[2] as u64])
+    }
+
+    /// Step IV over `lists.clip`.
+    fn step_iv(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<(), GpuError> {
         let device = &gpu.device;
         // Bound each submission's clip samples (41 per voxel per shape at worst).
         let per_voxel = (9 + self.msaa as u64) * self.clip.uniforms.counts[0].max(1) as u64;
-        let slabs = SlabDispatch::new(
-            self.dims,
-            Grid::Tiles,
+        let chunks = BrickDispatch::new(
+            0,
+            lists.clip.len(),
             per_voxel,
             budget::LAO_SAMPLES,
             u64::MAX,
         );
-        gpu.queue.write_buffer(&self.counters, 0, &[0u8; 16]);
         let clip_group = self
             .clip
             .bind_group(device, &self.pipelines.clip.get_bind_group_layout(1));
@@ -424,62 +618,122 @@ impl CaoGpu {
             bind_groups: &[&self.clip_group, &clip_group],
             uniforms: &self.clip_uniforms,
         };
-        slabs.run(gpu, &pass, self.clip_params, false, &|_, _| {})?;
-        validated(device, "Cao::counters", || {
-            let mut encoder = device.create_command_encoder(&Default::default());
-            encoder.copy_buffer_to_buffer(&self.counters, 0, &self.counters_readback, 0, 16);
-            gpu.queue.submit([encoder.finish()]);
-        })?;
-        let bytes = read_buffer(device, &self.counters_readback, "Cao::counters")?;
-        let c: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
-        Ok((c[0] as u64, c[1] as u64))
+        let mut params = self.clip_params;
+        params.full = u32::from(mode == CaoMode::Full);
+        chunks.run(gpu, &pass, params, false, |_, _| Ok(()), |_, _, _| {})
     }
 
+    /// Step V over `lists.lao`, for a frame or for `V_PAO`; `progress` counts bricks.
     fn step_v(
         &self,
         gpu: &Gpu,
-        mode: CaoMode,
+        lists: &Lists,
+        frame: bool,
         progress: &dyn Fn(usize, usize),
     ) -> Result<(), GpuError> {
         let per_voxel = self.rays as u64 * self.samples as u64;
-        let slabs = SlabDispatch::new(
-            self.dims,
-            Grid::Tiles,
+        let chunks = BrickDispatch::new(
+            lists.clip.len(),
+            lists.lao.len(),
             per_voxel,
             budget::LAO_SAMPLES,
             u64::MAX,
         );
-        let mut params = self.lao_params;
-        params.full = u32::from(mode == CaoMode::Full);
+        let params = self.lao_params;
         let pass = Pass {
             label: "Cao::step_v",
-            pipeline: &self.pipelines.lao,
-            bind_groups: &[&self.lao_group],
-            uniforms: &self.lao_uniforms,
+            pipeline: self.pipelines.lao_for(&self.bricks, frame),
+            bind_groups: &[&self.lao_group[usize::from(frame)]],
+            uniforms: &self.lao_uniforms[usize::from(frame)],
         };
-        slabs.run(gpu, &pass, params, true, progress)
+        let total = chunks.len() as usize;
+        chunks.run(
+            gpu,
+            &pass,
+            params,
+            true,
+            |first, count| {
+                progress((first + count) as usize, total);
+                Ok(())
+            },
+            |_, _, _| {},
+        )
     }
 
     /// `V_AO` for the ray caster.
     pub fn ao_view(&self) -> &wgpu::TextureView {
-        &self.views[3]
+        &self.views[2]
     }
 
-    /// Reads one of the CAO volumes back, x fastest.
+    /// Reads one of the CAO volumes back, x fastest. `V_PAO` and `V_AO` hold 1 in the
+    /// bricks the ray caster cannot read (which were never computed).
     pub fn read(&self, gpu: &Gpu, which: CaoVolume) -> Result<Vec<f32>, GpuError> {
         let t = match which {
             CaoVolume::ClippedOpacity => &self.v_o,
-            CaoVolume::Mask => &self.v_m,
+            CaoVolume::Mask => return self.read_mask(gpu),
             CaoVolume::Precomputed => &self.v_pao,
             CaoVolume::Ambient => &self.v_ao,
         };
-        read_texture_f32(gpu, t, self.dims, "Cao::read")
+        let mut values = read_texture_f32(gpu, t, self.dims, "Cao::read")?;
+        if matches!(which, CaoVolume::Precomputed | CaoVolume::Ambient)
+            && self.bricks.readable.contains(&0)
+        {
+            let dims = self.dims.map(|d| d as usize);
+            for (i, v) in values.iter_mut().enumerate() {
+                if !self.bricks.voxel_readable(crate::volume::voxel_of(i, dims)) {
+                    *v = 1.0;
+                }
+            }
+        }
+        Ok(values)
     }
 
-    /// GPU memory of the CAO volumes per voxel, in bytes (V_o, V_m, V_PAO, V_AO; the
-    /// density volume V is the ray caster's).
+    /// The last frame's mask, from step IV's marks in `V_AO`: steps IV (CAO's) and V
+    /// run again, which leaves `V_AO` as it was on every readable voxel.
+    fn read_mask(&self, gpu: &Gpu) -> Result<Vec<f32>, GpuError> {
+        let (lists, _) = &self.last;
+        self.write_lists(gpu, lists);
+        self.step_iv(gpu, lists, CaoMode::Selective)?;
+        let marks = read_texture_f32(gpu, &self.v_ao, self.dims, "Cao::mask")?;
+        let dims = self.dims.map(|d| d as usize);
+        let mut mask = vec![1.0; marks.len()];
+        for &b in &lists.clip {
+            for [x, y, z] in super::sparse::brick_voxels(b, dims) {
+                let i = x + dims[0] * (y + dims[1] * z);
+                // Step IV's marks: -1 recompute, -2 clipped, else a copy.
+                mask[i] = if marks[i] == -1.0 {
+                    0.5
+                } else if marks[i] == -2.0 {
+                    0.0
+                } else {
+                    1.0
+                };
+            }
+        }
+        let relisted = Lists {
+            clip: lists.clip.clone(),
+            lao: lists.clip.iter().map(|b| b | super::sparse::NEAR).collect(),
+        };
+        self.write_lists(gpu, &relisted);
+        self.step_v(gpu, &relisted, true, &|_, _| {})?;
+        crate::gpu::wait(&gpu.device, "Cao::mask", crate::gpu::WAIT)?;
+        Ok(mask)
+    }
+
+    /// `values` as the CAO volumes hold them (rounded to f16 when they are R16Float):
+    /// for comparing a CPU twin with what was read back.
+    pub fn round_as_stored(&self, values: &mut [f32]) {
+        if self.v_ao.format() == wgpu::TextureFormat::R16Float {
+            for v in values {
+                *v = half::f16::from_f32(*v).to_f32();
+            }
+        }
+    }
+
+    /// GPU memory of the CAO volumes per voxel, in bytes (V_o, V_PAO, V_AO; the density
+    /// volume V is the ray caster's).
     pub fn bytes_per_voxel(&self) -> u32 {
-        4 * 4
+        3 * self.v_ao.format().block_copy_size(None).unwrap_or(4)
     }
 }
 
@@ -550,7 +804,9 @@ pub fn clip_volume_cpu(
     per_voxel.into_iter().unzip()
 }
 
-/// Step V on the CPU: `V_AO` from `V_o`, `V_m` and `V_PAO` (twin of `cao_lao.wgsl`).
+/// Step V on the CPU: `V_AO` from `V_o`, `V_m` and `V_PAO` (twin of `cao_lao.wgsl`),
+/// for every voxel, with rays stepping over the empty bricks of `bricks`.
+#[allow(clippy::too_many_arguments)]
 pub fn lao_on_opacity_cpu(
     texels: &VolumeTexels,
     v_o: &[f32],
@@ -559,6 +815,7 @@ pub fn lao_on_opacity_cpu(
     rays: &Rays,
     samples: u32,
     mode: CaoMode,
+    bricks: &Bricks,
 ) -> Vec<f32> {
     let dims = texels.dims;
     let [nx, ny, nz] = dims;
@@ -573,6 +830,7 @@ pub fn lao_on_opacity_cpu(
             trilinear(v_o, dims, uvw)
         }
     };
+    let readable = bricks.readable_mask(texels);
     (0..nx * ny * nz)
         .into_par_iter()
         .map(|i| {
@@ -580,7 +838,7 @@ pub fn lao_on_opacity_cpu(
             if m == 1.0 && mode == CaoMode::Selective {
                 return v_pao[i];
             }
-            if m <= 0.0 {
+            if m <= 0.0 || !readable[i] {
                 return 1.0;
             }
             let v = Vec3::new(
@@ -592,14 +850,7 @@ pub fn lao_on_opacity_cpu(
             let mut total = 0.0;
             for (d, w) in rays.directions.iter().zip(&rays.weights) {
                 let step = *d * scale;
-                let mut transmittance = 1.0;
-                let mut sum = 0.0;
-                for s in 1..=samples {
-                    sum += transmittance;
-                    if s < samples {
-                        transmittance *= 1.0 - opacity_at(centre + step * s as f32);
-                    }
-                }
+                let sum = ray_sum(centre, step, samples, (bricks, dims), opacity_at);
                 total += w * sum / samples as f32;
             }
             total / rays.directions.len() as f32

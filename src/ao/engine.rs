@@ -11,12 +11,13 @@ use super::cone::{ConeGpu, MipPyramid, cone_cpu, opacity};
 use super::fast::{box_radius, cone_reach, map_of, statistics_device, twin_is_faster};
 use super::filter::{FilterGpu, Source};
 use super::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
+use super::sparse::Coverage;
 use super::vao::{PositionalAo, VaoGpu, VaoInputs, vao_cpu};
 use super::{AoMethod, AoSettings};
 use crate::clip::ClipShape;
 use crate::gpu::{Gpu, GpuError, GpuUse};
 use crate::render::gpu::GpuVolume;
-use crate::render::texels::{UploadLimits, VolumeTexels};
+use crate::render::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use crate::tf::TransferFunction;
 use std::sync::Arc;
 
@@ -29,6 +30,8 @@ pub struct AoRequest<'a> {
     /// CAO and lao-full: the frame's clip shapes (mm from the volume's centre). `None`
     /// precomputes `V_PAO` only (`V_AO = V_PAO`); the viewer updates it per frame.
     pub clip: Option<&'a [ClipShape]>,
+    /// Which voxels LAO, CAO and lao-full compute (the other methods compute all).
+    pub coverage: Coverage,
 }
 
 /// The volume AO is computed for: texels (uploaded here if a GPU stage runs) or a
@@ -190,8 +193,9 @@ impl AoEngine {
             AoMethod::Lao => {
                 let rays = Rays::uniform(s.rays.directions());
                 let lut = lao_lut(tf, texels);
+                let bricks = request.coverage.bricks(texels, vol.ranges(), tf);
                 g.stage::<LaoGpu>()?
-                    .compute(g, vol, &lut, &rays, s.samples, progress)
+                    .compute(g, vol, &lut, &rays, s.samples, &bricks, progress)
             }
             AoMethod::Vao => {
                 let inputs = VaoInputs::new(g, texels, tf, &s.vao)?;
@@ -234,7 +238,10 @@ impl AoEngine {
         match s.method {
             AoMethod::Lao => {
                 let rays = Rays::uniform(s.rays.directions());
-                lao_cpu(texels, &lao_lut(tf, texels), &rays, s.samples, progress)
+                let ranges = BlockRanges::new(texels);
+                let bricks = request.coverage.bricks(texels, &ranges, tf);
+                let lut = lao_lut(tf, texels);
+                lao_cpu(texels, &lut, &rays, s.samples, &bricks, progress)
             }
             AoMethod::Vao => vao_cpu(
                 &PositionalAo::new(texels, tf, &s.vao),
@@ -290,7 +297,10 @@ impl AoEngine {
         let mut uploaded = None;
         let vol = on_device(g, input, request.tf, &mut uploaded)?;
         let rays = Rays::uniform(s.rays.directions());
-        let mut c = CaoGpu::new(g, vol, request.tf, &rays, s.samples, s.msaa, progress)?;
+        let bricks = request.coverage.bricks(texels, vol.ranges(), request.tf);
+        let mut c = CaoGpu::new(
+            g, vol, request.tf, &rays, s.samples, s.msaa, bricks, progress,
+        )?;
         let mut stats = None;
         if let Some(clip) = request.clip {
             let reach = c.reach_mm(texels);

@@ -7,26 +7,21 @@
 //! Opacities `a_i` come from the transfer function, corrected for a 1 mm step; samples
 //! outside the volume are empty.
 
-use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
-use crate::gpu::{Gpu, GpuError, output_buffer, readback_buffer, storage_buffer, validated};
+use super::sparse::{BRICK, Bricks, VoxelTest, brick_voxels, empty_run, unpack};
+use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
+use crate::gpu::{
+    Gpu, GpuError, output_buffer, read_buffer, readback_buffer, storage_buffer, validated,
+};
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
-use crate::sample::bake_lut;
-use crate::sample::{alpha_column, lut_lerp, per_voxel, trilinear, voxel_centre};
-use crate::tf::{Lut, TransferFunction};
+use crate::sample::{alpha_column, lut_lerp, trilinear, voxel_centre};
+use crate::tf::Lut;
 use glam::Vec3;
+use rayon::prelude::*;
 
 pub use super::settings::DEFAULT_SAMPLES;
 
-/// Distance between samples along an LAO ray.
-pub const STEP_MM: f32 = 1.0;
-
-/// The opacity table for LAO: the transfer function's alpha, corrected from its
-/// reference length (one voxel of the smallest spacing) to a 1 mm step.
-pub fn lao_lut(tf: &TransferFunction, texels: &VolumeTexels) -> Lut {
-    let min_spacing = texels.spacing.iter().copied().fold(f32::INFINITY, f32::min);
-    bake_lut(tf, texels, STEP_MM / min_spacing)
-}
+pub use crate::sample::{LAO_STEP_MM as STEP_MM, lao_lut};
 
 /// Ray directions with their Eq. 3 weights `w_k` (mean 1).
 #[derive(Debug, Clone, PartialEq)]
@@ -58,8 +53,8 @@ impl Rays {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct LaoParams {
-    /// The volume's size and this dispatch's first z-slice.
-    pub slab: SlabOrigin,
+    /// The volume's size and this submission's bricks.
+    pub bricks: BrickChunk,
     /// One LAO step (1 mm) in texture coordinates per axis.
     pub mm_to_uvw: [f32; 3],
     pub _pad0: f32,
@@ -71,14 +66,16 @@ pub struct LaoParams {
     /// K and M.
     pub rays: u32,
     pub samples: u32,
-    /// Voxels in this dispatch and invocations per row of workgroups.
-    pub voxels: u32,
-    pub row_stride: u32,
+    pub _pad2: [u32; 2],
+    /// Bricks per axis and whether rays step over empty ones (0/1).
+    pub grid: [u32; 4],
+    /// The per-voxel readability test ([`VoxelTest::uniform`]).
+    pub readable: [f32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<LaoParams>() == 64);
+const _: () = assert!(std::mem::size_of::<LaoParams>() == 112);
 
-slab_fields!(LaoParams, linear);
+chunk_fields!(LaoParams);
 
 /// One LAO step ([`STEP_MM`]) in texture coordinates along each axis.
 pub fn mm_to_uvw(texels: &VolumeTexels) -> [f32; 3] {
@@ -90,10 +87,17 @@ pub fn mm_to_uvw(texels: &VolumeTexels) -> [f32; 3] {
     ]
 }
 
-fn params(texels: &VolumeTexels, lut: &Lut, rays: &Rays, samples: u32) -> LaoParams {
+fn params(
+    texels: &VolumeTexels,
+    lut: &Lut,
+    rays: &Rays,
+    samples: u32,
+    bricks: &Bricks,
+) -> LaoParams {
     let (a, b) = texels.lut_map(lut);
+    let g = bricks.grid.map(|g| g as u32);
     LaoParams {
-        slab: SlabOrigin::of(texels.dims.map(|d| d as u32)),
+        bricks: BrickChunk::of(texels.dims.map(|d| d as u32)),
         mm_to_uvw: mm_to_uvw(texels),
         _pad0: 0.0,
         lut_scale: a,
@@ -102,8 +106,9 @@ fn params(texels: &VolumeTexels, lut: &Lut, rays: &Rays, samples: u32) -> LaoPar
         _pad1: 0.0,
         rays: rays.directions.len() as u32,
         samples: samples.max(1),
-        voxels: 0,
-        row_stride: 0,
+        _pad2: [0; 2],
+        grid: [g[0], g[1], g[2], u32::from(bricks.skipping)],
+        readable: VoxelTest::uniform(bricks.voxels.as_ref()),
     }
 }
 
@@ -118,10 +123,10 @@ fn alpha_at(p: &LaoParams, alpha: &[f32], norm: &[f32], dims: [usize; 3], uvw: V
 /// CPU twin of one invocation of `lao.wgsl`: A(x) of the voxel at `voxel`.
 fn lao_voxel(
     p: &LaoParams,
-    alpha: &[f32],
-    norm: &[f32],
+    (alpha, norm): (&[f32], &[f32]),
     dims: [usize; 3],
     rays: &[[f32; 4]],
+    bricks: &Bricks,
     voxel: [usize; 3],
 ) -> f32 {
     let centre = voxel_centre(voxel, dims);
@@ -130,46 +135,115 @@ fn lao_voxel(
     let mut total = 0.0;
     for ray in rays {
         let step = Vec3::new(ray[0], ray[1], ray[2]) * scale;
-        let mut transmittance = 1.0;
-        let mut sum = 0.0;
-        for m in 1..=samples {
-            sum += transmittance;
-            if m < samples {
-                transmittance *= 1.0 - alpha_at(p, alpha, norm, dims, centre + step * m as f32);
-            }
-        }
+        let sum = ray_sum(centre, step, samples, (bricks, dims), |uvw| {
+            alpha_at(p, alpha, norm, dims, uvw)
+        });
         total += ray[3] * sum / samples as f32;
     }
     total / rays.len() as f32
 }
 
-/// `V_PAO` on the CPU (rayon), x fastest. `progress(done, total)` counts z-slices.
+/// One LAO ray's sum `Σ_{m=1..M} Π_{i<m} (1 − a_i)` (Eq. 2), sample `i` at
+/// `centre + i · step`: the CPU twin of `lao_ray` in `shaders/lao_ray.wgsl`. With
+/// `bricks` skipping, runs of samples of opacity exactly 0 are not fetched; the
+/// transmittance is still added once per sample, so the sum is the dense one bit for bit.
+pub fn ray_sum(
+    centre: Vec3,
+    step: Vec3,
+    samples: u32,
+    (bricks, dims): (&Bricks, [usize; 3]),
+    opacity: impl Fn(Vec3) -> f32,
+) -> f32 {
+    let mut transmittance = 1.0f32;
+    let mut sum = transmittance;
+    let mut m = 1;
+    while m < samples {
+        let run = empty_run(bricks, dims, centre, step, m, samples);
+        if run > 0 {
+            for _ in 0..run {
+                sum += transmittance;
+            }
+            m += run;
+            continue;
+        }
+        transmittance *= 1.0 - opacity(centre + step * m as f32);
+        m += 1;
+        sum += transmittance;
+    }
+    sum
+}
+
+/// `V_PAO` on the CPU (rayon), x fastest: the readable bricks of `bricks`, 1 elsewhere.
+/// `progress(done, total)` counts bricks.
 pub fn lao_cpu(
     texels: &VolumeTexels,
     lut: &Lut,
     rays: &Rays,
     samples: u32,
+    bricks: &Bricks,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Vec<f32> {
-    let p = params(texels, lut, rays, samples);
+    let p = params(texels, lut, rays, samples, bricks);
     let alpha = alpha_column(lut);
     let norm = texels.norm_values();
     let packed = rays.packed();
-    per_voxel(texels.dims, progress, |v| {
-        lao_voxel(&p, &alpha, &norm, texels.dims, &packed, v)
-    })
+    let dims = texels.dims;
+    let list = bricks.list(|i| bricks.readable[i] != 0);
+    let readable = bricks.readable_mask(texels);
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let values: Vec<Vec<f32>> = list
+        .par_iter()
+        .map(|&b| {
+            let v = brick_voxels(b, dims)
+                .map(|v| {
+                    if readable[v[0] + dims[0] * (v[1] + dims[1] * v[2])] {
+                        lao_voxel(&p, (&alpha, &norm), dims, &packed, bricks, v)
+                    } else {
+                        1.0
+                    }
+                })
+                .collect();
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress(n, list.len());
+            v
+        })
+        .collect();
+    let mut out = vec![1.0; dims.iter().product()];
+    for (&b, v) in list.iter().zip(values) {
+        for (voxel, a) in brick_voxels(b, dims).zip(v) {
+            out[voxel[0] + dims[0] * (voxel[1] + dims[1] * voxel[2])] = a;
+        }
+    }
+    out
 }
 
-crate::gpu::compute_stage!(
-    /// Long-lived LAO compute state.
-    LaoGpu,
-    "Lao",
-    "lao.wgsl"
-);
+/// Long-lived LAO compute state: the skipping pipeline and the dense one.
+#[derive(Debug)]
+pub struct LaoGpu {
+    sparse: crate::gpu::ComputeStage,
+    dense: crate::gpu::ComputeStage,
+}
+
+impl crate::gpu::Stage for LaoGpu {
+    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
+        use crate::gpu::ComputeStage;
+        Ok(LaoGpu {
+            sparse: ComputeStage::new(device, "Lao", "lao.wgsl")?,
+            dense: ComputeStage::edited(
+                device,
+                "Lao::dense",
+                "lao.wgsl",
+                super::sparse::dense_variant,
+            )?,
+        })
+    }
+}
 
 impl LaoGpu {
-    /// `V_PAO` of an uploaded volume, computed in z-slabs (one submission each) and read
-    /// back. `progress(done, total)` counts z-slices.
+    /// `V_PAO` of an uploaded volume over the readable bricks of `bricks` (1 elsewhere),
+    /// in submissions of whole bricks, each read back. `progress(done, total)` counts
+    /// bricks.
+    #[allow(clippy::too_many_arguments)]
     pub fn compute(
         &self,
         gpu: &Gpu,
@@ -177,20 +251,27 @@ impl LaoGpu {
         lut: &Lut,
         rays: &Rays,
         samples: u32,
+        bricks: &Bricks,
         progress: &dyn Fn(usize, usize),
     ) -> Result<Vec<f32>, GpuError> {
         let device = &gpu.device;
         let texels = &vol.texels;
-        let base = params(texels, lut, rays, samples);
+        let dims = texels.dims;
+        let stage = if bricks.skipping {
+            &self.sparse
+        } else {
+            &self.dense
+        };
+        let base = params(texels, lut, rays, samples, bricks);
+        let list = bricks.list(|i| bricks.readable[i] != 0);
         let per_voxel = rays.directions.len() as u64 * samples.max(1) as u64;
-        let max_storage = device.limits().max_storage_buffer_binding_size / 4;
-        let slabs = SlabDispatch::new(
-            base.slab.dims,
-            Grid::Linear,
-            per_voxel,
-            budget::LAO_SAMPLES,
-            max_storage,
-        );
+        let max_bricks = device.limits().max_storage_buffer_binding_size / (4 * 512);
+        let chunks = BrickDispatch::new(0, list.len(), per_voxel, budget::LAO_SAMPLES, max_bricks);
+        let mut out_values = vec![1.0f32; dims.iter().product()];
+        if list.is_empty() {
+            return Ok(out_values);
+        }
+        let occupied: Vec<u32> = bricks.occupied.iter().map(|&o| o as u32).collect();
         let alpha = alpha_column(lut);
         let (uniforms, out, readback, group) = validated(device, "Lao::buffers", || {
             let lut_buf = storage_buffer(
@@ -205,21 +286,73 @@ impl LaoGpu {
                 bytemuck::cast_slice(&rays.packed()),
                 wgpu::BufferUsages::empty(),
             );
-            let size = slabs.max_slab_voxels() * 4;
+            let list_buf = storage_buffer(
+                gpu,
+                "Lao::bricks",
+                bytemuck::cast_slice(&list),
+                wgpu::BufferUsages::empty(),
+            );
+            let occupied_buf = storage_buffer(
+                gpu,
+                "Lao::occupied",
+                bytemuck::cast_slice(&occupied),
+                wgpu::BufferUsages::empty(),
+            );
+            let prefix_buf = storage_buffer(
+                gpu,
+                "Lao::readable_prefix",
+                bytemuck::cast_slice(&VoxelTest::prefix_of(bricks.voxels.as_ref())),
+                wgpu::BufferUsages::empty(),
+            );
+            let size = chunks.max_chunk() as u64 * 512 * 4;
             let out = output_buffer(device, "Lao::v_pao", size);
             let readback = readback_buffer(device, "Lao::readback", size);
-            let bound = [&lut_buf, &ray_buf, &out].map(|b| b.as_entire_binding());
+            let bound = [
+                &lut_buf,
+                &ray_buf,
+                &out,
+                &list_buf,
+                &occupied_buf,
+                &prefix_buf,
+            ]
+            .map(|b| b.as_entire_binding());
             let (uniforms, group) =
-                self.0
-                    .sampling_group(gpu, "Lao", &base, vol.volume_view(), &bound);
+                stage.sampling_group(gpu, "Lao", &base, vol.volume_view(), &bound);
             (uniforms, out, readback, group)
         })?;
         let pass = Pass {
-            label: "Lao::slab",
-            pipeline: &self.0.pipeline,
+            label: "Lao::bricks",
+            pipeline: &stage.pipeline,
             bind_groups: &[&group],
             uniforms: &uniforms,
         };
-        slabs.run_readback(gpu, &pass, base, (&out, &readback), progress)
+        chunks.run(
+            gpu,
+            &pass,
+            base,
+            false,
+            |first, count| {
+                let back = read_buffer(device, &readback, pass.label)?;
+                let values: &[f32] = bytemuck::cast_slice(&back);
+                for (slot, &b) in list[first as usize..(first + count) as usize]
+                    .iter()
+                    .enumerate()
+                {
+                    let o = unpack(b).map(|c| c * BRICK);
+                    for (i, &a) in values[slot * 512..(slot + 1) * 512].iter().enumerate() {
+                        let v = [o[0] + i % BRICK, o[1] + (i / BRICK) % BRICK, o[2] + i / 64];
+                        if (0..3).all(|k| v[k] < dims[k]) {
+                            out_values[v[0] + dims[0] * (v[1] + dims[1] * v[2])] = a;
+                        }
+                    }
+                }
+                progress((first + count) as usize, list.len());
+                Ok(())
+            },
+            |encoder, _, count| {
+                encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, count as u64 * 512 * 4);
+            },
+        )?;
+        Ok(out_values)
     }
 }

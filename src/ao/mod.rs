@@ -25,6 +25,7 @@ pub mod filter;
 pub mod lao;
 pub mod rays;
 pub mod settings;
+pub mod sparse;
 pub mod vao;
 
 pub use engine::{Ambient, AoComputed, AoEngine, AoInput, AoRequest};

@@ -29,6 +29,8 @@ pub struct AoInput {
     pub step_voxels: f32,
     /// CAO (the AO stays exact while clip shapes move) instead of an AO volume.
     pub clipping: bool,
+    /// Which voxels LAO and CAO compute.
+    pub coverage: crate::ao::sparse::Coverage,
 }
 
 /// A finished AO computation.
@@ -59,6 +61,7 @@ pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, Strin
         settings,
         step_voxels,
         clipping,
+        coverage,
     } = input;
     let report = |d: usize, t: usize| progress.set(d as u64, t as u64);
     let engine = AoEngine::on(Some(Arc::clone(&gpu)));
@@ -87,6 +90,7 @@ pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, Strin
         tf: &tf,
         settings: &settings,
         clip: None,
+        coverage,
     };
     let computed = engine
         .compute(input, &request, &report)

@@ -117,6 +117,8 @@ fn probe(gpu: &Gpu, tf: &TransferFunction) -> Option<(Duration, usize)> {
         tf,
         settings: &settings,
         clip: None,
+        // What the viewer computes in compositing.
+        coverage: crate::ao::sparse::Coverage::Readable,
     };
     let run = || engine.compute(AoInput::Texels(&texels), &request, &|_, _| {});
     run().ok()?;

@@ -22,6 +22,8 @@ pub(super) struct AoKey {
     pub(super) clipping: bool,
     /// LAO depends on the transfer function's opacity only.
     pub(super) opacity: Vec<crate::tf::OpacityPoint>,
+    /// Which voxels LAO and CAO compute (the render mode and skipping decide).
+    pub(super) coverage: crate::ao::sparse::Coverage,
     pub(super) doc_generation: u64,
 }
 

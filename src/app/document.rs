@@ -75,6 +75,8 @@ pub struct ViewerOptions {
     /// once AO is ready, the first clip shape moves 1 mm every frame for N frames, then the
     /// frame times are printed and the viewer closes.
     pub bench_clip_drag: Option<u64>,
+    /// Every volume opens with every skip off (`--no-skipping`: the naive result).
+    pub no_skipping: bool,
 }
 
 impl Default for ViewerOptions {
@@ -88,6 +90,7 @@ impl Default for ViewerOptions {
             window_size: [1280.0, 800.0],
             clip_resolution: crate::clip::gpu::DEFAULT_RESOLUTION,
             bench_clip_drag: None,
+            no_skipping: false,
         }
     }
 }

@@ -459,7 +459,10 @@ impl Viewer {
                 for w in &loaded.warnings {
                     self.toast(format!("warning: {w}"), false);
                 }
-                let doc = loaded.doc;
+                let mut doc = loaded.doc;
+                if self.options.no_skipping {
+                    doc.render.empty_space_skipping = false;
+                }
                 if doc.downsampled > 0 {
                     self.toast(
                         format!(

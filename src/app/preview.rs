@@ -50,6 +50,7 @@ pub fn compute_preview(
         tf,
         settings: &s,
         clip: None,
+        coverage: crate::ao::sparse::Coverage::Every,
     };
     let computed = AoEngine::on(None)
         .compute(AoInput::Texels(texels), &request, &|_, _| {})

@@ -38,6 +38,7 @@ impl Viewer {
             // CAO and its baseline keep the AO exact under clipping, as in `volao render`.
             clipping: matches!(doc.ao.method, AoMethod::Cao | AoMethod::LaoFull),
             opacity: doc.tf.opacity.clone(),
+            coverage: crate::ao::sparse::Coverage::for_render(&doc.render),
             doc_generation: self.doc_generation,
         })
     }
@@ -149,6 +150,7 @@ impl Viewer {
             settings: doc.ao,
             step_voxels: doc.render.step_voxels,
             clipping: key.clipping,
+            coverage: key.coverage,
         };
         let job = Job::spawn(label, self.repaint_fn(), move |p| compute_ao(input, p));
         self.derived.ao.start(key, job);

@@ -26,6 +26,9 @@ pub struct ClipCamera {
     pub depth_per_mm: f32,
     /// The dilation (carve) or contraction (probe) radius this camera leaves room for, mm.
     pub margin_mm: f32,
+    /// A sphere holding the mesh (shape space): centre and radius, mm.
+    pub bound_centre: Vec3,
+    pub bound_radius: f32,
 }
 
 impl ClipCamera {
@@ -67,6 +70,11 @@ impl ClipCamera {
             Vec4::new(0.0, 0.0, 1.0, 0.0),
             Vec4::new(res as f32 * 0.5, res as f32 * 0.5, 0.0, 1.0),
         );
+        let bound_radius = mesh
+            .vertices
+            .iter()
+            .map(|v| v.distance(centre))
+            .fold(0.0f32, f32::max);
         ClipCamera {
             projection,
             to_map: ndc_to_pixels * projection,
@@ -74,6 +82,8 @@ impl ClipCamera {
             pixels_per_mm: 1.0 / pixel,
             depth_per_mm: 1.0 / depth,
             margin_mm: margin,
+            bound_centre: centre,
+            bound_radius,
         }
     }
 
@@ -83,6 +93,14 @@ impl ClipCamera {
             self.margin_mm * self.pixels_per_mm,
             self.margin_mm * self.depth_per_mm,
         )
+    }
+
+    /// How far from [`Self::bound_centre`] a point the maps call inside or near can lie
+    /// (mm): the mesh's bound, the dilation margin and three pixels for the maps'
+    /// quantisation (a point is looked up in its texel, the kernel measured between
+    /// texel centres).
+    pub fn reach_bound(&self) -> f32 {
+        self.bound_radius + self.margin_mm + 3.0 / self.pixels_per_mm
     }
 
     /// Where a shape-space point lands: (pixel x, pixel y, depth).

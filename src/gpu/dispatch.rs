@@ -305,3 +305,135 @@ mod tests {
         }
     }
 }
+
+/// The uniforms of a brick-list stage: the volume's size, then where this submission's
+/// bricks start in the list, how many there are and the workgroups per row (each
+/// shader's `struct Params` starts with `dims: vec4<u32>, chunk: vec4<u32>`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct BrickChunk {
+    pub dims: [u32; 3],
+    pub _pad: u32,
+    /// First brick of this submission in the list, bricks in it, workgroups per row,
+    /// unused.
+    pub chunk: [u32; 4],
+}
+
+impl BrickChunk {
+    pub fn of(dims: [u32; 3]) -> Self {
+        BrickChunk {
+            dims,
+            _pad: 0,
+            chunk: [0; 4],
+        }
+    }
+}
+
+/// A uniform struct with a `bricks: BrickChunk` field that the dispatcher sets.
+pub trait ChunkParams: bytemuck::Pod {
+    fn set_chunk(&mut self, first: u32, count: u32, row: u32);
+}
+
+macro_rules! chunk_fields {
+    ($params:ty) => {
+        impl $crate::gpu::dispatch::ChunkParams for $params {
+            fn set_chunk(&mut self, first: u32, count: u32, row: u32) {
+                self.bricks.chunk = [first, count, row, 0];
+            }
+        }
+    };
+}
+pub(crate) use chunk_fields;
+
+/// One pass over a list of 8³ bricks (`ao::sparse`): the dispatch size follows the list,
+/// not the volume. A workgroup is 8 × 8 voxels of one brick layer; `[8, row, rows]`
+/// workgroups cover a submission's bricks (layer = x, brick = first + y + z · row), so
+/// that consecutive workgroups work on one brick.
+/// Submissions are cut, like slabs, so that none exceeds the work budget.
+#[derive(Debug, Clone, Copy)]
+pub struct BrickDispatch {
+    /// Where the list starts in the bound brick buffer.
+    offset: u32,
+    bricks: u32,
+    per_submission: u32,
+}
+
+impl BrickDispatch {
+    /// A list of `bricks` bricks of 512 voxels starting at `offset` in the brick buffer,
+    /// with `work_per_voxel` each, at most `budget` per submission (and at most
+    /// `max_bricks`, an output buffer's capacity).
+    pub fn new(
+        offset: usize,
+        bricks: usize,
+        work_per_voxel: u64,
+        budget: u64,
+        max_bricks: u64,
+    ) -> Self {
+        let per = (budget / (512 * work_per_voxel.max(1))).clamp(1, max_bricks.max(1));
+        BrickDispatch {
+            offset: offset as u32,
+            bricks: bricks as u32,
+            per_submission: per.min(u32::MAX as u64) as u32,
+        }
+    }
+
+    /// (first brick in the list, bricks) of each submission.
+    pub fn chunks(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
+        (0..self.bricks)
+            .step_by(self.per_submission.max(1) as usize)
+            .map(move |first| (first, self.per_submission.min(self.bricks - first)))
+    }
+
+    pub fn len(&self) -> u32 {
+        self.bricks
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.bricks == 0
+    }
+
+    /// Bricks in the largest submission.
+    pub fn max_chunk(&self) -> u32 {
+        self.per_submission.min(self.bricks)
+    }
+
+    /// Runs `pass` once per chunk (one submission each) with `base`'s chunk fields set,
+    /// calling `after(encoder, first, count)` in each submission's encoder (to copy its
+    /// output) and `each(first, count)` after submitting it (first counts from the
+    /// list's start). With `wait_between`, waits for each chunk before the next.
+    pub fn run<P: ChunkParams>(
+        &self,
+        gpu: &Gpu,
+        pass: &Pass<'_>,
+        base: P,
+        wait_between: bool,
+        mut each: impl FnMut(u32, u32) -> Result<(), GpuError>,
+        after: impl Fn(&mut wgpu::CommandEncoder, u32, u32),
+    ) -> Result<(), GpuError> {
+        let split = self.bricks > self.per_submission;
+        for (first, count) in self.chunks() {
+            let row = count.clamp(1, MAX_GROUPS);
+            let rows = count.div_ceil(row);
+            let mut p = base;
+            p.set_chunk(self.offset + first, count, row);
+            validated(&gpu.device, pass.label, || {
+                gpu.queue
+                    .write_buffer(pass.uniforms, 0, bytemuck::bytes_of(&p));
+                super::submit_compute_with(
+                    &gpu.device,
+                    &gpu.queue,
+                    pass.label,
+                    pass.pipeline,
+                    pass.bind_groups,
+                    [8, row, rows],
+                    |encoder| after(encoder, first, count),
+                );
+            })?;
+            if wait_between && split {
+                super::wait(&gpu.device, pass.label, super::WAIT)?;
+            }
+            each(first, count)?;
+        }
+        Ok(())
+    }
+}

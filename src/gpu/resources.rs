@@ -136,7 +136,17 @@ pub struct ComputeStage {
 impl ComputeStage {
     /// Builds `shader`'s pipeline, labelled `"{name}::pipeline"`.
     pub fn new(device: &wgpu::Device, name: &str, shader: &str) -> Result<Self, GpuError> {
-        let module = super::shaders::module(device, shader)?;
+        Self::edited(device, name, shader, |code| code)
+    }
+
+    /// The same from `shader`'s source with `edit` applied (a specialisation).
+    pub fn edited(
+        device: &wgpu::Device,
+        name: &str,
+        shader: &str,
+        edit: impl Fn(String) -> String,
+    ) -> Result<Self, GpuError> {
+        let module = super::shaders::module_with(device, shader, edit)?;
         validated(device, &format!("{name}::new"), || ComputeStage {
             pipeline: compute_pipeline(device, &format!("{name}::pipeline"), &module, "main", None),
             sampler: linear_sampler(device, &format!("{name}::linear_clamp")),
@@ -528,7 +538,7 @@ pub fn texture_readback(
     (buffer, row)
 }
 
-/// Reads an `R32Float` texture (2-D array or 3-D; `size` = width, height, layers/depth)
+/// Reads an `R32Float` or `R16Float` texture (2-D array or 3-D; `size` = width, height, layers/depth)
 /// back as f32 values, x fastest, then y, then layer.
 pub fn read_texture_f32(
     gpu: &Gpu,
@@ -537,8 +547,9 @@ pub fn read_texture_f32(
     stage: &str,
 ) -> Result<Vec<f32>, GpuError> {
     let device = &gpu.device;
+    let half = texture.format() == wgpu::TextureFormat::R16Float;
     let (readback, row) = validated(device, stage, || {
-        let (readback, row) = texture_readback(device, stage, size, 4);
+        let (readback, row) = texture_readback(device, stage, size, if half { 2 } else { 4 });
         let mut encoder =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(stage) });
         copy_texture_out(&mut encoder, texture, &readback, row, size);
@@ -546,7 +557,14 @@ pub fn read_texture_f32(
         (readback, row)
     })?;
     let bytes = read_buffer(device, &readback, stage)?;
-    Ok(unpad::<f32>(&bytes, row, size[0]))
+    Ok(if half {
+        unpad::<u16>(&bytes, row, size[0])
+            .into_iter()
+            .map(|h| half::f16::from_bits(h).to_f32())
+            .collect()
+    } else {
+        unpad::<f32>(&bytes, row, size[0])
+    })
 }
 
 /// A render pipeline that draws triangles from one vertex buffer with `module`'s `vs`

@@ -17,6 +17,7 @@ macro_rules! shader {
 pub const SOURCES: &[(&str, &str)] = &[
     shader!("ambient_maps.wgsl"),
     shader!("box_stats.wgsl"),
+    shader!("bricks.wgsl"),
     shader!("cao_clip.wgsl"),
     shader!("cao_lao.wgsl"),
     shader!("clip_common.wgsl"),
@@ -25,8 +26,10 @@ pub const SOURCES: &[(&str, &str)] = &[
     shader!("common.wgsl"),
     shader!("cone.wgsl"),
     shader!("lao.wgsl"),
+    shader!("lao_ray.wgsl"),
     shader!("light.wgsl"),
     shader!("raycast.wgsl"),
+    shader!("readable.wgsl"),
     shader!("smoke.wgsl"),
     shader!("viewport.wgsl"),
     shader!("surface.wgsl"),
@@ -85,6 +88,22 @@ fn include(
 /// Creates a shader module from an embedded shader, failing on validation errors.
 pub fn module(device: &wgpu::Device, name: &str) -> Result<wgpu::ShaderModule, GpuError> {
     let code = source(name)?;
+    super::validated(device, name, || {
+        device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(name),
+            source: wgpu::ShaderSource::Wgsl(code.into()),
+        })
+    })
+}
+
+/// The shader `name` with `edit` applied to its resolved source (a storage format
+/// chosen for the adapter, say).
+pub fn module_with(
+    device: &wgpu::Device,
+    name: &str,
+    edit: impl Fn(String) -> String,
+) -> Result<wgpu::ShaderModule, GpuError> {
+    let code = edit(source(name)?);
     super::validated(device, name, || {
         device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(name),

@@ -320,6 +320,11 @@ impl GpuVolume {
         quantised.iter().map(|&q| q as f32 / 65535.0).collect()
     }
 
+    /// Per-block texel ranges (the occupancy grid's and sparse AO's source).
+    pub fn ranges(&self) -> &BlockRanges {
+        &self.ranges
+    }
+
     /// The occupancy grid for the current LUT (for the CPU twin).
     pub fn occupancy(&self) -> Vec<u8> {
         self.ranges.occupancy(&self.texels, &self.lut)

@@ -190,6 +190,7 @@ fn render_gpu(
         tf,
         settings: ao,
         clip: Some(clip),
+        coverage: crate::ao::sparse::Coverage::for_render(&frame.settings),
     };
     let computed = engine.compute(AoInput::Uploaded(&vol), &request, progress)?;
     let mut clip_errors = Vec::new();
@@ -260,6 +261,7 @@ fn render_cpu(
         tf,
         settings: ao,
         clip: None,
+        coverage: crate::ao::sparse::Coverage::for_render(&frame.settings),
     };
     // The GPU keeps AO volumes as f32 (R32Float), so the twin uses them as computed.
     let computed = AoEngine::on(None).compute(AoInput::Texels(&texels), &request, progress)?;

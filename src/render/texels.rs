@@ -315,6 +315,12 @@ pub struct BlockRanges {
 
 impl BlockRanges {
     pub fn new(texels: &VolumeTexels) -> Self {
+        Self::with_apron(texels, 1)
+    }
+
+    /// Ranges over each block widened by `apron` voxels: 1 is what a trilinear sample
+    /// needs ([`Self::new`]); tests use 0 to show that exactness rests on it.
+    pub fn with_apron(texels: &VolumeTexels, apron: usize) -> Self {
         use rayon::prelude::*;
         let dims = texels.dims;
         let grid: [usize; 3] = std::array::from_fn(|i| dims[i].div_ceil(BLOCK));
@@ -322,9 +328,9 @@ impl BlockRanges {
             .into_par_iter()
             .map(|b| {
                 let bi = crate::volume::voxel_of(b, grid);
-                let lo: [usize; 3] = std::array::from_fn(|i| (bi[i] * BLOCK).saturating_sub(1));
+                let lo: [usize; 3] = std::array::from_fn(|i| (bi[i] * BLOCK).saturating_sub(apron));
                 let hi: [usize; 3] =
-                    std::array::from_fn(|i| ((bi[i] + 1) * BLOCK + 1).min(dims[i]));
+                    std::array::from_fn(|i| ((bi[i] + 1) * BLOCK + apron).min(dims[i]));
                 let (mut mn, mut mx) = (f32::INFINITY, f32::NEG_INFINITY);
                 for z in lo[2]..hi[2] {
                     for y in lo[1]..hi[1] {

@@ -3,6 +3,7 @@
 use crate::args::AoArgs;
 use crate::progress::{load_with_bar, slice_bar};
 use anyhow::{Context, Result, bail};
+use volao::ao::sparse::Coverage;
 use volao::ao::{Ambient, AoEngine, AoInput, AoRequest};
 use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::volume::{self, Volume, fmt_dims};
@@ -51,6 +52,11 @@ pub fn run(args: &AoArgs) -> Result<()> {
         tf: &tf,
         settings: &precomputed,
         clip: Some(&clip),
+        coverage: if args.visible_only {
+            Coverage::Readable
+        } else {
+            Coverage::Every
+        },
     };
     let computed = engine.compute(AoInput::Texels(&texels), &request, &|done, total| {
         bar.set_length(total as u64);

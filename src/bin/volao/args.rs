@@ -43,6 +43,10 @@ pub struct ViewArgs {
     /// Window size in points, e.g. 1280x800.
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     pub size: Option<[f32; 2]>,
+    /// Turn off every skip in the ray caster, LAO and CAO (the naive result; see
+    /// `volao render --help`).
+    #[arg(long)]
+    pub no_skipping: bool,
     #[command(flatten)]
     pub load: LoadArgs,
 }
@@ -138,6 +142,11 @@ pub struct RenderArgs {
     /// Volumetric shadows from a directional light (see --light).
     #[arg(long)]
     pub shadows: bool,
+    /// Turn off every skip (empty space in the ray caster; unreadable bricks, empty
+    /// samples and bricks far from the clip shapes in LAO and CAO): the naive result,
+    /// which the skips never change.
+    #[arg(long)]
+    pub no_skipping: bool,
     /// Directional light: the direction towards the light in volume space (RAS: x to the
     /// patient's left, y anterior, z superior), e.g. -0.5,0.6,0.62.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_light, allow_hyphen_values = true)]
@@ -420,6 +429,11 @@ pub struct AoArgs {
     /// Compute on the CPU twin instead of the GPU.
     #[arg(long)]
     pub cpu: bool,
+    /// LAO, CAO and lao-full: compute only the voxels a composite rendering with this
+    /// transfer function can read (much faster on sparse data); the others are written
+    /// as 1. Without it every voxel is computed.
+    #[arg(long)]
+    pub visible_only: bool,
     #[command(flatten)]
     pub load: LoadArgs,
 }

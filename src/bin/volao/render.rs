@@ -208,6 +208,9 @@ impl RenderArgs {
             settings.step_voxels = step;
         }
         settings.shadows |= self.shadows;
+        if self.no_skipping {
+            settings.empty_space_skipping = false;
+        }
         Ok(())
     }
 

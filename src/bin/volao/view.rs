@@ -29,6 +29,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         screenshot: args.screenshot.clone(),
         exit_after_frames: args.exit_after_frames,
         bench_clip_drag: args.bench_clip_drag,
+        no_skipping: args.no_skipping,
         ..Default::default()
     };
     if let Some(size) = args.size {

@@ -1,5 +1,13 @@
 //! `volao bench cao`: the CAO paper's evaluation (Titov et al. §4, Tables 2–4, Fig. 10)
-//! with a clip shape moving along a fixed path every frame.
+//! with a clip shape moving along a fixed path every frame, for three methods measured
+//! side by side in one run:
+//!
+//! - `lao-every-frame`: the paper's baseline, dense (every voxel and sample);
+//! - `cao-paper`: the paper's CAO, dense step IV and V;
+//! - `cao`: sparse CAO (issue #15, `volao::ao::sparse`), what rendering runs.
+//!
+//! Every frame of every method is rendered and compared with `lao-every-frame`'s image
+//! of the same pose: `differing_pixels` must be 0.
 
 use anyhow::Result;
 use glam::Vec3;
@@ -8,6 +16,7 @@ use std::time::Instant;
 use volao::ao::cao::{CaoGpu, CaoMode, CaoStats};
 use volao::ao::lao::Rays;
 use volao::ao::rays::RaySet;
+use volao::ao::sparse::Coverage;
 use volao::clip::{ClipShape, Shape};
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::texels::{UploadLimits, VolumeTexels};
@@ -20,9 +29,9 @@ pub struct CaoBenchArgs {
     /// The shared data folder.
     #[arg(long, default_value = "../shared/data")]
     pub data: PathBuf,
-    /// Largest volume side: volumes are halved until they fit (the paper's full sizes
-    /// take minutes per frame on a CPU driver; use 512 on a real GPU).
-    #[arg(long, default_value_t = 128)]
+    /// Largest volume side for Tables 3–4: volumes are halved until they fit (256 keeps
+    /// the Engine at its full 256×256×110).
+    #[arg(long, default_value_t = 256)]
     pub max_dim: usize,
     /// Largest volume side for Table 2 (percent recomputed does not depend on the ray
     /// count, so it runs with 6 rays at the paper's sizes).
@@ -37,10 +46,129 @@ pub struct CaoBenchArgs {
     /// Depth/dilation map size.
     #[arg(long, default_value_t = volao::clip::gpu::DEFAULT_RESOLUTION)]
     pub clip_resolution: u32,
+    /// Ray patterns of Table 3, a comma list (6, 14, 26, 54).
+    #[arg(long, value_delimiter = ',', default_value = "6,14,26,54", value_parser = crate::args::parse_rays)]
+    pub rays: Vec<RaySet>,
+    /// Scenes of Tables 3 (a comma list of engine, lobster, cranium); Table 4 runs on
+    /// the Engine when it is listed.
+    #[arg(long, value_delimiter = ',', default_value = "engine,lobster,cranium")]
+    pub scenes: Vec<String>,
+    /// The tables to run, a comma list of 2, 3, 4.
+    #[arg(long, value_delimiter = ',', default_value = "2,3,4")]
+    pub tables: Vec<u32>,
+    /// One JSON object per line instead of markdown tables.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// The paper's Table 3 speedups for the Engine (6, 14, 26, 54 rays).
-const PAPER_SPEEDUP: [f64; 4] = [1.66, 2.29, 2.95, 3.79];
+fn paper_speedup(set: RaySet) -> Option<f64> {
+    match set {
+        RaySet::Six => Some(1.66),
+        RaySet::Fourteen => Some(2.29),
+        RaySet::TwentySix => Some(2.95),
+        RaySet::FiftyFour => Some(3.79),
+        _ => None,
+    }
+}
+
+/// The three methods, in the order they run each frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Method {
+    LaoEveryFrame,
+    CaoPaper,
+    Cao,
+}
+
+impl Method {
+    const ALL: [Method; 3] = [Method::LaoEveryFrame, Method::CaoPaper, Method::Cao];
+
+    fn name(self) -> &'static str {
+        match self {
+            Method::LaoEveryFrame => "lao-every-frame",
+            Method::CaoPaper => "cao-paper",
+            Method::Cao => "cao",
+        }
+    }
+
+    fn mode(self) -> CaoMode {
+        match self {
+            Method::LaoEveryFrame => CaoMode::Full,
+            _ => CaoMode::Selective,
+        }
+    }
+
+    fn coverage(self) -> Coverage {
+        match self {
+            Method::Cao => Coverage::Readable,
+            _ => Coverage::Dense,
+        }
+    }
+}
+
+struct Scene {
+    key: &'static str,
+    name: &'static str,
+    file: &'static str,
+    raw: RawOverrides,
+    shape: &'static str,
+    samples: u32,
+    paper_percent: f64,
+}
+
+fn scenes() -> [Scene; 3] {
+    let cranium_raw = RawOverrides {
+        dims: Some([256, 256, 108]),
+        ty: Some(VoxelType::I16),
+        endian: Some(volume::Endian::Little),
+        spacing: Some([0.957031, 0.957031, 1.5]),
+        offset: None,
+    };
+    [
+        Scene {
+            key: "engine",
+            name: "Engine",
+            file: "raw/engine.raw",
+            raw: RawOverrides::default(),
+            shape: "sphere",
+            samples: 20,
+            paper_percent: 14.94,
+        },
+        Scene {
+            key: "lobster",
+            name: "Lobster (paper: Beetle)",
+            file: "pvm/Lobster.pvm",
+            raw: RawOverrides::default(),
+            shape: "cube",
+            samples: 40,
+            paper_percent: 20.24,
+        },
+        Scene {
+            key: "cranium",
+            name: "Cranium CT (paper: Skeleton)",
+            file: "raw/cranium-ct.raw",
+            raw: cranium_raw,
+            shape: "rectangular prism",
+            samples: 50,
+            paper_percent: 16.13,
+        },
+    ]
+}
+
+impl Scene {
+    /// The scene's clip shape at rest, sized for a volume of half-extent `half`.
+    fn base_shape(&self, half: Vec3) -> ClipShape {
+        let r = half.min_element();
+        match self.key {
+            "engine" => ClipShape::new(Shape::Sphere, Vec3::ZERO, r * 0.45),
+            "lobster" => ClipShape::new(Shape::Box, Vec3::ZERO, r * 0.4),
+            _ => ClipShape {
+                scale: [r * 0.35, r * 0.6, r * 0.3],
+                ..ClipShape::new(Shape::Box, Vec3::ZERO, 1.0)
+            },
+        }
+    }
+}
 
 struct Bench {
     gpu: volao::gpu::Gpu,
@@ -51,10 +179,11 @@ struct Bench {
     resolution: u32,
 }
 
-/// A frame's figures: CAO stats and the render time.
+/// A frame's figures: CAO stats, the render time and the image.
 struct Timed {
     stats: CaoStats,
     render_seconds: f64,
+    pixels: Vec<[u8; 4]>,
 }
 
 impl Timed {
@@ -96,7 +225,7 @@ impl Bench {
         })
     }
 
-    fn cao(&self, set: RaySet, samples: u32) -> Result<CaoGpu> {
+    fn cao(&self, set: RaySet, samples: u32, coverage: Coverage) -> Result<CaoGpu> {
         Ok(CaoGpu::new(
             &self.gpu,
             &self.vol,
@@ -104,6 +233,7 @@ impl Bench {
             &Rays::uniform(set.directions()),
             samples,
             volao::ao::cao::DEFAULT_MSAA,
+            coverage.bricks(&self.vol.texels, self.vol.ranges(), &self.tf),
             &|_, _| {},
         )?)
     }
@@ -121,21 +251,27 @@ impl Bench {
         )?;
         self.vol.set_ambient_occlusion_view(cao.ao_view());
         let start = Instant::now();
-        self.rc
+        let image = self
+            .rc
             .render(&self.gpu, &self.vol, &self.frame, Some(&cao.clip))?;
         Ok(Timed {
             stats,
             render_seconds: start.elapsed().as_secs_f64(),
+            pixels: image.pixels,
         })
     }
 
     fn half(&self) -> Vec3 {
         Vec3::from(self.vol.texels.extent()) * 0.5
     }
+
+    fn dims(&self) -> [usize; 3] {
+        self.vol.texels.dims
+    }
 }
 
-/// The shape of scene `i` at frame `k` of `n`: it travels along a fixed arc through
-/// the volume, so every frame clips a different region.
+/// The shape at frame `k` of `n`: it travels along a fixed arc through the volume, so
+/// every frame clips a different region.
 fn moving(shape: &ClipShape, half: Vec3, k: usize, n: usize) -> ClipShape {
     let t = k as f32 / n.max(1) as f32;
     let angle = std::f32::consts::TAU * t * 0.5;
@@ -151,68 +287,138 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
     sum / n.max(1) as f64
 }
 
+fn differing(a: &[[u8; 4]], b: &[[u8; 4]]) -> usize {
+    a.iter().zip(b).filter(|(x, y)| x != y).count() + a.len().abs_diff(b.len())
+}
+
+/// One method's frames of one configuration.
+struct Run {
+    method: Method,
+    frames: Vec<Timed>,
+    differing_pixels: usize,
+}
+
+impl Run {
+    fn mean_ms(&self) -> f64 {
+        mean(self.frames.iter().map(Timed::total_ms))
+    }
+
+    fn percent(&self) -> f64 {
+        mean(self.frames.iter().map(|t| match self.method {
+            // The paper's count: category b over the whole volume.
+            Method::CaoPaper => 100.0 * t.stats.category_b as f64 / t.stats.voxels as f64,
+            _ => t.stats.percent_recomputed(),
+        }))
+    }
+
+    /// Percent of the voxels steps IV and V visited.
+    fn visited(&self) -> [f64; 2] {
+        let pct = |f: &dyn Fn(&CaoStats) -> u64| {
+            mean(
+                self.frames
+                    .iter()
+                    .map(|t| 100.0 * f(&t.stats) as f64 / t.stats.voxels as f64),
+            )
+        };
+        [pct(&|s| s.clip_voxels), pct(&|s| s.lao_voxels)]
+    }
+
+    fn stage_ms(&self, f: impl Fn(&Timed) -> f64) -> f64 {
+        mean(self.frames.iter().map(|t| f(t) * 1e3))
+    }
+}
+
+/// The three methods over `frames` poses of `shapes_at`, side by side: per pose,
+/// `lao-every-frame` first (the reference image), then the others.
+fn compare(
+    b: &mut Bench,
+    set: RaySet,
+    samples: u32,
+    methods: &[Method],
+    frames: usize,
+    shapes_at: &dyn Fn(usize) -> Vec<ClipShape>,
+) -> Result<Vec<Run>> {
+    let mut caos = Vec::new();
+    for &m in methods {
+        let mut cao = b.cao(set, samples, m.coverage())?;
+        // A warm-up frame compiles pipelines and builds the clip maps.
+        b.frame(&mut cao, &shapes_at(0), m.mode())?;
+        caos.push(cao);
+    }
+    let mut runs: Vec<Run> = methods
+        .iter()
+        .map(|&method| Run {
+            method,
+            frames: Vec::new(),
+            differing_pixels: 0,
+        })
+        .collect();
+    for k in 0..frames {
+        let shapes = shapes_at(k);
+        let mut reference: Option<Vec<[u8; 4]>> = None;
+        for (run, cao) in runs.iter_mut().zip(&mut caos) {
+            let t = b.frame(cao, &shapes, run.method.mode())?;
+            match &reference {
+                None => reference = Some(t.pixels.clone()),
+                Some(r) => run.differing_pixels += differing(r, &t.pixels),
+            }
+            run.frames.push(t);
+        }
+    }
+    Ok(runs)
+}
+
 /// `volao bench cao`.
 pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
     let adapter = volao::gpu::request_device()?.describe();
-    println!("adapter: {adapter}");
-    let load = |rel: &str, raw: RawOverrides| -> Result<volume::Volume> {
+    let json = args.json;
+    let emit = |value: serde_json::Value| {
+        println!("{value}");
+    };
+    if !json {
+        println!("adapter: {adapter}");
+        println!(
+            "Table 2 at up to {} voxels a side, Tables 3–4 at up to {}; {} frames per configuration, {}² images, {}² clip maps",
+            args.table2_max_dim, args.max_dim, args.frames, args.size, args.clip_resolution
+        );
+    }
+    let load = |s: &Scene| -> Result<volume::Volume> {
         Ok(volume::load(
-            &args.data.join(rel),
+            &args.data.join(s.file),
             &LoadOptions {
-                raw,
+                raw: s.raw.clone(),
                 ..Default::default()
             },
         )?
         .volume
         .to_ras())
     };
-    let cranium_raw = RawOverrides {
-        dims: Some([256, 256, 108]),
-        ty: Some(VoxelType::I16),
-        endian: Some(volume::Endian::Little),
-        spacing: Some([0.957031, 0.957031, 1.5]),
-        offset: None,
-    };
-    let scenes = [
-        (
-            "Engine",
-            "raw/engine.raw",
-            RawOverrides::default(),
-            Shape::Sphere,
-            20u32,
-            14.94,
-        ),
-        (
-            "Lobster (paper: Beetle)",
-            "pvm/Lobster.pvm",
-            RawOverrides::default(),
-            Shape::Box,
-            40,
-            20.24,
-        ),
-        (
-            "Cranium CT (paper: Skeleton)",
-            "raw/cranium-ct.raw",
-            cranium_raw,
-            Shape::Box,
-            50,
-            16.13,
-        ),
-    ];
-    println!(
-        "Table 2 at up to {} voxels a side, Tables 3–4 halved to at most {}; {} frames per configuration, {}² images, {}² clip maps",
-        args.table2_max_dim, args.max_dim, args.frames, args.size, args.clip_resolution
-    );
+    let chosen: Vec<Scene> = scenes()
+        .into_iter()
+        .filter(|s| args.scenes.iter().any(|k| k == s.key))
+        .collect();
+    if chosen.is_empty() {
+        anyhow::bail!(
+            "--scenes {:?}: none of engine, lobster, cranium",
+            args.scenes
+        );
+    }
 
     // Table 2: percent of voxels recomputed (independent of the ray count).
-    println!("\n### Table 2: voxels recomputed per frame\n");
-    println!(
-        "| scene | dims | samples per ray | clip shape | % recomputed (volao, mean of frames) | % (paper) |"
-    );
-    println!("|---|---|---|---|---|---|");
-    let mut engine_bench = None;
-    for (name, rel, raw, shape, samples, paper) in scenes {
-        let volume = load(rel, raw)?;
+    let table2: &[Scene] = if args.tables.contains(&2) {
+        &chosen
+    } else {
+        &[]
+    };
+    if !json && !table2.is_empty() {
+        println!("\n### Table 2: voxels recomputed per frame\n");
+        println!(
+            "| scene | dims | samples per ray | clip shape | % recomputed, paper's count (cao-paper) | % ray cast by sparse cao | % (paper) |"
+        );
+        println!("|---|---|---|---|---|---|---|");
+    }
+    for s in table2 {
+        let volume = load(s)?;
         let mut b = Bench::new(
             volao::gpu::request_device()?,
             &volume,
@@ -220,145 +426,192 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
             args.size,
             args.clip_resolution,
         )?;
-        let half = b.half();
-        let r = half.min_element();
-        let base = match shape {
-            Shape::Sphere => ClipShape::new(Shape::Sphere, Vec3::ZERO, r * 0.45),
-            _ if name.starts_with("Lobster") => ClipShape::new(Shape::Box, Vec3::ZERO, r * 0.4),
-            _ => ClipShape {
-                scale: [r * 0.35, r * 0.6, r * 0.3],
-                ..ClipShape::new(Shape::Box, Vec3::ZERO, 1.0)
-            },
-        };
-        let mut cao = b.cao(RaySet::Six, samples)?;
-        let mut pct = Vec::new();
-        for k in 0..args.frames {
-            let t = b.frame(
-                &mut cao,
-                &[moving(&base, half, k, args.frames)],
-                CaoMode::Selective,
-            )?;
-            pct.push(t.stats.percent_recomputed());
-        }
-        println!(
-            "| {name} | {:?} | {samples} | {} | {:.2} | {paper} |",
-            b.vol.texels.dims,
-            if shape == Shape::Sphere {
-                "sphere"
-            } else if name.starts_with("Lobster") {
-                "cube"
-            } else {
-                "rectangular prism"
-            },
-            mean(pct.into_iter())
-        );
-        if name == "Engine" {
-            let b = Bench::new(
-                volao::gpu::request_device()?,
-                &volume,
-                args.max_dim,
-                args.size,
-                args.clip_resolution,
-            )?;
-            let r = b.half().min_element();
-            engine_bench = Some((b, ClipShape::new(Shape::Sphere, Vec3::ZERO, r * 0.45)));
-        }
-    }
-    let Some((mut b, base)) = engine_bench else {
-        anyhow::bail!("the engine scene did not run");
-    };
-    let half = b.half();
-
-    // Table 3: LAO every frame vs CAO, and Fig. 10's stages.
-    println!(
-        "\n### Table 3: mean frame time, LAO every frame vs CAO (Engine, 20 samples per ray)\n"
-    );
-    println!(
-        "| rays | LAO every frame (ms) | CAO (ms) | speedup (volao) | speedup (paper) | CAO stages: clip + mask / ray cast / render (ms) | LAO: ray cast (ms) |"
-    );
-    println!("|---|---|---|---|---|---|---|");
-    let mut memory = 0;
-    for (i, set) in [
-        RaySet::Six,
-        RaySet::Fourteen,
-        RaySet::TwentySix,
-        RaySet::FiftyFour,
-    ]
-    .into_iter()
-    .enumerate()
-    {
-        let mut cao = b.cao(set, 20)?;
-        memory = cao.bytes_per_voxel();
-        let mut full = Vec::new();
-        let mut sel = Vec::new();
-        // One warm-up frame each compiles pipelines and builds the clip maps.
-        b.frame(
-            &mut cao,
-            &[moving(&base, half, 0, args.frames)],
-            CaoMode::Full,
+        let (half, frames) = (b.half(), args.frames);
+        let base = s.base_shape(half);
+        let runs = compare(
+            &mut b,
+            RaySet::Six,
+            s.samples,
+            &[Method::CaoPaper, Method::Cao],
+            frames,
+            &|k| vec![moving(&base, half, k, frames)],
         )?;
-        for k in 0..args.frames {
-            let shapes = [moving(&base, half, k, args.frames)];
-            full.push(b.frame(&mut cao, &shapes, CaoMode::Full)?);
-            sel.push(b.frame(&mut cao, &shapes, CaoMode::Selective)?);
+        let (paper_count, sparse) = (runs[0].percent(), runs[1].percent());
+        if json {
+            emit(serde_json::json!({
+                "table": 2, "scene": s.key, "dims": b.dims(), "samples": s.samples,
+                "shape": s.shape, "frames": frames,
+                "percent_recomputed": paper_count, "percent_ray_cast_sparse": sparse,
+                "paper_percent": s.paper_percent, "differing_pixels": runs[1].differing_pixels,
+                "adapter": adapter,
+            }));
+        } else {
+            println!(
+                "| {} | {:?} | {} | {} | {paper_count:.2} | {sparse:.2} | {} |",
+                s.name,
+                b.dims(),
+                s.samples,
+                s.shape,
+                s.paper_percent
+            );
         }
-        let f = mean(full.iter().map(Timed::total_ms));
-        let c = mean(sel.iter().map(Timed::total_ms));
+    }
+
+    // Table 3: the three methods per ray count, with Fig. 10's stages.
+    let mut memory = Vec::new();
+    for s in &chosen {
+        let volume = load(s)?;
+        let mut b = Bench::new(
+            volao::gpu::request_device()?,
+            &volume,
+            args.max_dim,
+            args.size,
+            args.clip_resolution,
+        )?;
+        let (half, frames) = (b.half(), args.frames);
+        let base = s.base_shape(half);
+        let rays: &[RaySet] = if args.tables.contains(&3) {
+            &args.rays
+        } else {
+            &[]
+        };
+        if !json && !rays.is_empty() {
+            println!(
+                "\n### Table 3: mean frame time, {} {:?}, {} samples per ray\n",
+                s.name,
+                b.dims(),
+                s.samples
+            );
+            println!(
+                "| rays | method | mean frame (ms) | speedup over lao-every-frame | paper's CAO speedup | clip + mask / ray cast / render (ms) | % visited by clip + mask / ray cast | % ray cast | differing pixels |"
+            );
+            println!("|---|---|---|---|---|---|---|---|---|");
+        }
+        for &set in rays {
+            let runs = compare(&mut b, set, s.samples, &Method::ALL, frames, &|k| {
+                vec![moving(&base, half, k, frames)]
+            })?;
+            let reference = runs[0].mean_ms();
+            for run in &runs {
+                let stages = serde_json::json!({
+                    "clip_mask": run.stage_ms(|t| t.stats.clip_seconds),
+                    "ray_cast": run.stage_ms(|t| t.stats.lao_seconds),
+                    "render": run.stage_ms(|t| t.render_seconds),
+                });
+                if json {
+                    emit(serde_json::json!({
+                        "table": 3, "scene": s.key, "dims": b.dims(),
+                        "rays": set.directions().len(), "samples": s.samples,
+                        "method": run.method.name(), "frames": frames,
+                        "mean_frame_ms": run.mean_ms(), "stages_ms": stages,
+                        "percent_recomputed": run.percent(),
+                        "percent_visited": {"clip_mask": run.visited()[0], "ray_cast": run.visited()[1]},
+                        "speedup_over_lao_every_frame": reference / run.mean_ms(),
+                        "differing_pixels": run.differing_pixels, "adapter": adapter,
+                    }));
+                } else {
+                    let paper = match (run.method, paper_speedup(set), s.key) {
+                        (Method::CaoPaper, Some(p), "engine") => format!("{p}"),
+                        _ => String::new(),
+                    };
+                    let [clip, lao] = run.visited();
+                    println!(
+                        "| {} | {} | {:.0} | {:.2} | {paper} | {:.0} / {:.0} / {:.0} | {clip:.1} / {lao:.1} | {:.2} | {} |",
+                        set.name(),
+                        run.method.name(),
+                        run.mean_ms(),
+                        reference / run.mean_ms(),
+                        run.stage_ms(|t| t.stats.clip_seconds),
+                        run.stage_ms(|t| t.stats.lao_seconds),
+                        run.stage_ms(|t| t.render_seconds),
+                        run.percent(),
+                        run.differing_pixels
+                    );
+                }
+            }
+        }
+        memory.push((
+            s.key,
+            b.cao(RaySet::Six, 1, Coverage::Readable)?.bytes_per_voxel(),
+        ));
+
+        // Table 4: one vs two meshes (Engine, 26 rays).
+        if s.key != "engine" || !args.tables.contains(&4) {
+            continue;
+        }
+        let second = ClipShape {
+            scale: [half.min_element() * 0.3; 3],
+            ..ClipShape::new(Shape::Box, Vec3::new(-half.x * 0.5, half.y * 0.4, 0.0), 1.0)
+        };
+        if !json {
+            println!("\n### Table 4: one vs two clip meshes (Engine, 26 rays)\n");
+            println!(
+                "| meshes | method | mean frame (ms) | % ray cast | slowdown | differing pixels |"
+            );
+            println!("|---|---|---|---|---|---|");
+        }
+        let methods = Method::ALL;
+        let one = compare(
+            &mut b,
+            RaySet::TwentySix,
+            s.samples,
+            &methods,
+            frames,
+            &|k| vec![moving(&base, half, k, frames)],
+        )?;
+        let two = compare(
+            &mut b,
+            RaySet::TwentySix,
+            s.samples,
+            &methods,
+            frames,
+            &|k| vec![moving(&base, half, k, frames), second.clone()],
+        )?;
+        for (meshes, runs) in [(1, &one), (2, &two)] {
+            for (run, single) in runs.iter().zip(&one) {
+                let slowdown = run.mean_ms() / single.mean_ms() - 1.0;
+                if json {
+                    emit(serde_json::json!({
+                        "table": 4, "scene": s.key, "dims": b.dims(), "rays": 26,
+                        "meshes": meshes, "method": run.method.name(), "frames": frames,
+                        "mean_frame_ms": run.mean_ms(), "percent_recomputed": run.percent(),
+                        "slowdown": slowdown, "differing_pixels": run.differing_pixels,
+                        "adapter": adapter,
+                    }));
+                } else {
+                    println!(
+                        "| {meshes} | {} | {:.0} | {:.2} | {} | {} |",
+                        run.method.name(),
+                        run.mean_ms(),
+                        run.percent(),
+                        if meshes == 2 {
+                            format!("{:+.0} % (paper: 8–16 %)", slowdown * 100.0)
+                        } else {
+                            String::new()
+                        },
+                        run.differing_pixels
+                    );
+                }
+            }
+        }
+    }
+
+    if !json {
+        let maps =
+            volao::clip::gpu::LAYERS_PER_SHAPE as u64 * 4 * (args.clip_resolution as u64).pow(2);
+        for (scene, bytes) in memory {
+            println!(
+                "\nGPU memory ({scene}): {bytes} B per voxel for CAO (V_o, V_m, V_PAO, V_AO) plus the density V \
+                 (the paper keeps 5 full-size volumes); clip maps {:.0} MiB per shape ({} layers of {}² f32).",
+                maps as f64 / (1 << 20) as f64,
+                volao::clip::gpu::LAYERS_PER_SHAPE,
+                args.clip_resolution
+            );
+        }
         println!(
-            "| {} | {f:.0} | {c:.0} | {:.2} | {} | {:.0} / {:.0} / {:.0} | {:.0} |",
-            set.name(),
-            f / c,
-            PAPER_SPEEDUP[i],
-            mean(sel.iter().map(|t| t.stats.clip_seconds * 1e3)),
-            mean(sel.iter().map(|t| t.stats.lao_seconds * 1e3)),
-            mean(sel.iter().map(|t| t.render_seconds * 1e3)),
-            mean(full.iter().map(|t| t.stats.lao_seconds * 1e3)),
+            "Times are wall-clock per stage with a wait after each, on {adapter}; differing pixels \
+             compare every frame's image with lao-every-frame's."
         );
     }
-
-    // Table 4: one vs two meshes.
-    println!("\n### Table 4: one vs two clip meshes (Engine, CAO, 26 rays)\n");
-    println!("| meshes | mean frame (ms) | % recomputed | slowdown |");
-    println!("|---|---|---|---|");
-    let mut cao = b.cao(RaySet::TwentySix, 20)?;
-    let second = ClipShape {
-        scale: [half.min_element() * 0.3; 3],
-        ..ClipShape::new(Shape::Box, Vec3::new(-half.x * 0.5, half.y * 0.4, 0.0), 1.0)
-    };
-    b.frame(
-        &mut cao,
-        &[base.clone(), second.clone()],
-        CaoMode::Selective,
-    )?;
-    let mut one = Vec::new();
-    let mut two = Vec::new();
-    for k in 0..args.frames {
-        let first = moving(&base, half, k, args.frames);
-        one.push(b.frame(&mut cao, std::slice::from_ref(&first), CaoMode::Selective)?);
-        two.push(b.frame(&mut cao, &[first, second.clone()], CaoMode::Selective)?);
-    }
-    let t1 = mean(one.iter().map(Timed::total_ms));
-    let t2 = mean(two.iter().map(Timed::total_ms));
-    println!(
-        "| 1 | {t1:.0} | {:.2} | |",
-        mean(one.iter().map(|t| t.stats.percent_recomputed()))
-    );
-    println!(
-        "| 2 | {t2:.0} | {:.2} | {:+.0} % (paper: 8–16 %) |",
-        mean(two.iter().map(|t| t.stats.percent_recomputed())),
-        (t2 / t1 - 1.0) * 100.0
-    );
-
-    let texel = b.vol.texels.format.bytes();
-    let maps = volao::clip::gpu::LAYERS_PER_SHAPE as u64 * 4 * (args.clip_resolution as u64).pow(2);
-    println!(
-        "\nGPU memory: {} B per voxel for CAO (V_o, V_m, V_PAO, V_AO as f32) + {texel} B for the density V \
-         (the paper keeps 5 full-size volumes); clip maps {:.0} MiB per shape ({} layers of {}² f32).",
-        memory,
-        maps as f64 / (1 << 20) as f64,
-        volao::clip::gpu::LAYERS_PER_SHAPE,
-        args.clip_resolution
-    );
-    println!("Times are wall-clock per stage with a wait after each, on {adapter}.");
     Ok(())
 }

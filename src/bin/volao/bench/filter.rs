@@ -9,6 +9,7 @@ use volao::ao::cone::{ConeGpu, ConePreset, ConeSet, MipPyramid, cone_cpu, opacit
 use volao::ao::filter::{self, AmbientMap, FilterCpu, FilterGpu, Source, StatisticSource};
 use volao::ao::lao::{LaoGpu, Rays, lao_lut};
 use volao::ao::rays::RaySet;
+use volao::ao::sparse::Bricks;
 use volao::render::gpu::GpuVolume;
 use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::tf::{Preset, TransferFunction};
@@ -250,6 +251,7 @@ fn quality(
                 &lut,
                 &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
                 m,
+                &Bricks::dense(evol.texels.dims),
                 &|_, _| {},
             )?;
             if let Some(p) = &args.truth_cache {
@@ -313,15 +315,17 @@ fn quality(
             rms(a, &truth, Some(&surface))
         );
     };
+    // The reference is dense LAO, every voxel and sample.
+    let dense = Bricks::dense(evol.texels.dims);
     for set in [RaySet::Six, RaySet::Fourteen, RaySet::TwentySix] {
         let rays = Rays::uniform(set.directions());
-        let a = lao.compute(gpu, &evol, &lut, &rays, m, &|_, _| {})?;
+        let a = lao.compute(gpu, &evol, &lut, &rays, m, &dense, &|_, _| {})?;
         let g = median_ms(1, || {
-            lao.compute(gpu, &evol, &lut, &rays, m, &|_, _| {})?;
+            lao.compute(gpu, &evol, &lut, &rays, m, &dense, &|_, _| {})?;
             Ok(())
         })?;
         let c = median_ms(1, || {
-            volao::ao::lao::lao_cpu(&et, &lut, &rays, m, &|_, _| {});
+            volao::ao::lao::lao_cpu(&et, &lut, &rays, m, &dense, &|_, _| {});
             Ok(())
         })?;
         row("LAO", format!("{} rays × {m}", set.name()), &a, g, c);

@@ -5,6 +5,7 @@ use super::rms;
 use anyhow::{Result, bail};
 use std::path::PathBuf;
 use std::time::Instant;
+use volao::ao::sparse::Bricks;
 
 /// Arguments of `volao bench lao`.
 #[derive(Debug, clap::Args)]
@@ -72,6 +73,7 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
             &lut,
             &Rays::uniform(set.directions()),
             m,
+            &Bricks::dense(vol.texels.dims),
             &|_, _| {},
         )?;
         Ok((a, start.elapsed().as_secs_f64()))
@@ -144,11 +146,26 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     let rays = Rays::uniform(RaySet::FiftyFour.directions());
     let part_lut = lao_lut(&tf, &texels);
     let start = Instant::now();
-    lao_cpu(&texels, &part_lut, &rays, m, &|_, _| {});
+    lao_cpu(
+        &texels,
+        &part_lut,
+        &rays,
+        m,
+        &Bricks::dense(texels.dims),
+        &|_, _| {},
+    );
     let t_cpu = start.elapsed().as_secs_f64();
     let part_vol = GpuVolume::from_texels(&gpu, texels.clone(), &tf, 0.5)?;
     let start = Instant::now();
-    lao.compute(&gpu, &part_vol, &part_lut, &rays, m, &|_, _| {})?;
+    lao.compute(
+        &gpu,
+        &part_vol,
+        &part_lut,
+        &rays,
+        m,
+        &Bricks::dense(part_vol.texels.dims),
+        &|_, _| {},
+    )?;
     let t_gpu = start.elapsed().as_secs_f64();
     let samples = (nx * ny * slab) as f64 * 54.0 * (m.max(2) - 1) as f64;
     println!();

@@ -98,6 +98,7 @@ fn accuracy(bench: Bench) -> Result<()> {
         &lao_lut(tf, &small),
         &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
         volao::ao::lao::DEFAULT_SAMPLES,
+        &volao::ao::sparse::Bricks::dense(small.dims),
         &|_, _| {},
     )?;
     let t_truth = start.elapsed().as_secs_f64();

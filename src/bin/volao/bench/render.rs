@@ -127,6 +127,16 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
             tf: &tf,
             settings: &ao,
             clip: None,
+            // One AO for every mode timed: an isosurface reads AO wherever it lies.
+            coverage: if args
+                .mode
+                .iter()
+                .all(|m| *m == volao::render::RenderMode::Composite)
+            {
+                volao::ao::sparse::Coverage::Readable
+            } else {
+                volao::ao::sparse::Coverage::Every
+            },
         };
         let computed = AoEngine::on(Some(Arc::clone(&gpu))).compute(
             AoInput::Uploaded(&vol),

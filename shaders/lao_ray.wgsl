@@ -1,0 +1,87 @@
+//!fragment: no shader of its own; validated as part of the shaders that include it.
+// One LAO ray (Eq. 2): Σ_{m=1..M} Π_{i<m} (1 − a_i), sample i lying i steps from the
+// voxel centre. Shared by lao.wgsl and cao_lao.wgsl; CPU twin: ao::lao::ray_sum.
+//
+// With skipping (ao::sparse), runs of samples known to have opacity exactly 0 (outside
+// the volume, or inside a brick the LAO LUT leaves empty) are not fetched: their factor
+// is 1, and the transmittance is still added once per sample, in order, so the sum is
+// the dense one bit for bit. The including shader declares `opacity_at(uvw) -> f32`,
+// `p.dims: vec4<u32>`, `p.grid: vec4<u32>` (bricks per axis, skipping 0/1) and
+// `occupied: array<u32>` (1 per brick where a sample may be opaque).
+
+// Whether this pipeline skips at all: `false` in the dense pipelines (`--no-skipping`),
+// which a CPU driver then compiles without the skipping code (ao::sparse::dense_variant).
+const SKIPPING: bool = true;
+// Whether rays step over empty blocks: `false` in CAO's per-frame step V
+// (ao::sparse::frame_variant), whose rays start at surfaces the clip shapes bare and
+// cross occupied bricks, where the per-sample check costs more than it saves.
+const RAY_SKIPPING: bool = true;
+
+// Samples from m on (all before the last) whose opacity is exactly 0; 0: fetch m.
+fn empty_run(centre: vec3<f32>, step: vec3<f32>, m: u32, samples: u32) -> u32 {
+    let uvw = centre + step * f32(m);
+    if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) {
+        return samples - m;  // a straight ray that left the box never comes back
+    }
+    let size = vec3<f32>(p.dims.xyz);
+    let b = min(vec3<u32>(floor(uvw * size / 8.0)), p.grid.xyz - vec3<u32>(1u));
+    if occupied[b.x + p.grid.x * (b.y + p.grid.y * b.z)] != 0u {
+        return 0u;
+    }
+    let lo = vec3<f32>(b * 8u) / size;
+    let hi = vec3<f32>((b + vec3<u32>(1u)) * 8u) / size;
+    var exit = 3.0e38;
+    for (var a = 0u; a < 3u; a = a + 1u) {
+        if step[a] > 0.0 {
+            exit = min(exit, (hi[a] - centre[a]) / step[a]);
+        } else if step[a] < 0.0 {
+            exit = min(exit, (lo[a] - centre[a]) / step[a]);
+        }
+    }
+    // Samples m ..= floor(exit) lie in the box; what they read reaches half a voxel
+    // past it, far more than rounding.
+    let inside = min(u32(max(floor(exit), f32(m))), samples - 1u);
+    return inside - m + 1u;
+}
+
+fn lao_ray(centre: vec3<f32>, step: vec3<f32>, samples: u32) -> f32 {
+    if !SKIPPING || !RAY_SKIPPING || p.grid.w == 0u {
+        return dense_ray(centre, step, samples);
+    }
+    var transmittance = 1.0;
+    var sum = transmittance;  // sample 1
+    var m = 1u;
+    loop {
+        if m >= samples {
+            break;
+        }
+        if p.grid.w != 0u {
+            let run = empty_run(centre, step, m, samples);
+            if run > 0u {
+                // Samples m .. m + run − 1 leave the transmittance as it is.
+                for (var j = 0u; j < run; j = j + 1u) {
+                    sum = sum + transmittance;
+                }
+                m = m + run;
+                continue;
+            }
+        }
+        transmittance = transmittance * (1.0 - opacity_at(centre + step * f32(m)));
+        m = m + 1u;
+        sum = sum + transmittance;
+    }
+    return sum;
+}
+
+// The same sum, every sample fetched (skipping off): the plain loop.
+fn dense_ray(centre: vec3<f32>, step: vec3<f32>, samples: u32) -> f32 {
+    var transmittance = 1.0;
+    var sum = 0.0;
+    for (var m = 1u; m <= samples; m = m + 1u) {
+        sum = sum + transmittance;
+        if m < samples {
+            transmittance = transmittance * (1.0 - opacity_at(centre + step * f32(m)));
+        }
+    }
+    return sum;
+}

@@ -1,0 +1,467 @@
+//! Sparse AO (issue #15): the 8³ bricks an AO stage must process, and the bricks an LAO
+//! ray may step over, so that per-frame work follows what can be seen and what a clip
+//! shape touches while every pixel stays what the dense computation gives.
+//!
+//! Three facts carry it, each conservative:
+//!
+//! - **Readable bricks.** The ray caster reads `V_AO` (trilinearly) only at samples of
+//!   non-zero opacity. A sample that gives weight to a voxel of brick `b` lies within one
+//!   voxel of it, so it reads only texels of `b` widened by one voxel — exactly the range
+//!   the ray caster's occupancy block `b` holds ([`BlockRanges`]). A brick whose block
+//!   is transparent under the rendering LUT can have any AO. Clipping only lowers
+//!   opacity, so the unclipped test stays valid while shapes move.
+//! - **Empty bricks along LAO rays.** An LAO sample inside brick `b`'s box reads only the
+//!   same widened texel range; where the LAO LUT gives those texels zero opacity, the
+//!   sample's factor `1 − a` is exactly 1. The ray still adds its transmittance once per
+//!   skipped sample, in order, so the sum is the dense one bit for bit.
+//! - **Bricks near a shape.** Outside every shape's clipping-camera box (which holds the
+//!   shape and its dilation, [`crate::clip::camera::ClipCamera::frame`]) step IV gives
+//!   `V_o = α` and `V_m = 1`: nothing to do. A probing shape clips everything outside
+//!   it, so with one every brick is near.
+//!
+//! With skipping off ([`Bricks::dense`], `--no-skipping`) every list holds every brick
+//! and no ray skips: the paper's dense CAO.
+
+use crate::clip::camera::ClipCamera;
+use crate::clip::gpu::ClipUniforms;
+use crate::render::texels::{BLOCK, BlockRanges, VolumeTexels};
+use crate::render::{RenderMode, RenderSettings};
+use crate::tf::{Lut, TransferFunction};
+use glam::{Mat4, Vec3};
+
+/// Which voxels an AO computation covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Coverage {
+    /// Every voxel, with only the skip that changes no value (empty samples along LAO
+    /// rays): what `volao ao` writes.
+    #[default]
+    Every,
+    /// The voxels the ray caster can read, and empty samples skipped; the others hold 1
+    /// when read back. For rendering, and `volao ao --visible-only`.
+    Readable,
+    /// Every voxel and every sample: `--no-skipping`, the paper's dense computation.
+    Dense,
+}
+
+impl Coverage {
+    /// What rendering with `s` needs: readable voxels in compositing (whose AO is read
+    /// only where the TF's opacity is non-zero) and in the projections (which read no
+    /// AO: switching to them keeps it), every voxel for an isosurface (shaded wherever
+    /// it lies), nothing skipped with skipping off.
+    pub fn for_render(s: &RenderSettings) -> Self {
+        match (s.empty_space_skipping, s.mode) {
+            (false, _) => Coverage::Dense,
+            (true, RenderMode::Iso(_)) => Coverage::Every,
+            (true, _) => Coverage::Readable,
+        }
+    }
+
+    /// The bricks for `tf` on `texels`, whose block ranges are `ranges`.
+    pub fn bricks(
+        self,
+        texels: &VolumeTexels,
+        ranges: &BlockRanges,
+        tf: &TransferFunction,
+    ) -> Bricks {
+        let lao = crate::sample::lao_lut(tf, texels);
+        match self {
+            Coverage::Dense => Bricks::dense(texels.dims),
+            Coverage::Every => Bricks::new(texels, ranges, None, &lao),
+            // Opacity uncorrected for the step: zero exactly where every step's is.
+            Coverage::Readable => {
+                let render = crate::sample::bake_lut(tf, texels, 1.0);
+                Bricks::new(texels, ranges, Some(&render), &lao)
+            }
+        }
+    }
+}
+
+/// Brick edge in voxels: the ray caster's occupancy block.
+pub const BRICK: usize = BLOCK;
+
+/// Bricks per axis at most (a packed brick index has 10 bits per axis).
+pub const MAX_BRICKS_PER_AXIS: usize = 1 << 10;
+
+/// A list entry's flag: a shape is near the brick this frame or was in the last one
+/// (CAO's step V then reads step IV's marks).
+pub const NEAR: u32 = 1 << 30;
+
+/// Which bricks the AO stages process, for one volume and transfer function.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bricks {
+    /// Bricks per axis.
+    pub grid: [usize; 3],
+    /// 1 where the ray caster may read the brick's AO, x fastest.
+    pub readable: Vec<u8>,
+    /// 1 where an LAO sample in the brick may have non-zero opacity, x fastest.
+    pub occupied: Vec<u8>,
+    /// Whether anything is skipped (false: every brick, every sample).
+    pub skipping: bool,
+    /// Within readable bricks, the per-voxel test (`None`: every voxel of them).
+    pub voxels: Option<VoxelTest>,
+}
+
+/// The per-voxel readability test: voxel `v` is readable if the range of the 3³ texels
+/// around it may give non-zero opacity under the rendering LUT.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VoxelTest {
+    /// The rendering LUT (opacity uncorrected for the step).
+    pub lut: Lut,
+    /// `prefix[i]`: the LUT's entries before `i` with opacity > 0 (`prefix.len()` is the
+    /// LUT's length + 1).
+    pub prefix: Vec<u32>,
+    /// LUT index = norm · a + b; the last entry.
+    pub map: [f32; 3],
+    /// value = norm · value_scale + value_offset.
+    pub value_map: [f64; 2],
+    /// Texels taken below the voxel on each axis (and 1 above): 1. Tests set 0 to show
+    /// that exactness rests on it.
+    pub below: usize,
+}
+
+impl VoxelTest {
+    fn new(texels: &VolumeTexels, lut: &Lut) -> Self {
+        let mut prefix = Vec::with_capacity(lut.rgba.len() + 1);
+        let mut n = 0u32;
+        prefix.push(0);
+        for e in &lut.rgba {
+            n += u32::from(e[3] > 0.0);
+            prefix.push(n);
+        }
+        let (a, b) = texels.lut_map(lut);
+        VoxelTest {
+            lut: lut.clone(),
+            prefix,
+            map: [a, b, (lut.rgba.len().max(2) - 1) as f32],
+            value_map: [texels.value_scale, texels.value_offset],
+            below: 1,
+        }
+    }
+
+    /// The shaders' uniform: scale, offset, last entry, on.
+    pub fn uniform(test: Option<&VoxelTest>) -> [f32; 4] {
+        match test {
+            Some(t) => [t.map[0], t.map[1], t.map[2], 1.0 + t.below as f32],
+            None => [0.0; 4],
+        }
+    }
+
+    /// The prefix counts as the shaders read them (a single 1 when off).
+    pub fn prefix_of(test: Option<&VoxelTest>) -> Vec<u32> {
+        test.map(|t| t.prefix.clone()).unwrap_or_else(|| vec![0, 1])
+    }
+}
+
+impl Bricks {
+    /// Every brick readable and occupied, no ray skipping: the dense computation.
+    pub fn dense(dims: [usize; 3]) -> Self {
+        let grid = grid_of(dims);
+        let n = grid.iter().product();
+        Bricks {
+            grid,
+            readable: vec![1; n],
+            occupied: vec![1; n],
+            skipping: false,
+            voxels: None,
+        }
+    }
+
+    /// Bricks for `ranges` of `texels`: readable under `render_lut` (every brick when
+    /// `None`, for a render mode that reads AO at samples the LUT's opacity does not
+    /// decide, such as an isosurface), occupied under the LAO LUT `lao_lut`.
+    pub fn new(
+        texels: &VolumeTexels,
+        ranges: &BlockRanges,
+        render_lut: Option<&Lut>,
+        lao_lut: &Lut,
+    ) -> Self {
+        assert_eq!(
+            ranges.grid,
+            grid_of(texels.dims),
+            "block ranges of another volume"
+        );
+        let readable = match render_lut {
+            Some(lut) => ranges.occupancy(texels, lut),
+            None => vec![1; ranges.ranges.len()],
+        };
+        let occupied = ranges.occupancy(texels, lao_lut);
+        Bricks {
+            grid: ranges.grid,
+            readable,
+            occupied,
+            skipping: true,
+            voxels: render_lut.map(|lut| VoxelTest::new(texels, lut)),
+        }
+    }
+
+    pub fn count(&self) -> usize {
+        self.readable.len()
+    }
+
+    /// Whether the brick holding voxel `v` is readable.
+    pub fn voxel_readable(&self, v: [usize; 3]) -> bool {
+        self.readable[self.index(v.map(|c| c / BRICK))] != 0
+    }
+
+    /// Per voxel (x fastest): readable by its brick and, with a per-voxel test, by the
+    /// range of the 3³ texels around it (the CPU twin of `voxel_readable` in
+    /// `shaders/bricks.wgsl`, whose margin is one LUT entry wider: every voxel readable
+    /// here is computed there).
+    pub fn readable_mask(&self, texels: &VolumeTexels) -> Vec<bool> {
+        use rayon::prelude::*;
+        let dims = texels.dims;
+        (0..dims.iter().product::<usize>())
+            .into_par_iter()
+            .map(|i| {
+                let v = crate::volume::voxel_of(i, dims);
+                self.voxel_readable(v)
+                    && self.voxels.as_ref().is_none_or(|t| {
+                        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                        let b = t.below;
+                        for dz in 0..=1 + b {
+                            for dy in 0..=1 + b {
+                                for dx in 0..=1 + b {
+                                    let x = (v[0] + dx).saturating_sub(b).min(dims[0] - 1);
+                                    let y = (v[1] + dy).saturating_sub(b).min(dims[1] - 1);
+                                    let z = (v[2] + dz).saturating_sub(b).min(dims[2] - 1);
+                                    let n = texels.norm_at(x + dims[0] * (y + dims[1] * z));
+                                    lo = lo.min(n);
+                                    hi = hi.max(n);
+                                }
+                            }
+                        }
+                        let [s, o] = t.value_map;
+                        let (a, b) = (lo as f64 * s + o, hi as f64 * s + o);
+                        !t.lut.is_transparent_over(a.min(b), a.max(b))
+                    })
+            })
+            .collect()
+    }
+
+    fn index(&self, b: [usize; 3]) -> usize {
+        b[0] + self.grid[0] * (b[1] + self.grid[1] * b[2])
+    }
+
+    /// Whether step IV must write brick `i` when it is near a shape: its clipped opacity
+    /// may be read by a ray (occupied) or its mask by step V (readable).
+    pub fn used(&self, i: usize) -> bool {
+        self.readable[i] != 0 || self.occupied[i] != 0
+    }
+
+    /// The bricks `keep` selects, packed for the shaders ([`pack`]), x fastest.
+    pub fn list(&self, keep: impl Fn(usize) -> bool) -> Vec<u32> {
+        (0..self.count())
+            .filter(|&i| keep(i))
+            .map(|i| pack(crate::volume::voxel_of(i, self.grid)))
+            .collect()
+    }
+
+    /// The bricks `keep` selects, those `near` selects flagged [`NEAR`].
+    pub fn list_flagged(
+        &self,
+        keep: impl Fn(usize) -> bool,
+        near: impl Fn(usize) -> bool,
+    ) -> Vec<u32> {
+        (0..self.count())
+            .filter(|&i| keep(i))
+            .map(|i| pack(crate::volume::voxel_of(i, self.grid)) | if near(i) { NEAR } else { 0 })
+            .collect()
+    }
+
+    /// Voxels in the bricks of `list`, clipped to a volume of `dims`.
+    pub fn voxels_in(list: &[u32], dims: [usize; 3]) -> u64 {
+        list.iter()
+            .map(|&p| {
+                let b = unpack(p);
+                (0..3)
+                    .map(|i| (dims[i] - b[i] * BRICK).min(BRICK) as u64)
+                    .product::<u64>()
+            })
+            .sum()
+    }
+
+    /// Bricks near any shape of `clip` (see the module docs): inside a carving shape's
+    /// clipping-camera box and its bounding sphere ([`ClipCamera::reach_bound`]), both
+    /// widened by a voxel, or anywhere when a shape probes. `cameras` are the shapes'
+    /// clipping cameras, in the order of `clip`. With skipping off, every brick.
+    pub fn near(
+        &self,
+        dims: [usize; 3],
+        spacing: [f32; 3],
+        clip: &ClipUniforms,
+        cameras: &[ClipCamera],
+    ) -> Vec<bool> {
+        let shapes = clip.counts[0] as usize;
+        if !self.skipping || clip.counts[1] > 0 {
+            return vec![true; self.count()];
+        }
+        if cameras.len() != shapes {
+            return vec![true; self.count()];
+        }
+        let mut near = vec![false; self.count()];
+        let spacing = Vec3::from(spacing);
+        let half = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * spacing * 0.5;
+        let voxel = spacing.length();
+        for (s, camera) in clip.shapes[..shapes].iter().zip(cameras) {
+            let res = s.info[2] as f32;
+            let to_volume = Mat4::from_cols_array_2d(&s.volume_to_map).inverse();
+            // The bounding sphere in volume mm (the pose is rigid: the radius stays).
+            let centre = to_volume.transform_point3(camera.project(camera.bound_centre));
+            let radius = camera.reach_bound() + voxel;
+            let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+            for c in 0..8 {
+                let m = Vec3::new(
+                    if c & 1 == 0 { 0.0 } else { res },
+                    if c & 2 == 0 { 0.0 } else { res },
+                    if c & 4 == 0 { 0.0 } else { 1.0 },
+                );
+                let mm = to_volume.transform_point3(m);
+                lo = lo.min(mm);
+                hi = hi.max(mm);
+            }
+            if !(lo.is_finite() && hi.is_finite()) {
+                return vec![true; self.count()];
+            }
+            // Voxel coordinates (voxel v spans [v, v + 1]), widened by one voxel.
+            let lo = (lo + half) / spacing - Vec3::ONE;
+            let hi = (hi + half) / spacing + Vec3::ONE;
+            let range = |a: usize| {
+                let first = (lo[a].max(0.0) / BRICK as f32).floor() as usize;
+                let last = (hi[a].max(0.0) / BRICK as f32).floor() as usize;
+                (first.min(self.grid[a]), (last + 1).min(self.grid[a]))
+            };
+            let (x, y, z) = (range(0), range(1), range(2));
+            let brick_mm = spacing * BRICK as f32;
+            for bz in z.0..z.1 {
+                for by in y.0..y.1 {
+                    for bx in x.0..x.1 {
+                        // The brick's box (mm) against the sphere.
+                        let lo = Vec3::new(bx as f32, by as f32, bz as f32) * brick_mm - half;
+                        let closest = centre.clamp(lo, lo + brick_mm);
+                        if closest.distance(centre) <= radius || !centre.is_finite() {
+                            near[self.index([bx, by, bz])] = true;
+                        }
+                    }
+                }
+            }
+        }
+        near
+    }
+}
+
+/// A skipping shader's source (one including `lao_ray.wgsl`) made into its dense
+/// variant: the skipping code is compiled out, so that `--no-skipping` runs as fast as
+/// the plain loops did.
+pub fn dense_variant(code: String) -> String {
+    code.replace(
+        "const SKIPPING: bool = true;",
+        "const SKIPPING: bool = false;",
+    )
+}
+
+/// CAO's per-frame step V: rays fetch every sample (the same bits, see `lao_ray.wgsl`)
+/// while the readable-voxel test stays.
+pub fn frame_variant(code: String) -> String {
+    code.replace(
+        "const RAY_SKIPPING: bool = true;",
+        "const RAY_SKIPPING: bool = false;",
+    )
+}
+
+/// Bricks per axis for a volume of `dims`.
+pub fn grid_of(dims: [usize; 3]) -> [usize; 3] {
+    dims.map(|d| d.div_ceil(BRICK).max(1))
+}
+
+/// A brick's coordinates as the shaders read them: 10 bits per axis.
+pub fn pack(b: [usize; 3]) -> u32 {
+    debug_assert!(b.iter().all(|&c| c < MAX_BRICKS_PER_AXIS));
+    (b[0] | b[1] << 10 | b[2] << 20) as u32
+}
+
+/// The voxels of packed brick `b` inside `dims`, x fastest.
+pub fn brick_voxels(b: u32, dims: [usize; 3]) -> impl Iterator<Item = [usize; 3]> {
+    let o = unpack(b).map(|c| c * BRICK);
+    (0..BRICK * BRICK * BRICK)
+        .map(move |i| {
+            [
+                o[0] + i % BRICK,
+                o[1] + (i / BRICK) % BRICK,
+                o[2] + i / (BRICK * BRICK),
+            ]
+        })
+        .filter(move |v| (0..3).all(|a| v[a] < dims[a]))
+}
+
+pub fn unpack(p: u32) -> [usize; 3] {
+    let p = p as usize;
+    [p & 0x3ff, (p >> 10) & 0x3ff, (p >> 20) & 0x3ff]
+}
+
+/// The LAO rays' empty-space test on the CPU (twin of `empty_run` in `lao_ray.wgsl`):
+/// how many samples from `m` on (all before the last, `samples`) have opacity exactly 0
+/// because they lie outside the volume or in an unoccupied brick; 0 when sample `m`
+/// must be fetched.
+pub fn empty_run(
+    bricks: &Bricks,
+    dims: [usize; 3],
+    centre: Vec3,
+    step: Vec3,
+    m: u32,
+    samples: u32,
+) -> u32 {
+    if !bricks.skipping || m >= samples {
+        return 0;
+    }
+    let uvw = centre + step * m as f32;
+    if uvw.cmplt(Vec3::ZERO).any() || uvw.cmpgt(Vec3::ONE).any() {
+        // A straight ray that has left the box never comes back.
+        return samples - m;
+    }
+    let size = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32);
+    let last = Vec3::new(
+        (bricks.grid[0] - 1) as f32,
+        (bricks.grid[1] - 1) as f32,
+        (bricks.grid[2] - 1) as f32,
+    );
+    let b = (uvw * size / BRICK as f32).floor().min(last);
+    let i = b.x as usize + bricks.grid[0] * (b.y as usize + bricks.grid[1] * b.z as usize);
+    if bricks.occupied[i] != 0 {
+        return 0;
+    }
+    let lo = b * BRICK as f32 / size;
+    let hi = (b + Vec3::ONE) * BRICK as f32 / size;
+    let mut exit = f32::INFINITY;
+    for a in 0..3 {
+        if step[a] > 0.0 {
+            exit = exit.min((hi[a] - centre[a]) / step[a]);
+        } else if step[a] < 0.0 {
+            exit = exit.min((lo[a] - centre[a]) / step[a]);
+        }
+    }
+    // Samples m ..= floor(exit) lie in the box (m itself does); the texels they read
+    // extend half a voxel past it, far more than rounding.
+    let inside = (exit.floor().max(m as f32) as u32).min(samples - 1);
+    inside - m + 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packing_round_trips() {
+        for b in [[0, 0, 0], [1023, 0, 5], [3, 1023, 1023], [17, 42, 999]] {
+            assert_eq!(unpack(pack(b)), b);
+        }
+    }
+
+    #[test]
+    fn voxels_in_clips_the_last_bricks() {
+        let dims = [20, 8, 9];
+        let all = Bricks::dense(dims);
+        let list = all.list(|_| true);
+        assert_eq!(list.len(), 3 * 2);
+        assert_eq!(Bricks::voxels_in(&list, dims), 20 * 8 * 9);
+    }
+}
