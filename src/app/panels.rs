@@ -55,7 +55,8 @@ impl Viewer {
             .add_filter(
                 "Volumes and scenes",
                 &[
-                    "nii", "gz", "hdr", "img", "nrrd", "nhdr", "dcm", "pvm", "raw", "dat", "json",
+                    "nii", "gz", "hdr", "img", "nrrd", "nhdr", "dcm", "mgh", "mgz", "pvm", "raw",
+                    "dat", "json",
                 ],
             )
             .add_filter("All files", &["*"])
