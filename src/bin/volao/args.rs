@@ -494,7 +494,7 @@ impl ClipArgs {
 /// How to read the input: 4-D frame and raw layout.
 #[derive(Args, Debug, Default)]
 pub struct LoadArgs {
-    /// 4-D volumes (NIfTI, NRRD, MGH/MGZ, DICOM): which frame to load (0-based).
+    /// 4-D volumes (NIfTI, NRRD, MGH/MGZ): which frame to load (0-based).
     #[arg(long, default_value_t = 0)]
     pub frame: usize,
     /// Raw: voxel counts along x, y, z.
