@@ -232,20 +232,7 @@ impl SlabDispatch {
     ) -> Result<(), GpuError> {
         let mut p = base;
         p.set_slab(slab);
-        validated(&gpu.device, pass.label, || {
-            // Ordered before this submission's commands (and after the previous one's).
-            gpu.queue
-                .write_buffer(pass.uniforms, 0, bytemuck::bytes_of(&p));
-            super::submit_compute_with(
-                &gpu.device,
-                &gpu.queue,
-                pass.label,
-                pass.pipeline,
-                pass.bind_groups,
-                slab.groups,
-                after,
-            );
-        })
+        pass.submit(gpu, &p, slab.groups, after)
     }
 }
 
@@ -257,6 +244,33 @@ pub struct Pass<'a> {
     pub pipeline: &'a wgpu::ComputePipeline,
     pub bind_groups: &'a [&'a wgpu::BindGroup],
     pub uniforms: &'a wgpu::Buffer,
+}
+
+impl Pass<'_> {
+    /// One submission: `params` into the uniform buffer (ordered before this
+    /// submission's commands and after the previous one's), `groups` workgroups, then
+    /// whatever `after` encodes.
+    fn submit<P: bytemuck::Pod>(
+        &self,
+        gpu: &Gpu,
+        params: &P,
+        groups: [u32; 3],
+        after: impl FnOnce(&mut wgpu::CommandEncoder),
+    ) -> Result<(), GpuError> {
+        validated(&gpu.device, self.label, || {
+            gpu.queue
+                .write_buffer(self.uniforms, 0, bytemuck::bytes_of(params));
+            super::submit_compute_with(
+                &gpu.device,
+                &gpu.queue,
+                self.label,
+                self.pipeline,
+                self.bind_groups,
+                groups,
+                after,
+            );
+        })
+    }
 }
 
 #[cfg(test)]
@@ -416,18 +430,8 @@ impl BrickDispatch {
             let rows = count.div_ceil(row);
             let mut p = base;
             p.set_chunk(self.offset + first, count, row);
-            validated(&gpu.device, pass.label, || {
-                gpu.queue
-                    .write_buffer(pass.uniforms, 0, bytemuck::bytes_of(&p));
-                super::submit_compute_with(
-                    &gpu.device,
-                    &gpu.queue,
-                    pass.label,
-                    pass.pipeline,
-                    pass.bind_groups,
-                    [8, row, rows],
-                    |encoder| after(encoder, first, count),
-                );
+            pass.submit(gpu, &p, [8, row, rows], |encoder| {
+                after(encoder, first, count)
             })?;
             if wait_between && split {
                 super::wait(&gpu.device, pass.label, super::WAIT)?;
