@@ -7,9 +7,15 @@
 //! writes the stage's uniforms for each slab into one buffer (the stage's `Params` struct
 //! sets its own slab fields, [`SlabParams::set_slab`]), submits, and optionally copies
 //! each slab's output to the host.
+//!
+//! In the viewer a submission must also be short in time: wgpu has one in-order queue, so
+//! a long one delays the UI's own frame behind it. [`Slicing`] sizes submissions for that.
 
 use super::{GpuError, read_buffer, validated};
 use crate::gpu::Gpu;
+use std::collections::HashMap;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 /// Invocations per workgroup of the linear stages (`@workgroup_size(64)`).
 pub const LINEAR_GROUP: u32 = 64;
@@ -27,6 +33,81 @@ pub mod budget {
     /// clip tests): at 2^30, one slab of the full Engine outran the 60 s readback bound
     /// on a busy 2-core lavapipe.
     pub const COSTLY_SAMPLES: u64 = 1 << 27;
+}
+
+/// Time-sliced submissions for an interactive program (the viewer). With a slice time
+/// set, the dispatchers size each submission of a long stage from the throughput they
+/// measured for it (work units per second, per pass label) so that it takes about that
+/// long, and wait for it before submitting the next, so that the UI's frames slip in
+/// between. Without one (the CLI, the tests), submissions are as large as the work
+/// budgets allow. The size of a submission never changes a result: every voxel is
+/// computed by one invocation, whichever submission it falls in.
+#[derive(Debug, Default)]
+pub struct Slicing {
+    target: Mutex<Option<Duration>>,
+    /// Measured units per second, per pass label.
+    rates: Mutex<HashMap<String, f64>>,
+}
+
+/// Throughput assumed for a stage before its first submission was measured (samples per
+/// second, about lavapipe's on two cores): the first slice is short on any adapter, the
+/// following ones grow to the slice time.
+const FIRST_RATE: f64 = 1e8;
+
+/// A slice grows at most this much from one submission to the next.
+const MAX_GROWTH: f64 = 4.0;
+
+impl Slicing {
+    /// Sets (or with `None` removes) the time one submission may take.
+    pub fn set_target(&self, target: Option<Duration>) {
+        *self.target.lock().unwrap_or_else(|e| e.into_inner()) = target;
+    }
+
+    pub fn target(&self) -> Option<Duration> {
+        *self.target.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Whether submissions are sliced in time.
+    pub fn is_on(&self) -> bool {
+        self.target().is_some()
+    }
+
+    /// The measured throughput of `label` (units per second), if any.
+    pub fn rate(&self, label: &str) -> Option<f64> {
+        self.rates
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(label)
+            .copied()
+    }
+
+    /// Units of work of `label` that fit in `time` (at least 1, at most `max`).
+    pub fn units_in(&self, label: &str, time: Duration, max: u64) -> u64 {
+        let rate = self.rate(label).unwrap_or(FIRST_RATE);
+        ((rate * time.as_secs_f64()) as u64).clamp(1, max.max(1))
+    }
+
+    /// Units of work of `label` for the next submission: `max` without a slice time.
+    pub fn units(&self, label: &str, max: u64) -> u64 {
+        match self.target() {
+            None => max.max(1),
+            Some(t) => self.units_in(label, t, max),
+        }
+    }
+
+    /// Records that `units` of `label` took `took` (submission to completion).
+    pub fn measured(&self, label: &str, units: u64, took: Duration) {
+        let secs = took.as_secs_f64().max(1e-5);
+        let fresh = units as f64 / secs;
+        let mut rates = self.rates.lock().unwrap_or_else(|e| e.into_inner());
+        let rate = match rates.get(label) {
+            // Smooth, and grow at most MAX_GROWTH× per measurement (a slice that finished
+            // early because the queue was empty says little about a full one).
+            Some(&old) => (0.5 * old + 0.5 * fresh).min(old * MAX_GROWTH),
+            None => fresh.min(FIRST_RATE * MAX_GROWTH),
+        };
+        rates.insert(label.to_owned(), rate);
+    }
 }
 
 /// How a stage's invocations cover a slab.
@@ -114,6 +195,8 @@ pub struct SlabDispatch {
     dims: [u32; 3],
     depth: u32,
     grid: Grid,
+    /// Work per voxel, in the budget's units (sizes slabs under a slice time).
+    work_per_voxel: u64,
 }
 
 impl SlabDispatch {
@@ -129,7 +212,12 @@ impl SlabDispatch {
         let slice = (dims[0] as u64 * dims[1] as u64).max(1);
         let nz = dims[2].max(1) as u64;
         let depth = ((budget / work_per_voxel.max(1)).min(max_voxels) / slice).clamp(1, nz) as u32;
-        SlabDispatch { dims, depth, grid }
+        SlabDispatch {
+            dims,
+            depth,
+            grid,
+            work_per_voxel: work_per_voxel.max(1),
+        }
     }
 
     /// The whole volume in one slab.
@@ -138,6 +226,7 @@ impl SlabDispatch {
             dims,
             depth: dims[2].max(1),
             grid,
+            work_per_voxel: 1,
         }
     }
 
@@ -157,41 +246,60 @@ impl SlabDispatch {
     }
 
     pub fn slabs(&self) -> impl Iterator<Item = Slab> + '_ {
-        let [nx, ny, nz] = self.dims;
-        (0..nz).step_by(self.depth.max(1) as usize).map(move |z0| {
-            let depth = self.depth.min(nz - z0);
-            let voxels = nx * ny * depth;
-            let (groups, row_stride) = match self.grid {
-                Grid::Linear => fold_linear(voxels),
-                Grid::Tiles => ([nx.div_ceil(8), ny.div_ceil(8), depth], 0),
-            };
-            Slab {
-                z0,
-                depth,
-                voxels,
-                row_stride,
-                groups,
-            }
-        })
+        (0..self.dims[2])
+            .step_by(self.depth.max(1) as usize)
+            .map(move |z0| self.slab_at(z0, self.depth))
     }
 
-    /// Runs `pass` once per slab with `base`'s slab fields set, one submission each, and
-    /// reports progress in z-slices. With `wait_between`, waits for each slab before the
-    /// next (so one long pass does not queue up minutes of work).
-    pub fn run<P: SlabParams>(
+    /// The slab of up to `depth` z-slices from `z0`.
+    fn slab_at(&self, z0: u32, depth: u32) -> Slab {
+        let [nx, ny, nz] = self.dims;
+        let depth = depth.clamp(1, nz.saturating_sub(z0).max(1));
+        let voxels = nx * ny * depth;
+        let (groups, row_stride) = match self.grid {
+            Grid::Linear => fold_linear(voxels),
+            Grid::Tiles => ([nx.div_ceil(8), ny.div_ceil(8), depth], 0),
+        };
+        Slab {
+            z0,
+            depth,
+            voxels,
+            row_stride,
+            groups,
+        }
+    }
+
+    /// Runs `pass` over the slabs with `base`'s slab fields set, one submission each
+    /// (ending with what `after` encodes), calls `each` after each of them (which waits
+    /// for it) and reports progress in z-slices. With a slice time ([`Slicing`]) a slab is as thick as fits in it (never
+    /// thicker than [`Self::depth`]) and is waited for before the next.
+    fn run_paced<P: SlabParams>(
         &self,
         gpu: &Gpu,
         pass: &Pass<'_>,
         base: P,
-        wait_between: bool,
+        after: impl Fn(&mut wgpu::CommandEncoder, &Slab),
+        mut each: impl FnMut(&Slab) -> Result<(), GpuError>,
         progress: &dyn Fn(usize, usize),
     ) -> Result<(), GpuError> {
-        for slab in self.slabs() {
-            self.submit(gpu, pass, base, &slab, |_| {})?;
-            if wait_between && self.is_split() {
-                super::wait(&gpu.device, pass.label, super::WAIT)?;
+        let paced = gpu.slicing.is_on();
+        let slice = self.dims[0] as u64 * self.dims[1] as u64 * self.work_per_voxel;
+        let mut z0 = 0;
+        while z0 < self.dims[2] {
+            let max = self.depth as u64 * slice;
+            let depth = (gpu.slicing.units(pass.label, max) / slice).max(1) as u32;
+            let slab = self.slab_at(z0, depth.min(self.depth));
+            let start = Instant::now();
+            let mut p = base;
+            p.set_slab(&slab);
+            pass.submit(gpu, &p, slab.groups, |encoder| after(encoder, &slab))?;
+            each(&slab)?;
+            if paced {
+                gpu.slicing
+                    .measured(pass.label, slab.depth as u64 * slice, start.elapsed());
             }
-            progress((slab.z0 + slab.depth) as usize, self.dims[2] as usize);
+            z0 += slab.depth;
+            progress(z0 as usize, self.dims[2] as usize);
         }
         Ok(())
     }
@@ -208,31 +316,22 @@ impl SlabDispatch {
     ) -> Result<Vec<f32>, GpuError> {
         let total = self.dims.iter().map(|&d| d as usize).product();
         let mut result = Vec::with_capacity(total);
-        for slab in self.slabs() {
-            let bytes = slab.voxels as u64 * 4;
-            self.submit(gpu, pass, base, &slab, |encoder| {
-                encoder.copy_buffer_to_buffer(out, 0, readback, 0, bytes);
-            })?;
-            let back = read_buffer(&gpu.device, readback, pass.label)?;
-            result.extend(bytemuck::pod_collect_to_vec::<u8, f32>(
-                &back[..bytes as usize],
-            ));
-            progress((slab.z0 + slab.depth) as usize, self.dims[2] as usize);
-        }
+        self.run_paced(
+            gpu,
+            pass,
+            base,
+            |encoder, slab| {
+                encoder.copy_buffer_to_buffer(out, 0, readback, 0, slab.voxels as u64 * 4);
+            },
+            |slab| {
+                let bytes = slab.voxels as usize * 4;
+                let back = read_buffer(&gpu.device, readback, pass.label)?;
+                result.extend(bytemuck::pod_collect_to_vec::<u8, f32>(&back[..bytes]));
+                Ok(())
+            },
+            progress,
+        )?;
         Ok(result)
-    }
-
-    fn submit<P: SlabParams>(
-        &self,
-        gpu: &Gpu,
-        pass: &Pass<'_>,
-        base: P,
-        slab: &Slab,
-        after: impl FnOnce(&mut wgpu::CommandEncoder),
-    ) -> Result<(), GpuError> {
-        let mut p = base;
-        p.set_slab(slab);
-        pass.submit(gpu, &p, slab.groups, after)
     }
 }
 
@@ -370,6 +469,8 @@ pub struct BrickDispatch {
     offset: u32,
     bricks: u32,
     per_submission: u32,
+    /// Work per voxel, in the budget's units.
+    work_per_voxel: u64,
 }
 
 impl BrickDispatch {
@@ -388,6 +489,7 @@ impl BrickDispatch {
             offset: offset as u32,
             bricks: bricks as u32,
             per_submission: per.min(u32::MAX as u64) as u32,
+            work_per_voxel: work_per_voxel.max(1),
         }
     }
 
@@ -411,10 +513,42 @@ impl BrickDispatch {
         self.per_submission.min(self.bricks)
     }
 
+    /// Work of one brick, in the budget's units.
+    pub fn brick_work(&self) -> u64 {
+        512 * self.work_per_voxel
+    }
+
+    /// Submits the chunk of up to `count` bricks from `first` (counted from the list's
+    /// start; at most [`Self::max_chunk`]) with `after(encoder)` at its end; returns the
+    /// bricks submitted.
+    pub fn submit_chunk<P: ChunkParams>(
+        &self,
+        gpu: &Gpu,
+        pass: &Pass<'_>,
+        base: P,
+        (first, count): (u32, u32),
+        after: impl FnOnce(&mut wgpu::CommandEncoder),
+    ) -> Result<u32, GpuError> {
+        let count = count
+            .clamp(1, self.per_submission.max(1))
+            .min(self.bricks.saturating_sub(first));
+        if count == 0 {
+            return Ok(0);
+        }
+        let row = count.clamp(1, MAX_GROUPS);
+        let rows = count.div_ceil(row);
+        let mut p = base;
+        p.set_chunk(self.offset + first, count, row);
+        pass.submit(gpu, &p, [8, row, rows], after)?;
+        Ok(count)
+    }
+
     /// Runs `pass` once per chunk (one submission each) with `base`'s chunk fields set,
     /// calling `after(encoder, first, count)` in each submission's encoder (to copy its
     /// output) and `each(first, count)` after submitting it (first counts from the
-    /// list's start). With `wait_between`, waits for each chunk before the next.
+    /// list's start). With `wait_between`, waits for each chunk before the next. With a
+    /// slice time ([`Slicing`]) a chunk holds the bricks that fit in it and is always
+    /// waited for.
     pub fn run<P: ChunkParams>(
         &self,
         gpu: &Gpu,
@@ -424,19 +558,29 @@ impl BrickDispatch {
         mut each: impl FnMut(u32, u32) -> Result<(), GpuError>,
         after: impl Fn(&mut wgpu::CommandEncoder, u32, u32),
     ) -> Result<(), GpuError> {
-        let split = self.bricks > self.per_submission;
-        for (first, count) in self.chunks() {
-            let row = count.clamp(1, MAX_GROUPS);
-            let rows = count.div_ceil(row);
-            let mut p = base;
-            p.set_chunk(self.offset + first, count, row);
-            pass.submit(gpu, &p, [8, row, rows], |encoder| {
+        let paced = gpu.slicing.is_on();
+        let wait = paced || (wait_between && self.bricks > self.per_submission);
+        let brick = self.brick_work();
+        let mut first = 0;
+        while first < self.bricks {
+            let max = self.per_submission.max(1) as u64 * brick;
+            let wanted = (gpu.slicing.units(pass.label, max) / brick).max(1) as u32;
+            let count = wanted
+                .min(self.per_submission.max(1))
+                .min(self.bricks - first);
+            let start = Instant::now();
+            self.submit_chunk(gpu, pass, base, (first, count), |encoder| {
                 after(encoder, first, count)
             })?;
-            if wait_between && split {
+            if wait {
                 super::wait(&gpu.device, pass.label, super::WAIT)?;
             }
             each(first, count)?;
+            if paced {
+                gpu.slicing
+                    .measured(pass.label, count as u64 * brick, start.elapsed());
+            }
+            first += count;
         }
         Ok(())
     }

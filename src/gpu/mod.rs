@@ -6,6 +6,7 @@
 //! volume without an error.
 
 pub mod dispatch;
+pub mod pacer;
 pub mod resources;
 pub mod shaders;
 pub mod smoke;
@@ -64,6 +65,8 @@ pub struct Gpu {
     pub info: wgpu::AdapterInfo,
     /// Each stage's long-lived state (pipelines, layouts, samplers), built on first use.
     stages: StageCache,
+    /// How long one submission of a long stage may take (the viewer's slices).
+    pub slicing: dispatch::Slicing,
 }
 
 /// Long-lived GPU state of one pipeline stage, built once per device (rerun's
@@ -96,6 +99,7 @@ impl Gpu {
             queue,
             info,
             stages: StageCache::default(),
+            slicing: dispatch::Slicing::default(),
         }
     }
 

@@ -26,10 +26,9 @@
 //! hold from the previous frames; unreadable voxels keep whatever they hold, which no
 //! pixel uses. [`Bricks::dense`] turns all of it off.
 
-use super::lao::{Rays, STEP_MM, lao_lut, ray_sum};
+use super::lao::{Rays, STEP_MM, lao_lut};
 use super::sparse::{Bricks, VoxelTest};
 use crate::clip::ClipShape;
-use crate::clip::cpu::ClipMapsCpu;
 use crate::clip::gpu::{ClipMaps, ClipUpdate};
 use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
 use crate::gpu::{
@@ -38,13 +37,16 @@ use crate::gpu::{
 };
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
-use crate::sample::trilinear;
-use crate::tf::{Lut, TransferFunction};
+use crate::tf::TransferFunction;
 use glam::Vec3;
-use rayon::prelude::*;
 use std::time::Instant;
 
 pub use super::settings::DEFAULT_MSAA;
+pub use cpu::{clip_volume_cpu, lao_on_opacity_cpu};
+pub use frame::CaoFrame;
+
+mod cpu;
+mod frame;
 
 /// Selective recomputation (CAO) or the baseline that ray casts every voxel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -487,8 +489,10 @@ impl CaoGpu {
     }
 
     /// One frame: update the clip maps for `shapes` (moved shapes only change matrices),
-    /// clip (step IV) and compute `V_AO` (step V). `reach_mm` is normally
-    /// [`Self::reach_mm`]; tests shrink it to show exactness depends on it.
+    /// clip (step IV) and compute `V_AO` (step V), waiting for each. `reach_mm` is
+    /// normally [`Self::reach_mm`]; tests shrink it to show exactness depends on it. The
+    /// viewer submits the same work in slices without waiting ([`Self::begin`],
+    /// [`Self::advance`]).
     pub fn update(
         &mut self,
         gpu: &Gpu,
@@ -498,14 +502,32 @@ impl CaoGpu {
         reach_mm: f32,
         mode: CaoMode,
     ) -> Result<CaoStats, GpuError> {
-        let device = &gpu.device;
-        let radius = Vec3::from(texels.extent()).length() * 0.5;
         let t0 = Instant::now();
+        let frame = self.begin(gpu, texels, shapes, resolution, reach_mm, mode)?;
+        crate::gpu::wait(&gpu.device, "Cao::maps", crate::gpu::WAIT)?;
+        let t1 = Instant::now();
+        let mut stats = self.run_timed(gpu, &frame.lists, mode)?;
+        stats.maps_seconds = (t1 - t0).as_secs_f64();
+        stats.clip_errors = frame.clip_errors;
+        Ok(stats)
+    }
+
+    /// Starts one frame: re-poses the clip maps for `shapes` (a new geometry's maps are
+    /// rendered and submitted here), picks the bricks steps IV and V visit and writes
+    /// their lists. Nothing is waited for.
+    pub fn begin(
+        &mut self,
+        gpu: &Gpu,
+        texels: &VolumeTexels,
+        shapes: &[ClipShape],
+        resolution: u32,
+        reach_mm: f32,
+        mode: CaoMode,
+    ) -> Result<CaoFrame, GpuError> {
+        let radius = Vec3::from(texels.extent()).length() * 0.5;
         let ClipUpdate { errors, .. } = self
             .clip
             .update(gpu, shapes, radius, reach_mm, resolution)?;
-        crate::gpu::wait(device, "Cao::maps", crate::gpu::WAIT)?;
-        let t1 = Instant::now();
         let b = &self.bricks;
         let cameras = self.clip.cameras();
         let near = b.near(texels.dims, texels.spacing, &self.clip.uniforms, &cameras);
@@ -524,25 +546,31 @@ impl CaoGpu {
             },
         };
         self.was_near = near;
-        let mut stats = self.run_timed(gpu, &lists, mode)?;
-        self.last = (lists, mode);
-        stats.maps_seconds = (t1 - t0).as_secs_f64();
-        stats.clip_errors = errors.iter().map(|e| e.to_string()).collect();
-        Ok(stats)
+        self.write_lists(gpu, &lists);
+        self.last = (lists.clone(), mode);
+        Ok(CaoFrame::new(
+            lists,
+            mode,
+            errors.iter().map(|e| e.to_string()).collect(),
+        ))
     }
 
     fn run_timed(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<CaoStats, GpuError> {
         let device = &gpu.device;
-        let dims = self.dims.map(|d| d as usize);
         let t1 = Instant::now();
-        self.write_lists(gpu, lists);
         self.step_iv(gpu, lists, mode)?;
         crate::gpu::wait(device, "Cao::clip", crate::gpu::WAIT)?;
         let t2 = Instant::now();
         self.step_v(gpu, lists, true, &|_, _| {})?;
         let c = self.read_counters(gpu)?;
         let t3 = Instant::now();
-        Ok(CaoStats {
+        Ok(self.stats_of(lists, c, [(t2 - t1).as_secs_f64(), (t3 - t2).as_secs_f64()]))
+    }
+
+    /// A frame's figures from its lists, counters and stage times (step IV, step V).
+    fn stats_of(&self, lists: &Lists, c: [u64; 3], seconds: [f64; 2]) -> CaoStats {
+        let dims = self.dims.map(|d| d as usize);
+        CaoStats {
             voxels: dims.iter().map(|&d| d as u64).product(),
             recomputed: c[2],
             category_b: c[0],
@@ -550,10 +578,10 @@ impl CaoGpu {
             clip_voxels: Bricks::voxels_in(&lists.clip, dims),
             lao_voxels: Bricks::voxels_in(&lists.lao, dims),
             maps_seconds: 0.0,
-            clip_seconds: (t2 - t1).as_secs_f64(),
-            lao_seconds: (t3 - t2).as_secs_f64(),
+            clip_seconds: seconds[0],
+            lao_seconds: seconds[1],
             clip_errors: Vec::new(),
-        })
+        }
     }
 
     /// Steps IV and V over `lists` without timing (the precomputation).
@@ -597,9 +625,8 @@ impl CaoGpu {
         Ok([c[0] as u64, c[1] as u64, c[2] as u64])
     }
 
-    /// Step IV over `lists.clip`.
-    fn step_iv(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<(), GpuError> {
-        let device = &gpu.device;
+    /// Step IV's bricks over `lists.clip` and its uniforms.
+    fn iv_dispatch(&self, lists: &Lists, mode: CaoMode) -> (BrickDispatch, ClipParams) {
         // Bound each submission's clip samples (41 per voxel per shape at worst).
         let per_voxel = (9 + self.msaa as u64) * self.clip.uniforms.counts[0].max(1) as u64;
         let chunks = BrickDispatch::new(
@@ -609,17 +636,49 @@ impl CaoGpu {
             budget::LAO_SAMPLES,
             u64::MAX,
         );
-        let clip_group = self
-            .clip
-            .bind_group(device, &self.pipelines.clip.get_bind_group_layout(1));
+        let mut params = self.clip_params;
+        params.full = u32::from(mode == CaoMode::Full);
+        (chunks, params)
+    }
+
+    /// Step IV's bind group of the clip maps (group 1).
+    fn iv_clip_group(&self, device: &wgpu::Device) -> wgpu::BindGroup {
+        self.clip
+            .bind_group(device, &self.pipelines.clip.get_bind_group_layout(1))
+    }
+
+    /// Step V's bricks over `lists.lao` (after step IV's in the list buffer).
+    fn v_dispatch(&self, lists: &Lists) -> BrickDispatch {
+        let per_voxel = self.rays as u64 * self.samples as u64;
+        BrickDispatch::new(
+            lists.clip.len(),
+            lists.lao.len(),
+            per_voxel,
+            budget::LAO_SAMPLES,
+            u64::MAX,
+        )
+    }
+
+    /// Step V's pipeline, bind group and uniforms, for a frame or for `V_PAO`.
+    fn v_parts(&self, frame: bool) -> (&wgpu::ComputePipeline, &wgpu::BindGroup, &wgpu::Buffer) {
+        let i = usize::from(frame);
+        (
+            self.pipelines.lao_for(&self.bricks, frame),
+            &self.lao_group[i],
+            &self.lao_uniforms[i],
+        )
+    }
+
+    /// Step IV over `lists.clip`.
+    fn step_iv(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<(), GpuError> {
+        let (chunks, params) = self.iv_dispatch(lists, mode);
+        let clip_group = self.iv_clip_group(&gpu.device);
         let pass = Pass {
             label: "Cao::step_iv",
             pipeline: &self.pipelines.clip,
             bind_groups: &[&self.clip_group, &clip_group],
             uniforms: &self.clip_uniforms,
         };
-        let mut params = self.clip_params;
-        params.full = u32::from(mode == CaoMode::Full);
         chunks.run(gpu, &pass, params, false, |_, _| Ok(()), |_, _, _| {})
     }
 
@@ -631,26 +690,19 @@ impl CaoGpu {
         frame: bool,
         progress: &dyn Fn(usize, usize),
     ) -> Result<(), GpuError> {
-        let per_voxel = self.rays as u64 * self.samples as u64;
-        let chunks = BrickDispatch::new(
-            lists.clip.len(),
-            lists.lao.len(),
-            per_voxel,
-            budget::LAO_SAMPLES,
-            u64::MAX,
-        );
-        let params = self.lao_params;
+        let chunks = self.v_dispatch(lists);
+        let (pipeline, group, uniforms) = self.v_parts(frame);
         let pass = Pass {
             label: "Cao::step_v",
-            pipeline: self.pipelines.lao_for(&self.bricks, frame),
-            bind_groups: &[&self.lao_group[usize::from(frame)]],
-            uniforms: &self.lao_uniforms[usize::from(frame)],
+            pipeline,
+            bind_groups: &[group],
+            uniforms,
         };
         let total = chunks.len() as usize;
         chunks.run(
             gpu,
             &pass,
-            params,
+            self.lao_params,
             true,
             |first, count| {
                 progress((first + count) as usize, total);
@@ -735,125 +787,4 @@ impl CaoGpu {
     pub fn bytes_per_voxel(&self) -> u32 {
         3 * self.v_ao.format().block_copy_size(None).unwrap_or(4)
     }
-}
-
-/// Step IV on the CPU: (`V_o`, `V_m`) from the GPU's clip maps, for the twin tests.
-pub fn clip_volume_cpu(
-    texels: &VolumeTexels,
-    lut: &Lut,
-    maps: &ClipMapsCpu,
-    msaa: u32,
-) -> (Vec<f32>, Vec<f32>) {
-    let [nx, ny, nz] = texels.dims;
-    let norm = texels.norm_values();
-    let (a, b) = texels.lut_map(lut);
-    let top = (lut.rgba.len().max(2) - 1) as f32;
-    let spacing = Vec3::from(texels.spacing);
-    let half = Vec3::from(texels.extent()) * 0.5;
-    let offsets = msaa_offsets(msaa.max(1));
-    let opacity = |n: f32| {
-        let t = (n * a + b).clamp(0.0, top);
-        let i0 = t.floor() as usize;
-        let i1 = (i0 + 1).min(top as usize);
-        let f = t - t.floor();
-        lut.rgba[i0][3] + (lut.rgba[i1][3] - lut.rgba[i0][3]) * f
-    };
-    let per_voxel: Vec<(f32, f32)> = (0..nx * ny * nz)
-        .into_par_iter()
-        .map(|i| {
-            let v = Vec3::new(
-                (i % nx) as f32,
-                ((i / nx) % ny) as f32,
-                (i / (nx * ny)) as f32,
-            );
-            let at = |o: Vec3| (v + Vec3::splat(0.5) + o) * spacing - half;
-            let (mut visible, mut dilated) = (0u32, 0u32);
-            for k in 0..9u32 {
-                let o = if k == 0 {
-                    Vec3::ZERO
-                } else {
-                    let c = k - 1;
-                    Vec3::new((c & 1) as f32, ((c >> 1) & 1) as f32, ((c >> 2) & 1) as f32)
-                        - Vec3::splat(0.5)
-                };
-                let (vis, aff) = maps.classify(at(o));
-                visible += u32::from(vis);
-                dilated += u32::from(aff);
-            }
-            let mut o = 0.0;
-            if visible == 9 {
-                o = opacity(norm[i]);
-            } else if visible > 0 {
-                for off in offsets.iter().take(msaa as usize) {
-                    let (vis, aff) = maps.classify(at(*off));
-                    visible += u32::from(vis);
-                    dilated += u32::from(aff);
-                }
-                o = visible as f32 / (msaa + 9) as f32 * opacity(norm[i]);
-            }
-            let m = if dilated == 0 {
-                1.0
-            } else if visible > 0 {
-                0.5
-            } else {
-                0.0
-            };
-            (o, m)
-        })
-        .collect();
-    per_voxel.into_iter().unzip()
-}
-
-/// Step V on the CPU: `V_AO` from `V_o`, `V_m` and `V_PAO` (twin of `cao_lao.wgsl`),
-/// for every voxel, with rays stepping over the empty bricks of `bricks`.
-#[allow(clippy::too_many_arguments)]
-pub fn lao_on_opacity_cpu(
-    texels: &VolumeTexels,
-    v_o: &[f32],
-    v_m: &[f32],
-    v_pao: &[f32],
-    rays: &Rays,
-    samples: u32,
-    mode: CaoMode,
-    bricks: &Bricks,
-) -> Vec<f32> {
-    let dims = texels.dims;
-    let [nx, ny, nz] = dims;
-    let extent = Vec3::from(texels.extent());
-    let scale = Vec3::splat(STEP_MM) / extent;
-    let samples = samples.max(1);
-    let size = Vec3::new(nx as f32, ny as f32, nz as f32);
-    let opacity_at = |uvw: Vec3| {
-        if uvw.cmplt(Vec3::ZERO).any() || uvw.cmpgt(Vec3::ONE).any() {
-            0.0
-        } else {
-            trilinear(v_o, dims, uvw)
-        }
-    };
-    let readable = bricks.readable_mask(texels);
-    (0..nx * ny * nz)
-        .into_par_iter()
-        .map(|i| {
-            let m = v_m[i];
-            if m == 1.0 && mode == CaoMode::Selective {
-                return v_pao[i];
-            }
-            if m <= 0.0 || !readable[i] {
-                return 1.0;
-            }
-            let v = Vec3::new(
-                (i % nx) as f32,
-                ((i / nx) % ny) as f32,
-                (i / (nx * ny)) as f32,
-            );
-            let centre = (v + Vec3::splat(0.5)) / size;
-            let mut total = 0.0;
-            for (d, w) in rays.directions.iter().zip(&rays.weights) {
-                let step = *d * scale;
-                let sum = ray_sum(centre, step, samples, (bricks, dims), opacity_at);
-                total += w * sum / samples as f32;
-            }
-            total / rays.directions.len() as f32
-        })
-        .collect()
 }

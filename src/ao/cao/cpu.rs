@@ -1,0 +1,132 @@
+//! The CPU twins of CAO's steps IV and V (for the tests that compare them with the GPU).
+
+use super::super::lao::{Rays, STEP_MM, ray_sum};
+use super::super::sparse::Bricks;
+use super::{CaoMode, msaa_offsets};
+use crate::clip::cpu::ClipMapsCpu;
+use crate::render::texels::VolumeTexels;
+use crate::sample::trilinear;
+use crate::tf::Lut;
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Step IV on the CPU: (`V_o`, `V_m`) from the GPU's clip maps, for the twin tests.
+pub fn clip_volume_cpu(
+    texels: &VolumeTexels,
+    lut: &Lut,
+    maps: &ClipMapsCpu,
+    msaa: u32,
+) -> (Vec<f32>, Vec<f32>) {
+    let [nx, ny, nz] = texels.dims;
+    let norm = texels.norm_values();
+    let (a, b) = texels.lut_map(lut);
+    let top = (lut.rgba.len().max(2) - 1) as f32;
+    let spacing = Vec3::from(texels.spacing);
+    let half = Vec3::from(texels.extent()) * 0.5;
+    let offsets = msaa_offsets(msaa.max(1));
+    let opacity = |n: f32| {
+        let t = (n * a + b).clamp(0.0, top);
+        let i0 = t.floor() as usize;
+        let i1 = (i0 + 1).min(top as usize);
+        let f = t - t.floor();
+        lut.rgba[i0][3] + (lut.rgba[i1][3] - lut.rgba[i0][3]) * f
+    };
+    let per_voxel: Vec<(f32, f32)> = (0..nx * ny * nz)
+        .into_par_iter()
+        .map(|i| {
+            let v = Vec3::new(
+                (i % nx) as f32,
+                ((i / nx) % ny) as f32,
+                (i / (nx * ny)) as f32,
+            );
+            let at = |o: Vec3| (v + Vec3::splat(0.5) + o) * spacing - half;
+            let (mut visible, mut dilated) = (0u32, 0u32);
+            for k in 0..9u32 {
+                let o = if k == 0 {
+                    Vec3::ZERO
+                } else {
+                    let c = k - 1;
+                    Vec3::new((c & 1) as f32, ((c >> 1) & 1) as f32, ((c >> 2) & 1) as f32)
+                        - Vec3::splat(0.5)
+                };
+                let (vis, aff) = maps.classify(at(o));
+                visible += u32::from(vis);
+                dilated += u32::from(aff);
+            }
+            let mut o = 0.0;
+            if visible == 9 {
+                o = opacity(norm[i]);
+            } else if visible > 0 {
+                for off in offsets.iter().take(msaa as usize) {
+                    let (vis, aff) = maps.classify(at(*off));
+                    visible += u32::from(vis);
+                    dilated += u32::from(aff);
+                }
+                o = visible as f32 / (msaa + 9) as f32 * opacity(norm[i]);
+            }
+            let m = if dilated == 0 {
+                1.0
+            } else if visible > 0 {
+                0.5
+            } else {
+                0.0
+            };
+            (o, m)
+        })
+        .collect();
+    per_voxel.into_iter().unzip()
+}
+
+/// Step V on the CPU: `V_AO` from `V_o`, `V_m` and `V_PAO` (twin of `cao_lao.wgsl`),
+/// for every voxel, with rays stepping over the empty bricks of `bricks`.
+#[allow(clippy::too_many_arguments)]
+pub fn lao_on_opacity_cpu(
+    texels: &VolumeTexels,
+    v_o: &[f32],
+    v_m: &[f32],
+    v_pao: &[f32],
+    rays: &Rays,
+    samples: u32,
+    mode: CaoMode,
+    bricks: &Bricks,
+) -> Vec<f32> {
+    let dims = texels.dims;
+    let [nx, ny, nz] = dims;
+    let extent = Vec3::from(texels.extent());
+    let scale = Vec3::splat(STEP_MM) / extent;
+    let samples = samples.max(1);
+    let size = Vec3::new(nx as f32, ny as f32, nz as f32);
+    let opacity_at = |uvw: Vec3| {
+        if uvw.cmplt(Vec3::ZERO).any() || uvw.cmpgt(Vec3::ONE).any() {
+            0.0
+        } else {
+            trilinear(v_o, dims, uvw)
+        }
+    };
+    let readable = bricks.readable_mask(texels);
+    (0..nx * ny * nz)
+        .into_par_iter()
+        .map(|i| {
+            let m = v_m[i];
+            if m == 1.0 && mode == CaoMode::Selective {
+                return v_pao[i];
+            }
+            if m <= 0.0 || !readable[i] {
+                return 1.0;
+            }
+            let v = Vec3::new(
+                (i % nx) as f32,
+                ((i / nx) % ny) as f32,
+                (i / (nx * ny)) as f32,
+            );
+            let centre = (v + Vec3::splat(0.5)) / size;
+            let mut total = 0.0;
+            for (d, w) in rays.directions.iter().zip(&rays.weights) {
+                let step = *d * scale;
+                let sum = ray_sum(centre, step, samples, (bricks, dims), opacity_at);
+                total += w * sum / samples as f32;
+            }
+            total / rays.directions.len() as f32
+        })
+        .collect()
+}
