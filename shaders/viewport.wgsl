@@ -1,8 +1,11 @@
 // The viewer's viewport: draws the ray caster's Rgba8Unorm image 1:1 into the egui paint
 // callback's viewport (one texel per framebuffer pixel, no filtering), so the window
-// shows exactly the pixels `volao render` writes for the same frame.
+// shows exactly the pixels `volao render` writes for the same frame. An image of
+// another size (interactive quality while the view moves) is scaled with bilinear
+// filtering (`fs_scaled*`).
 
 @group(0) @binding(0) var image: texture_2d<f32>;
+@group(0) @binding(1) var filtered: sampler;
 
 struct VsOut {
     @builtin(position) position: vec4<f32>,
@@ -21,12 +24,19 @@ fn vs_main(@builtin(vertex_index) i: u32) -> VsOut {
 
 // Straight RGBA over a dark grey (only visible where the background is transparent);
 // opaque pixels pass through unchanged.
+fn over_grey(c: vec4<f32>) -> vec4<f32> {
+    let grey = vec3<f32>(0.12);
+    return vec4<f32>(c.rgb * c.a + grey * (1.0 - c.a), 1.0);
+}
+
 fn texel(uv: vec2<f32>) -> vec4<f32> {
     let size = textureDimensions(image);
     let p = min(vec2<u32>(uv * vec2<f32>(size)), size - vec2<u32>(1u));
-    let c = textureLoad(image, p, 0);
-    let grey = vec3<f32>(0.12);
-    return vec4<f32>(c.rgb * c.a + grey * (1.0 - c.a), 1.0);
+    return over_grey(textureLoad(image, p, 0));
+}
+
+fn scaled(uv: vec2<f32>) -> vec4<f32> {
+    return over_grey(textureSampleLevel(image, filtered, uv, 0.0));
 }
 
 // Render target without sRGB encoding (egui's usual one): copy the stored values.
@@ -46,5 +56,16 @@ fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
 @fragment
 fn fs_srgb(in: VsOut) -> @location(0) vec4<f32> {
     let c = texel(in.uv);
+    return vec4<f32>(srgb_to_linear(c.rgb), c.a);
+}
+
+@fragment
+fn fs_scaled(in: VsOut) -> @location(0) vec4<f32> {
+    return scaled(in.uv);
+}
+
+@fragment
+fn fs_scaled_srgb(in: VsOut) -> @location(0) vec4<f32> {
+    let c = scaled(in.uv);
     return vec4<f32>(srgb_to_linear(c.rgb), c.a);
 }

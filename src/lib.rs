@@ -13,7 +13,8 @@
 //! 4. [`gpu`] owns the device (one path for viewer, CLI and tests), the shaders, the
 //!    resource helpers, [`gpu::dispatch::SlabDispatch`] (the z-slab loop of the dense
 //!    per-voxel compute stages) and [`gpu::dispatch::BrickDispatch`] (LAO's and CAO's
-//!    lists of 8³ bricks). Each stage's pipelines are built once per device
+//!    lists of 8³ bricks), which in the viewer cut long work into short submissions
+//!    ([`gpu::dispatch::Slicing`]). Each stage's pipelines are built once per device
 //!    ([`gpu::Gpu::stage`]).
 //! 5. [`ao`] computes the ambient factor `A(x)`: [`ao::AoEngine`] picks the method's stage
 //!    (LAO, CAO, positional AO, filter maps, cone tracing; each a GPU pass with its CPU
@@ -28,7 +29,10 @@
 //!    device it is given.
 //! 7. [`app`] is the eframe viewer: the same texels, stages and ray caster behind a UI
 //!    whose background jobs compute AO (shown first as an ambient-map preview),
-//!    modulation and light volumes; the demo opens carved, with AO.
+//!    modulation and light volumes; the demo opens carved, with AO. Its viewport image —
+//!    CAO's per-frame update, then the ray cast in strips — is submitted in slices
+//!    between UI frames ([`gpu::pacer::Pacer`]), so the UI thread never waits for the
+//!    GPU.
 //!
 //! The command-line interface and the benchmarks live in the binary (`src/bin/volao`);
 //! [`process`] holds the few process-wide settings it makes at start.

@@ -69,7 +69,7 @@ fn harness_on(
         open,
         recent_file: Some(screenshot_dir.join("recent.json")),
         screenshot_dir: screenshot_dir.to_owned(),
-        clip_resolution: CLIP_MAPS,
+        clip_resolution: Some(CLIP_MAPS),
         ..Default::default()
     };
     let viewer = Viewer::new(&ctx, render_state, options).unwrap_or_else(|e| panic!("{e}"));
@@ -1043,4 +1043,83 @@ fn a_slow_ao_shows_an_ambient_map_first_and_then_never_a_frame_without_ao() {
     );
     assert_eq!(seen.last(), Some(&AoShown::Exact));
     assert!(seen.contains(&AoShown::Approximate), "{seen:?}");
+}
+
+/// Issue #16: dragging a clip shape with CAO never blocks the UI. The sphere of the
+/// demo head moves while 54-ray CAO is on; the update for its new pose runs on the GPU
+/// over many UI frames (on lavapipe it takes seconds), during which the UI keeps
+/// producing frames and handles input (a drag orbits the camera), and the viewport keeps
+/// the previous pose's complete image. Once it rests, the viewport equals `volao render`
+/// of the saved scene. On the blocking code every step ran the whole update, so no step
+/// ever saw one in flight.
+#[test]
+fn dragging_a_clip_shape_with_cao_keeps_the_ui_running() {
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(OpenRequest::Demo, dir.path());
+    settle(&mut h);
+    {
+        let doc = h.state_mut().document_mut().expect("doc");
+        doc.ao.method = volao::ao::AoMethod::Cao;
+        doc.ao.rays = volao::ao::rays::RaySet::FiftyFour;
+        doc.ao.samples = 20;
+        assert_eq!(doc.clip_shapes.len(), 1, "the demo opens carved");
+    }
+    settle(&mut h);
+    assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
+    let images_before = h.state().viewport_images();
+
+    // Move the sphere (as one step of a drag does) and keep stepping the UI.
+    let start = Instant::now();
+    h.state_mut().document_mut().expect("doc").clip_shapes[0].translation[0] += 6.0;
+    h.step();
+    let camera_before = h.state().document().expect("doc").camera;
+    let (mut frames, mut dragged, mut camera_moved) = (0u32, false, false);
+    // A corner of the viewport: background, away from the sphere's outline.
+    let centre = h.state().viewport_rect().left_bottom() + egui::vec2(30.0, -30.0);
+    while h.state().cao_update_in_flight() {
+        assert!(
+            start.elapsed() < Duration::from_secs(300),
+            "the CAO update did not finish in 5 minutes"
+        );
+        // Input while the update runs: a drag on the viewport orbits the camera.
+        match frames {
+            3 => h.drag_at(centre),
+            4..=7 => h.hover_at(centre + egui::vec2(8.0 * (frames - 3) as f32, 0.0)),
+            8 => {
+                h.drop_at(centre + egui::vec2(40.0, 0.0));
+                dragged = true;
+            }
+            _ => {}
+        }
+        h.step();
+        frames += 1;
+        if dragged && h.state().cao_update_in_flight() {
+            camera_moved |= h.state().document().expect("doc").camera != camera_before;
+        }
+    }
+    let update = start.elapsed();
+    eprintln!(
+        "the CAO update ran {:.2} s over {frames} UI frames ({} images before it)",
+        update.as_secs_f64(),
+        images_before
+    );
+    assert!(
+        frames >= 10,
+        "only {frames} UI frames while the CAO update ran ({:.2} s): the UI waited for it",
+        update.as_secs_f64()
+    );
+    assert!(
+        camera_moved,
+        "the drag was not handled while the CAO update ran"
+    );
+    let percent = h.state().cao_percent_recomputed().expect("CAO statistics");
+    assert!(percent > 0.0 && percent < 100.0, "{percent} % recomputed");
+
+    // Once it rests, the viewport is `volao render` of the saved scene.
+    settle(&mut h);
+    h.state_mut().show_outlines = false;
+    h.run_steps(2);
+    settle(&mut h);
+    viewport_is_volao_render(&mut h, &dir.path().join("dragged.json"), "dragged_cao");
 }

@@ -7,7 +7,6 @@ use super::jobs::Keyed;
 use crate::ao::AoSettings;
 use crate::ao::cao::CaoStats;
 use crate::ao::filter::OpacityModulation;
-use crate::clip::ClipShape;
 use crate::tf::TransferFunction;
 use std::time::{Duration, Instant};
 
@@ -51,8 +50,6 @@ pub(super) struct Derived {
     pub(super) uploaded_tf: Option<(TransferFunction, f32)>,
     /// The last AO computation's seconds and device.
     pub(super) ao_seconds: Option<(f64, String)>,
-    /// The shapes the GPU clips with (and CAO's V_AO was made for); `None`: out of date.
-    pub(super) synced_clip: Option<Vec<ClipShape>>,
     /// The last CAO frame's figures.
     pub(super) cao_stats: Option<CaoStats>,
 }
@@ -69,7 +66,6 @@ impl Default for Derived {
             tf_changed_at: Instant::now(),
             uploaded_tf: None,
             ao_seconds: None,
-            synced_clip: None,
             cao_stats: None,
         }
     }

@@ -68,9 +68,11 @@ pub struct ViewerOptions {
     pub screenshot_dir: PathBuf,
     /// Window size in points.
     pub window_size: [f32; 2],
-    /// Edge of the clip shapes' depth maps (rebuilt only when a shape's geometry
-    /// changes; moving a shape changes a matrix).
-    pub clip_resolution: u32,
+    /// Edge of the clip shapes' depth maps (`--clip-maps N`), replacing the opened
+    /// scene's (a scene saved from the viewer keeps it, so `volao render` clips alike).
+    /// The maps are rebuilt only when a shape's geometry changes; moving a shape changes
+    /// a matrix.
+    pub clip_resolution: Option<u32>,
     /// Benchmark (`volao view --bench-clip-drag N`): the viewport alone fills the window;
     /// once AO is ready, the first clip shape moves 1 mm every frame for N frames, then the
     /// frame times are printed and the viewer closes.
@@ -88,7 +90,7 @@ impl Default for ViewerOptions {
             recent_file: default_recent_file(),
             screenshot_dir: std::env::current_dir().unwrap_or_else(|_| PathBuf::from(".")),
             window_size: [1280.0, 800.0],
-            clip_resolution: crate::clip::gpu::DEFAULT_RESOLUTION,
+            clip_resolution: None,
             bench_clip_drag: None,
             no_skipping: false,
         }

@@ -13,10 +13,11 @@
 //! UI around the viewport and `screenshot.rs` takes screenshots; this file has the
 //! viewer's state, its API and one frame's wiring.
 //!
-//! The UI thread never waits for a file or for AO precomputation: loads and AO run on
-//! worker threads, screenshots are read back asynchronously and written by a worker.
-//! One exception remains: CAO's per-frame update (`sync_clip` → `CaoGpu::update`) waits
-//! for the GPU; docs/ui-never-waits.md says what it takes to remove it.
+//! The UI thread never waits for a file, for AO or for the GPU: loads and AO run on
+//! worker threads (whose GPU work is cut into short submissions, [`crate::gpu::dispatch::Slicing`]),
+//! screenshots are read back asynchronously and written by a worker, and the viewport's
+//! image — CAO's per-frame update included — is made in slices between UI frames
+//! ([`viewport`]), at interactive quality while the view moves.
 
 mod ao_job;
 pub mod ao_panel;
@@ -123,11 +124,32 @@ pub struct Viewer {
     gpu_errors: Arc<Mutex<Vec<String>>>,
     frame_ms: Option<f32>,
     frames_seen: u64,
+    /// The per-frame budget of GPU work the viewport may submit.
+    pacer: crate::gpu::pacer::Pacer,
+    /// Interactive quality while the view moves (the Rendering panel).
+    pub interactive: viewport::Interactive,
+    /// When the view (camera, clip shapes) last changed.
+    motion: Motion,
+    /// The viewport shows the full-quality image of what the document says.
+    viewport_current: bool,
     scripted: Scripted,
     /// Set when a `--screenshot` could not be written (the process exits non-zero).
     pub exit_error: Arc<Mutex<Option<String>>>,
     last_title: String,
 }
+
+/// The last view wanted and since when.
+#[derive(Debug)]
+struct Motion {
+    last: Option<(Frame, Vec<crate::clip::ClipShape>)>,
+    changed_at: Instant,
+}
+
+/// GPU time the viewport's work may take in one UI frame.
+const VIEWPORT_SLICE: std::time::Duration = std::time::Duration::from_millis(25);
+
+/// How long one submission of a background job (AO, light volume) may take.
+const JOB_SLICE: std::time::Duration = std::time::Duration::from_millis(15);
 
 /// Where a scripted run stands: `--exit-after-frames` and `--bench-clip-drag`.
 #[derive(Debug, Default)]
@@ -135,12 +157,13 @@ struct Scripted {
     /// Frames shown with the volume (and its AO) ready, for `--exit-after-frames`.
     ready_frames: u64,
     exit_requested: bool,
-    /// Frame times (s) and CAO shares (%) of `--bench-clip-drag`.
+    /// UI frame intervals (s) of `--bench-clip-drag`, while dragging.
     bench: Vec<(f64, f64)>,
     bench_last: Option<Instant>,
-    bench_warmup: u32,
-    /// When the counted frames began and the viewport's ray-cast frames by then.
+    /// When the counted frames began and the viewport's images by then.
     bench_start: Option<(Instant, u64)>,
+    /// Images completed: when, and seconds each took from its start.
+    images: Vec<(Instant, f64)>,
 }
 
 impl std::fmt::Debug for Viewer {
@@ -221,6 +244,9 @@ impl Viewer {
         options: ViewerOptions,
     ) -> Result<Self, AppError> {
         let gpu = gpu_of(&render_state);
+        // Long GPU work of background jobs goes in short submissions, so that the UI's
+        // frames slip in between (one in-order queue).
+        gpu.slicing.set_target(Some(JOB_SLICE));
         if gpu.info.backend == wgpu::Backend::Gl && std::env::var_os("VOLAO_ALLOW_GL").is_none() {
             return Err(AppError::OpenGl(gpu.info.name.clone()));
         }
@@ -245,6 +271,7 @@ impl Viewer {
             .as_deref()
             .map(load_recent)
             .unwrap_or_default();
+        let pacer = crate::gpu::pacer::Pacer::new(&gpu, VIEWPORT_SLICE);
         let mut viewer = Viewer {
             gpu: Arc::new(gpu),
             render_state,
@@ -268,6 +295,13 @@ impl Viewer {
             gpu_errors,
             frame_ms: None,
             frames_seen: 0,
+            pacer,
+            interactive: Default::default(),
+            motion: Motion {
+                last: None,
+                changed_at: Instant::now(),
+            },
+            viewport_current: false,
             scripted: Scripted::default(),
             exit_error: Arc::default(),
             last_title: String::new(),
@@ -300,9 +334,11 @@ impl Viewer {
         self.doc.as_mut()
     }
 
-    /// Whether a load, an AO computation or a screenshot is still running.
+    /// Whether a load, an AO computation, the viewport's full-quality image or a
+    /// screenshot is still on its way.
     pub fn is_busy(&self) -> bool {
         self.load_job.is_some()
+            || (self.doc.is_some() && !self.viewport_current)
             || self.derived.ao.pending(self.ao_key().as_ref())
             || self
                 .derived
@@ -353,6 +389,17 @@ impl Viewer {
     /// Why the AO for the current settings failed, if it did.
     pub fn ao_error(&self) -> Option<&str> {
         self.derived.ao.error(self.ao_key().as_ref())
+    }
+
+    /// Whether an update of CAO for moved clip shapes is being submitted or is still
+    /// running on the GPU (the viewport shows the previous pose meanwhile).
+    pub fn cao_update_in_flight(&self) -> bool {
+        self.with_viewport(|v| v.cao_in_flight()).unwrap_or(false)
+    }
+
+    /// Images the viewport has completed so far.
+    pub fn viewport_images(&self) -> u64 {
+        self.with_viewport(|v| v.frames_rendered).unwrap_or(0)
     }
 
     /// Voxels CAO recomputed in its last frame, in percent (`None` without CAO).
@@ -463,6 +510,9 @@ impl Viewer {
                 if self.options.no_skipping {
                     doc.render.empty_space_skipping = false;
                 }
+                if let Some(n) = self.options.clip_resolution {
+                    doc.ao.clip_resolution = n;
+                }
                 if doc.downsampled > 0 {
                     self.toast(
                         format!(
@@ -553,13 +603,14 @@ impl Viewer {
 
     /// One frame of the whole UI.
     pub fn show(&mut self, ui: &mut egui::Ui) {
+        let gpu = Arc::clone(&self.gpu);
+        self.pacer.begin_frame(&gpu);
         self.poll_load();
         self.handle_input(ui);
         self.update_ao();
         self.update_modulation();
         self.update_light();
         self.sync_transfer_function();
-        self.sync_clip();
         self.update_screenshots();
         let errors: Vec<String> = self
             .gpu_errors
@@ -572,6 +623,7 @@ impl Viewer {
 
         if self.options.bench_clip_drag.is_some() {
             egui::CentralPanel::no_frame().show(ui, |ui| self.viewport(ui));
+            self.pump_viewport();
             self.bench_step(ui.ctx());
             return;
         }
@@ -586,13 +638,18 @@ impl Viewer {
                     .show(ui, |ui| self.side_panel(ui));
             });
         egui::CentralPanel::no_frame().show(ui, |ui| self.viewport(ui));
+        // After the panels: the camera and shapes as this frame's input left them.
+        self.pump_viewport();
         self.show_prompt(ui.ctx());
         self.show_toasts(ui.ctx());
         self.update_title(ui.ctx());
         self.exit_logic(ui.ctx());
     }
 
-    /// One frame of `--bench-clip-drag`: time since the last frame, then move the shape.
+    /// One frame of `--bench-clip-drag N`: once the view is ready, moves the first clip
+    /// shape every UI frame (back and forth by 1 mm, a slow drag) and measures the UI
+    /// frames (what the mouse feels) and the viewport's images (each exact for its
+    /// pose) until N images have come while dragging.
     fn bench_step(&mut self, ctx: &egui::Context) {
         let Some(n) = self.options.bench_clip_drag else {
             return;
@@ -607,56 +664,66 @@ impl Viewer {
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             return;
         }
-        if self.load_job.is_some() || !self.derived_ready() {
-            return;
-        }
         let now = Instant::now();
-        let rendered = self
-            .with_viewport(|v| v.frames_rendered)
-            .unwrap_or_default();
-        // The first two frames build the clip maps and warm up: not counted.
-        if let Some(last) = self
-            .scripted
-            .bench_last
-            .filter(|_| self.scripted.bench_warmup >= 2)
-        {
-            let share = self.cao_percent_recomputed().unwrap_or(0.0);
-            self.scripted
-                .bench
-                .push(((now - last).as_secs_f64(), share));
+        let ready = self.load_job.is_none() && self.derived_ready() && self.viewport_current;
+        let share = self.cao_percent_recomputed().unwrap_or(0.0);
+        let b = &mut self.scripted;
+        if b.bench_start.is_none() {
+            // Start once the first full-quality image with AO is on screen.
+            if !ready {
+                return;
+            }
+            b.bench_start = Some((now, b.images.len() as u64));
+            b.bench_last = Some(now);
         }
-        if self.scripted.bench_warmup == 2 {
-            self.scripted.bench_start = Some((now, rendered));
+        let Some((since, images_before)) = b.bench_start else {
+            return;
+        };
+        if let Some(last) = b.bench_last {
+            b.bench.push(((now - last).as_secs_f64(), 0.0));
         }
-        self.scripted.bench_last = Some(now);
-        self.scripted.bench_warmup += 1;
-        if self.scripted.bench.len() as u64 >= n {
-            let mut t: Vec<f64> = self.scripted.bench.iter().map(|b| b.0).collect();
-            t.sort_by(f64::total_cmp);
-            let mean = t.iter().sum::<f64>() / t.len() as f64;
-            let share = self.scripted.bench.iter().map(|b| b.1).sum::<f64>() / t.len() as f64;
+        b.bench_last = Some(now);
+        // The first two images after the drag starts were begun before it: not counted.
+        let images: Vec<Instant> = b
+            .images
+            .iter()
+            .skip(images_before as usize + 2)
+            .map(|i| i.0)
+            .collect();
+        if images.len() as u64 > n {
+            let mut between: Vec<f64> = images
+                .windows(2)
+                .map(|w| (w[1] - w[0]).as_secs_f64())
+                .collect();
+            between.sort_by(f64::total_cmp);
+            let mean = between.iter().sum::<f64>() / between.len() as f64;
+            let mut ui: Vec<f64> = b.bench.iter().map(|x| x.0).collect();
+            ui.sort_by(f64::total_cmp);
+            let pct = |p: usize| ui[((ui.len() * p).div_ceil(100)).clamp(1, ui.len()) - 1];
+            let elapsed = (images[images.len() - 1] - images[0])
+                .as_secs_f64()
+                .max(1e-9);
             println!(
-                "viewport {}×{}: {} frames dragging a clip shape, mean {:.0} ms, median {:.0} ms, \
-                 min {:.0} ms; CAO recomputed {:.2} % of voxels per frame; {}",
+                "viewport {}×{}: {} images while dragging a clip shape, mean {:.0} ms, median \
+                 {:.0} ms, min {:.0} ms between images; CAO recomputed {:.2} % of voxels in \
+                 the last update; {}",
                 self.viewport_px.0,
                 self.viewport_px.1,
-                t.len(),
+                between.len(),
                 mean * 1e3,
-                t[t.len() / 2] * 1e3,
-                t[0] * 1e3,
+                between[between.len() / 2] * 1e3,
+                between[0] * 1e3,
                 share,
                 self.gpu.describe()
             );
-            // The UI thread's frames (time between two of them, what the mouse feels) and
-            // how often the viewport's image was ray-cast anew meanwhile.
-            let p95 = t[((t.len() * 95).div_ceil(100)).clamp(1, t.len()) - 1];
-            let updates = self.scripted.bench_start.map_or(0.0, |(since, before)| {
-                rendered.saturating_sub(before) as f64 / since.elapsed().as_secs_f64().max(1e-9)
-            });
             println!(
-                "ui frame p50 {:.0} ms p95 {:.0} ms; viewport {updates:.1} updates/s",
-                t[t.len() / 2] * 1e3,
-                p95 * 1e3
+                "ui frame p50 {:.0} ms p95 {:.0} ms over {} frames; viewport {:.1} updates/s; \
+                 {:.1} s dragging",
+                pct(50) * 1e3,
+                pct(95) * 1e3,
+                ui.len(),
+                between.len() as f64 / elapsed,
+                since.elapsed().as_secs_f64()
             );
             self.scripted.exit_requested = true;
             return;
@@ -664,7 +731,7 @@ impl Viewer {
         if let Some(doc) = &mut self.doc
             && let Some(s) = doc.clip_shapes.first_mut()
         {
-            // Back and forth by 1 mm, as a slow drag.
+            // Back and forth by 1 mm per UI frame, as a slow drag.
             let dir = if (self.scripted.bench.len() / 8).is_multiple_of(2) {
                 1.0
             } else {
@@ -691,7 +758,11 @@ impl Viewer {
             self.fail_exit(message);
             return;
         }
-        if self.doc.is_some() && self.load_job.is_none() && self.derived_ready() {
+        if self.doc.is_some()
+            && self.load_job.is_none()
+            && self.derived_ready()
+            && self.viewport_current
+        {
             self.scripted.ready_frames += 1;
         }
         if self.scripted.ready_frames < n {

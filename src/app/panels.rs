@@ -4,7 +4,7 @@
 use super::document::file_name;
 use super::{Document, OpenRequest, Pending, ShotSize, Viewer};
 use super::{ao_panel, camera_input, screenshot, tf_editor, viewport};
-use crate::render::{Camera, Frame, RenderMode, Shading};
+use crate::render::{Camera, RenderMode, Shading};
 use crate::scene::Light;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -261,6 +261,7 @@ impl Viewer {
                 }
             });
             shadow_controls(ui, doc, &light_status);
+            interactive_controls(ui, &mut self.interactive);
         });
         let radius = doc.radius;
         egui::CollapsingHeader::new("Clipping")
@@ -392,6 +393,7 @@ impl Viewer {
             if let Some(text) = self.ao_shown_text() {
                 ui.label(text);
             }
+            self.view_status(ui);
             if let Some(note) = self.doc.as_ref().and_then(|d| d.note.as_deref()) {
                 ui.weak(note);
             }
@@ -423,6 +425,30 @@ impl Viewer {
         });
     }
 
+    /// The viewport's image: how far a slow one is (on a CPU adapter an image with CAO's
+    /// update takes seconds), and whether the one drawn is at interactive quality.
+    fn view_status(&self, ui: &mut egui::Ui) {
+        let (work, scale) = self
+            .with_viewport(|v| (v.work_fraction(), v.shown_scale()))
+            .unwrap_or((None, 1));
+        let waited = self
+            .scripted
+            .images
+            .last()
+            .is_none_or(|(t, _)| t.elapsed() > Duration::from_millis(500));
+        if let Some((fraction, in_cao)) = work
+            && waited
+        {
+            ui.label(match in_cao {
+                true => "View: updating Contextual AO",
+                false => "View: ray casting",
+            });
+            progress_bar(ui, Some(fraction));
+        } else if scale > 1 {
+            ui.weak(format!("View: interactive quality (1/{scale} resolution)"));
+        }
+    }
+
     pub(super) fn viewport(&mut self, ui: &mut egui::Ui) {
         let rect = ui.available_rect_before_wrap();
         self.viewport_rect = rect;
@@ -447,15 +473,9 @@ impl Viewer {
         if !used {
             camera_input::handle(ui, &response, &mut doc.camera, doc.radius);
         }
-        let frame = Frame {
-            camera: doc.camera,
-            settings: doc.view_settings(),
-            width: self.viewport_px.0.max(1),
-            height: self.viewport_px.1.max(1),
-        };
         ui.painter().add(egui_wgpu::Callback::new_paint_callback(
             rect,
-            ViewportCallback { frame, rect },
+            ViewportCallback { rect },
         ));
         if self.show_outlines {
             self.clip_editor.paint(
@@ -597,6 +617,24 @@ impl Viewer {
             self.last_title = title;
         }
     }
+}
+
+/// Interactive quality: a lower resolution while the view moves, chosen to keep the
+/// viewport at a target rate (the full-quality image follows when it rests).
+fn interactive_controls(ui: &mut egui::Ui, q: &mut super::viewport::Interactive) {
+    ui.checkbox(&mut q.on, "Interactive quality while moving")
+        .on_hover_text(
+            "While the camera or a clip shape moves, the volume is drawn at a lower \
+             resolution, chosen from the measured speed to keep the target rate; a \
+             quarter of a second after the last move the full-quality image follows \
+             (the same pixels as volao render).",
+        );
+    ui.add_enabled(
+        q.on,
+        egui::Slider::new(&mut q.target_fps, 1.0..=60.0)
+            .logarithmic(true)
+            .text("Target rate (images/s)"),
+    );
 }
 
 /// Shadows on or off, and where the light comes from: the eye (a headlight, as `volao

@@ -87,8 +87,7 @@ impl Viewer {
                         return None;
                     }
                     g.set_ambient_occlusion(&gpu, &values);
-                    v.cao = None;
-                    v.touch();
+                    v.set_cao(None);
                     Some(())
                 });
                 if shown.flatten().is_some() {

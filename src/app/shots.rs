@@ -47,9 +47,12 @@ impl Viewer {
                 }
             }
         }
+        // The viewport's image must be current: CAO's V_AO is then posed for the shapes
+        // the screenshot is clipped with (and the viewport leaves it alone meanwhile).
         if self.shots.pending.is_none()
             && self.load_job.is_none()
             && self.derived_ready()
+            && self.viewport_current
             && self.doc.is_some()
             && let Some((path, size)) = self.shots.request.take()
             && let Some(doc) = &self.doc

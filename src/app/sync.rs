@@ -6,10 +6,14 @@
 use super::ao_job::{AoData, AoInput, compute_ao};
 use super::derived::*;
 use super::jobs::{Job, Keyed, Polled};
+use super::viewport::ViewportGpu;
+use super::viewport::{ClipSetup, INTERACTIVE_REST, MAX_INTERACTIVE_SCALE, Want};
 use super::{Viewer, ao_panel};
 use crate::ao::AoMethod;
+use crate::ao::cao::CaoMode;
 use crate::ao::filter::StatisticSource;
 use crate::gpu::Gpu;
+use crate::render::Frame;
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
 use std::sync::Arc;
@@ -62,12 +66,13 @@ impl Viewer {
                                     .to_owned());
                             }
                             g.set_ambient_occlusion(&gpu, &values);
-                            v.cao = None;
-                            v.touch();
+                            v.set_cao(None);
                             Ok(())
                         }
                         (AoData::Cao(cao), Some(_)) => {
-                            v.cao = Some(*cao);
+                            // Its V_AO is posed for the current shapes by the next image
+                            // (until then the approximation stays on screen).
+                            v.set_cao(Some(*cao));
                             Ok(())
                         }
                         (_, None) => Err("no volume".to_owned()),
@@ -75,9 +80,6 @@ impl Viewer {
                     .unwrap_or_else(|| Err("no viewport".into()));
                 match applied {
                     Ok(()) => {
-                        // CAO's V_AO is made for the current shapes on the next sync
-                        // (in this frame: the approximation stays until then).
-                        self.derived.synced_clip = None;
                         self.derived.ao_seconds = Some((r.seconds, r.device));
                         self.derived.ao.uploaded(key);
                         self.derived.preview.cancel();
@@ -184,7 +186,7 @@ impl Viewer {
         let gpu = Arc::clone(&self.gpu);
         let tf = self.doc.as_ref().map(|d| d.tf.clone());
         self.with_viewport(|v| {
-            v.cao = None;
+            v.set_cao(None);
             if let Some(g) = &mut v.volume {
                 if !keep {
                     g.clear_ambient_occlusion(&gpu);
@@ -201,7 +203,6 @@ impl Viewer {
         } else {
             AoShown::Nothing
         };
-        self.derived.synced_clip = None;
     }
 
     pub(super) fn modulation_key(&self) -> Option<ModulationKey> {
@@ -310,8 +311,7 @@ impl Viewer {
             return;
         };
         let (gpu, tf) = (Arc::clone(&self.gpu), doc.tf.clone());
-        let (shapes, radius, resolution) =
-            (key.clip.clone(), doc.radius, self.options.clip_resolution);
+        let (shapes, radius, resolution) = (key.clip.clone(), doc.radius, doc.ao.clip_resolution);
         let dir = match crate::render::shadow::light_direction(key.direction) {
             Ok(d) => d,
             Err(message) => {
@@ -430,6 +430,13 @@ impl Viewer {
         if self.derived.uploaded_tf.as_ref() == Some(&want) {
             return;
         }
+        // An image being ray-cast would start again with every edit while a curve is
+        // dragged: edits go in between images, and count as motion (interactive quality).
+        if self.with_viewport(|v| v.working()).unwrap_or(false) {
+            self.ctx.request_repaint();
+            return;
+        }
+        self.motion.changed_at = Instant::now();
         let gpu = Arc::clone(&self.gpu);
         self.with_viewport(|v| {
             if let Some(g) = &mut v.volume {
@@ -440,68 +447,109 @@ impl Viewer {
         self.derived.uploaded_tf = Some(want);
     }
 
-    /// Brings the GPU's clipping up to date with the shapes: CAO's per-frame update (the
-    /// AO stays exact while a shape moves) or, without CAO, the clip maps alone.
-    pub(super) fn sync_clip(&mut self) {
-        let Some(doc) = &self.doc else {
-            return;
-        };
-        if self.derived.synced_clip.as_ref() == Some(&doc.clip_shapes) {
-            return;
-        }
-        let shapes = doc.clip_shapes.clone();
-        let (radius, samples) = (doc.radius, doc.ao.samples);
+    /// What the viewport should show now: the document's frame and clip shapes, at
+    /// interactive quality while the view moves.
+    pub(super) fn want(&self) -> Option<Want> {
+        let doc = self.doc.as_ref()?;
         let cao_mode = if doc.ao.method == AoMethod::LaoFull {
-            crate::ao::cao::CaoMode::Full
+            CaoMode::Full
         } else {
-            crate::ao::cao::CaoMode::Selective
+            CaoMode::Selective
         };
-        let gpu = Arc::clone(&self.gpu);
-        let resolution = self.options.clip_resolution;
-        let result = self
-            .with_viewport(|v| -> Result<Option<crate::ao::cao::CaoStats>, String> {
-                let Some(vol) = &mut v.volume else {
-                    return Ok(None);
-                };
-                let out = if let Some(cao) = &mut v.cao {
-                    let reach = cao.reach_mm(&vol.texels);
-                    let stats = cao
-                        .update(&gpu, &vol.texels, &shapes, resolution, reach, cao_mode)
-                        .map_err(|e| e.to_string())?;
-                    vol.set_ambient_occlusion_view(cao.ao_view());
-                    Some(stats)
-                } else if shapes.is_empty() {
-                    v.clip = None;
-                    None
-                } else {
-                    if v.clip.is_none() {
-                        v.clip =
-                            Some(crate::clip::gpu::ClipMaps::new(&gpu).map_err(|e| e.to_string())?);
-                    }
-                    let reach = crate::ao::cao::reach_mm(samples, vol.texels.spacing);
-                    if let Some(clip) = &mut v.clip {
-                        let report = clip
-                            .update(&gpu, &shapes, radius, reach, resolution)
-                            .map_err(|e| e.to_string())?;
-                        if let Some(e) = report.errors.first() {
-                            return Err(e.to_string());
-                        }
-                    }
-                    None
-                };
-                v.touch();
-                Ok(out)
-            })
-            .unwrap_or(Ok(None));
-        self.derived.synced_clip = Some(shapes);
-        match result {
-            Ok(stats) => {
-                if let Some(e) = stats.as_ref().and_then(|s| s.clip_errors.first()) {
-                    self.toast(format!("Clip shape left out: {e}"), true);
-                }
-                self.derived.cao_stats = stats;
-            }
-            Err(e) => self.toast(format!("Clipping failed: {e}"), true),
+        Some(Want {
+            frame: Frame {
+                camera: doc.camera,
+                settings: doc.view_settings(),
+                width: self.viewport_px.0.max(1),
+                height: self.viewport_px.1.max(1),
+            },
+            clip: doc.clip_shapes.clone(),
+            setup: ClipSetup {
+                radius: doc.radius,
+                samples: doc.ao.samples,
+                resolution: doc.ao.clip_resolution,
+                cao_mode,
+            },
+            scale: 1,
+        })
+    }
+
+    /// Moves the viewport's image towards what the document says, within this frame's
+    /// slice of GPU time: CAO's update when the shapes moved, then the ray cast, at
+    /// interactive quality while the view moves (see [`super::viewport`]). Never
+    /// waits for the GPU.
+    pub(super) fn pump_viewport(&mut self) {
+        let Some(mut want) = self.want() else {
+            return;
+        };
+        if self.shots.pending.is_some() {
+            // A screenshot reads the same V_AO and clip maps: they stay as they are.
+            self.ctx.request_repaint();
+            return;
         }
+        let view = (want.frame, want.clip.clone());
+        if self.motion.last.as_ref() != Some(&view) {
+            self.motion.last = Some(view);
+            self.motion.changed_at = Instant::now();
+        }
+        let moving = self.motion.changed_at.elapsed() < INTERACTIVE_REST;
+        if moving && self.interactive.on {
+            want.scale = self.interactive_scale(&want.frame);
+        }
+        let gpu = Arc::clone(&self.gpu);
+        let pacer = &mut self.pacer;
+        let Some(pumped) = ({
+            let mut renderer = self.render_state.renderer.write();
+            renderer
+                .callback_resources
+                .get_mut::<ViewportGpu>()
+                .map(|v| {
+                    let pumped = v.pump(&gpu, &want, pacer);
+                    let busy = v.working()
+                        || !v.is_current(&Want {
+                            scale: 1,
+                            ..want.clone()
+                        });
+                    (pumped, busy)
+                })
+        }) else {
+            return;
+        };
+        let (pumped, busy) = pumped;
+        // A transfer function waiting for the image being made to finish is not shown yet.
+        let tf_waiting = self.doc.as_ref().is_some_and(|d| {
+            self.derived.uploaded_tf.as_ref() != Some(&(d.view_tf(), d.render.step_voxels))
+        });
+        self.viewport_current = !busy && !moving && !tf_waiting;
+        if let Some(stats) = pumped.stats {
+            self.derived.cao_stats = Some(stats);
+        }
+        for e in pumped.clip_errors {
+            self.toast(format!("Clip shape left out: {e}"), true);
+        }
+        if let Some(e) = pumped.error {
+            self.toast(format!("Viewport: {e}"), true);
+        }
+        if let Some(seconds) = pumped.completed {
+            self.scripted.images.push((Instant::now(), seconds));
+        }
+        if busy {
+            self.ctx.request_repaint();
+        } else if moving {
+            self.ctx.request_repaint_after(INTERACTIVE_REST);
+        }
+    }
+
+    /// The scale of the interactive image: the smallest (up to 1/4 of the size on each
+    /// axis) whose ray cast the measured rate finishes at the target rate.
+    fn interactive_scale(&self, frame: &Frame) -> u32 {
+        let Some(rate) = self.pacer.rate(super::viewport::STRIP) else {
+            return 2;
+        };
+        let pixels = frame.width as f64 * frame.height as f64;
+        let budget = 1.0 / self.interactive.target_fps.max(0.5) as f64;
+        (1..=MAX_INTERACTIVE_SCALE)
+            .find(|&s| pixels / (s * s) as f64 / rate <= budget)
+            .unwrap_or(MAX_INTERACTIVE_SCALE)
     }
 }

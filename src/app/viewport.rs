@@ -1,16 +1,23 @@
-//! The 3-D viewport: an `egui_wgpu` paint callback that ray-casts the volume with the
-//! same [`RayCaster`] and [`GpuVolume`] as `volao render` into a storage texture (a
-//! compute pass in `prepare`) and draws that texture 1:1 (`paint`,
-//! `shaders/viewport.wgsl`). Same scene, same pixels.
+//! The 3-D viewport: the same [`RayCaster`] and [`GpuVolume`] as `volao render`, drawn
+//! through an `egui_wgpu` paint callback (`shaders/viewport.wgsl`). Same scene, same
+//! pixels.
 //!
-//! [`ViewportGpu`] is the long-lived part and lives in egui_wgpu's callback resources;
-//! a [`ViewportCallback`] carries only what changes per frame (the [`Frame`]).
+//! [`ViewportGpu`] is the long-lived part and lives in egui_wgpu's callback resources.
+//! The picture is made off the paint path, in slices (see "making the image in slices" below): each UI
+//! frame submits the part of CAO's update and of the ray cast (in strips of rows) that
+//! fits in the [`Pacer`](crate::gpu::pacer::Pacer)'s slice into a back image, and the
+//! paint callback draws the last complete image — 1:1 at full quality, scaled up while
+//! the view moves at interactive quality. A [`ViewportCallback`] carries only the
+//! rectangle to draw into.
 
-use crate::ao::cao::CaoGpu;
+use crate::ao::cao::{CaoFrame, CaoGpu, CaoMode, CaoStats};
+use crate::clip::ClipShape;
 use crate::clip::gpu::ClipMaps;
-use crate::gpu::{GpuError, shaders, validated};
+use crate::gpu::pacer::Pacer;
+use crate::gpu::{Gpu, GpuError, shaders, validated};
 use crate::render::Frame;
 use crate::render::gpu::{GpuVolume, RayCaster};
+use std::time::Instant;
 
 /// Format of the ray caster's output (its storage texture is Rgba8Unorm).
 pub const IMAGE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -19,29 +26,61 @@ pub const IMAGE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 #[derive(Debug)]
 pub struct ViewportGpu {
     pub ray_caster: RayCaster,
-    pipeline: wgpu::RenderPipeline,
+    /// Draws an image 1:1 (exact) or scaled up (interactive quality).
+    pipelines: [wgpu::RenderPipeline; 2],
     layout: wgpu::BindGroupLayout,
-    target: Option<Target>,
+    sampler: wgpu::Sampler,
+    /// The last complete image and what it shows.
+    pub(super) shown: Option<Shown>,
+    /// The image being made.
+    pub(super) work: Option<Work>,
+    /// A texture to reuse for the next image.
+    pub(super) spare: Option<Target>,
+    /// The strip the ray cast writes before it is copied into the image.
+    pub(super) strip: Option<wgpu::Texture>,
     /// The volume shown; `None` until the first one is uploaded.
     pub volume: Option<GpuVolume>,
     /// Clip shapes' maps when clipping without CAO.
     pub clip: Option<ClipMaps>,
     /// Contextual AO (LAO with clip shapes): its clip maps clip the picture too.
-    pub cao: Option<CaoGpu>,
+    pub(super) cao: Option<CaoGpu>,
+    /// Bumped whenever [`Self::cao`] is replaced (a CAO frame belongs to one).
+    pub(super) cao_generation: u64,
+    /// The shapes the clip maps (and CAO's `V_AO`) are posed for; `None`: out of date.
+    pub(super) synced_clip: Option<Vec<ClipShape>>,
+    /// A submitted CAO frame whose figures have not come back yet.
+    pub(super) stats_pending: Option<CaoFrame>,
     /// Bumped by every change to the volume, its transfer function or its AO, so an
-    /// unchanged frame is not ray-cast again (egui repaints on every mouse move).
+    /// unchanged view is not ray-cast again (egui repaints on every mouse move).
     pub revision: u64,
-    drawn: Option<(Frame, u64)>,
     /// The last GPU error while rendering (shown in the status bar).
     pub last_error: Option<String>,
-    /// Ray-cast frames encoded so far (for `--exit-after-frames` and statistics).
+    /// Images completed so far (for `--exit-after-frames` and statistics).
     pub frames_rendered: u64,
 }
 
+/// A texture the ray cast's strips are copied into, and its bind group for drawing.
 #[derive(Debug)]
-struct Target {
-    texture: wgpu::Texture,
+pub(super) struct Target {
+    pub(super) texture: wgpu::Texture,
     bind_group: wgpu::BindGroup,
+}
+
+/// What an image shows: the frame it was cast for (at its own size), the volume
+/// revision, the clip shapes' poses and the interactive scale (1: full quality).
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct ViewKey {
+    pub(super) frame: Frame,
+    pub(super) revision: u64,
+    pub(super) clip: Vec<ClipShape>,
+    pub(super) scale: u32,
+}
+
+/// A complete image.
+#[derive(Debug)]
+pub(super) struct Shown {
+    pub(super) target: Target,
+    pub(super) key: ViewKey,
 }
 
 impl ViewportGpu {
@@ -55,58 +94,69 @@ impl ViewportGpu {
         validated(device, "Viewport::new", || {
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("Viewport::layout"),
-                entries: &[crate::gpu::entry::texture(
-                    0,
-                    wgpu::ShaderStages::FRAGMENT,
-                    wgpu::TextureViewDimension::D2,
-                    Some(false),
-                )],
+                entries: &[
+                    crate::gpu::entry::texture(
+                        0,
+                        wgpu::ShaderStages::FRAGMENT,
+                        wgpu::TextureViewDimension::D2,
+                        Some(true),
+                    ),
+                    crate::gpu::entry::sampler(1, wgpu::ShaderStages::FRAGMENT),
+                ],
             });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("Viewport::pipeline_layout"),
                 bind_group_layouts: &[Some(&layout)],
                 immediate_size: 0,
             });
-            let fragment = if target_format.is_srgb() {
-                "fs_srgb"
-            } else {
-                "fs_main"
+            let srgb = target_format.is_srgb();
+            let pipeline = |fragment: &str| {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some("Viewport::pipeline"),
+                    layout: Some(&pipeline_layout),
+                    vertex: wgpu::VertexState {
+                        module: &module,
+                        entry_point: Some("vs_main"),
+                        compilation_options: Default::default(),
+                        buffers: &[],
+                    },
+                    primitive: wgpu::PrimitiveState::default(),
+                    depth_stencil: None,
+                    multisample: wgpu::MultisampleState::default(),
+                    fragment: Some(wgpu::FragmentState {
+                        module: &module,
+                        entry_point: Some(fragment),
+                        compilation_options: Default::default(),
+                        targets: &[Some(wgpu::ColorTargetState {
+                            format: target_format,
+                            blend: None,
+                            write_mask: wgpu::ColorWrites::ALL,
+                        })],
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
             };
-            let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("Viewport::pipeline"),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: None,
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some(fragment),
-                    compilation_options: Default::default(),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: target_format,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+            let pipelines = match srgb {
+                true => [pipeline("fs_srgb"), pipeline("fs_scaled_srgb")],
+                false => [pipeline("fs_main"), pipeline("fs_scaled")],
+            };
             ViewportGpu {
                 ray_caster,
-                pipeline,
+                pipelines,
                 layout,
-                target: None,
+                sampler: crate::gpu::linear_sampler(device, "Viewport::sampler"),
+                shown: None,
+                work: None,
+                spare: None,
+                strip: None,
                 volume: None,
                 clip: None,
                 cao: None,
+                cao_generation: 0,
+                synced_clip: None,
+                stats_pending: None,
                 revision: 0,
-                drawn: None,
                 last_error: None,
                 frames_rendered: 0,
             }
@@ -116,7 +166,27 @@ impl ViewportGpu {
     /// Replaces the volume shown.
     pub fn set_volume(&mut self, volume: GpuVolume) {
         self.volume = Some(volume);
+        self.set_cao(None);
+        self.clip = None;
         self.revision += 1;
+    }
+
+    /// Installs (or removes) Contextual AO; its `V_AO` is posed for the shapes by the
+    /// next image, which the ray caster then reads.
+    pub fn set_cao(&mut self, cao: Option<CaoGpu>) {
+        if let (Some(c), Some(v)) = (&cao, &mut self.volume) {
+            v.set_ambient_occlusion_view(c.ao_view());
+        }
+        self.cao = cao;
+        self.cao_generation += 1;
+        self.synced_clip = None;
+        self.stats_pending = None;
+        self.revision += 1;
+    }
+
+    /// Whether Contextual AO is installed.
+    pub fn has_cao(&self) -> bool {
+        self.cao.is_some()
     }
 
     /// The clip maps the picture is clipped with: CAO's when it runs, else the plain ones.
@@ -129,88 +199,54 @@ impl ViewportGpu {
         self.revision += 1;
     }
 
-    /// Ray-casts `frame` into the target texture unless the same frame of the same
-    /// volume revision is already there.
-    fn prepare_frame(
-        &mut self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        frame: &Frame,
-        encoder: &mut wgpu::CommandEncoder,
-    ) {
-        let Some(volume) = &self.volume else {
-            return;
-        };
-        if self.drawn == Some((*frame, self.revision)) {
-            return;
+    /// A texture of `size` for an image, with its bind group (the spare one if it fits).
+    pub(super) fn target(&mut self, device: &wgpu::Device, size: (u32, u32)) -> Target {
+        if let Some(t) = self.spare.take()
+            && (t.texture.width(), t.texture.height()) == size
+        {
+            return t;
         }
-        let size = (frame.width.max(1), frame.height.max(1));
-        let same_size = self
-            .target
-            .as_ref()
-            .is_some_and(|t| (t.texture.width(), t.texture.height()) == size);
-        if !same_size {
-            let texture = crate::gpu::image_texture(
-                device,
-                "Viewport::image",
-                size,
-                IMAGE_FORMAT,
-                wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
-            );
-            let view = texture.create_view(&Default::default());
-            let bind_group = crate::gpu::bind_group(
-                device,
-                "Viewport::bind_group",
-                &self.layout,
-                &[wgpu::BindingResource::TextureView(&view)],
-            );
-            self.target = Some(Target {
-                texture,
-                bind_group,
-            });
-        }
-        let Some(target) = &self.target else {
-            return;
-        };
-        let clip = self.clip_maps();
-        match self.ray_caster.encode_tile(
-            (device, queue),
-            volume,
-            frame,
-            clip,
-            (&target.texture, (0, 0)),
-            encoder,
-        ) {
-            Ok(()) => {
-                self.drawn = Some((*frame, self.revision));
-                self.frames_rendered += 1;
-                self.last_error = None;
-            }
-            Err(e) => {
-                self.drawn = None;
-                self.last_error = Some(e.to_string());
-            }
+        let texture = crate::gpu::image_texture(
+            device,
+            "Viewport::image",
+            size,
+            IMAGE_FORMAT,
+            wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        let view = texture.create_view(&Default::default());
+        let bind_group = crate::gpu::bind_group(
+            device,
+            "Viewport::bind_group",
+            &self.layout,
+            &[
+                wgpu::BindingResource::TextureView(&view),
+                wgpu::BindingResource::Sampler(&self.sampler),
+            ],
+        );
+        Target {
+            texture,
+            bind_group,
         }
     }
 
-    fn paint(&self, pass: &mut wgpu::RenderPass<'static>) {
-        if self.volume.is_none() || self.drawn.is_none() {
+    /// Draws the last complete image into the callback's viewport: 1:1 when it has the
+    /// viewport's size, else scaled up with bilinear filtering.
+    fn paint(&self, pass: &mut wgpu::RenderPass<'static>, viewport_px: (u32, u32)) {
+        let Some(shown) = &self.shown else {
             return;
-        }
-        if let Some(target) = &self.target {
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &target.bind_group, &[]);
-            pass.draw(0..3, 0..1);
-        }
+        };
+        let t = &shown.target.texture;
+        let exact = (t.width(), t.height()) == viewport_px;
+        pass.set_pipeline(&self.pipelines[usize::from(!exact)]);
+        pass.set_bind_group(0, &shown.target.bind_group, &[]);
+        pass.draw(0..3, 0..1);
     }
 }
 
-/// The per-frame part of the paint callback: the frame to show (its size is replaced by
-/// the callback's viewport in physical pixels).
+/// The per-frame part of the paint callback: where to draw.
 #[derive(Debug, Clone, Copy)]
 pub struct ViewportCallback {
-    pub frame: Frame,
-    /// The callback's rectangle in points (to size the image in physical pixels).
+    /// The callback's rectangle in points.
     pub rect: egui::Rect,
 }
 
@@ -221,38 +257,427 @@ pub fn size_in_pixels(rect: egui::Rect, pixels_per_point: f32, screen_px: [u32; 
 }
 
 impl egui_wgpu::CallbackTrait for ViewportCallback {
-    fn prepare(
-        &self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        screen: &egui_wgpu::ScreenDescriptor,
-        encoder: &mut wgpu::CommandEncoder,
-        resources: &mut egui_wgpu::CallbackResources,
-    ) -> Vec<wgpu::CommandBuffer> {
-        let (width, height) =
-            size_in_pixels(self.rect, screen.pixels_per_point, screen.size_in_pixels);
-        if width == 0 || height == 0 {
-            return Vec::new();
-        }
-        if let Some(v) = resources.get_mut::<ViewportGpu>() {
-            let frame = Frame {
-                width,
-                height,
-                ..self.frame
-            };
-            v.prepare_frame(device, queue, &frame, encoder);
-        }
-        Vec::new()
-    }
-
     fn paint(
         &self,
-        _info: egui::PaintCallbackInfo,
+        info: egui::PaintCallbackInfo,
         pass: &mut wgpu::RenderPass<'static>,
         resources: &egui_wgpu::CallbackResources,
     ) {
-        if let Some(v) = resources.get::<ViewportGpu>() {
-            v.paint(pass);
+        let v = info.viewport_in_pixels();
+        let size = (v.width_px.max(0) as u32, v.height_px.max(0) as u32);
+        if let Some(vp) = resources.get::<ViewportGpu>() {
+            vp.paint(pass, size);
         }
+    }
+}
+
+// ----- making the image in slices ------------------------------------------------------
+//
+// Making the viewport's image without ever waiting for the GPU on the UI thread.
+//
+// Each UI frame the viewer says what it wants on screen ([`Want`]: the frame, the clip
+// shapes' poses and the interactive scale) and [`ViewportGpu::pump`] moves one image
+// ([`Work`]) towards it, submitting only what fits in the [`Pacer`]'s slice:
+//
+// 1. when the shapes moved, CAO's update for their new pose ([`CaoGpu::begin`] /
+// [`CaoGpu::advance`]: steps IV and V in chunks of bricks) or, without CAO, the clip
+// maps re-posed;
+// 2. the ray cast of the frame in strips of rows into a back image;
+// 3. once every strip is submitted the back image becomes the one drawn. The queue is
+// in order, so the paint that follows sees it complete.
+//
+// An image is exact for the pose it was made for: its clipping and its `V_AO` come
+// from the same CAO frame, and nothing else changes them until it is shown. Requests
+// coalesce: while an image is made, newer poses only replace the wanted one, and the
+// next image is made for the newest (a CAO update is never abandoned half-way, since
+// the next one relies on what it restored). A full-quality image still being ray-cast
+// when the view moves again is dropped for an interactive one. A change to the volume,
+// its transfer function or AO during a ray cast starts the strips again.
+/// Pass label of the viewport's strips (the pacer's rate is in pixels per second).
+pub(super) const STRIP: &str = "Viewport::strip";
+
+/// How long after the last change of the view (camera, clip shapes) the full-quality
+/// image is made.
+pub(super) const INTERACTIVE_REST: std::time::Duration = std::time::Duration::from_millis(250);
+
+/// The smallest interactive image is 1/this of the viewport on each axis.
+pub(super) const MAX_INTERACTIVE_SCALE: u32 = 4;
+
+/// Interactive quality: while the view moves, the image is ray-cast at a lower resolution
+/// chosen to keep the viewport at `target_fps` (like 3D Slicer's adaptive quality).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Interactive {
+    pub on: bool,
+    /// Images per second wanted while the view moves.
+    pub target_fps: f32,
+}
+
+impl Default for Interactive {
+    fn default() -> Self {
+        Interactive {
+            on: true,
+            target_fps: 10.0,
+        }
+    }
+}
+
+/// Pixels per second assumed for the ray cast before it was measured: about lavapipe's
+/// on two cores for a CPU adapter, a hundred times that for a GPU.
+fn first_pixel_rate(gpu: &Gpu) -> f64 {
+    match gpu.info.device_type {
+        wgpu::DeviceType::Cpu => 3e5,
+        _ => 3e7,
+    }
+}
+
+/// Tallest strip, in rows.
+const MAX_STRIP_ROWS: u32 = 64;
+
+/// Smallest strip, in pixels, where the image has them.
+const MIN_STRIP_PIXELS: u64 = 16384;
+
+/// How the clip maps and CAO are posed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct ClipSetup {
+    /// The volume's bounding radius (mm; sizes planes).
+    pub radius: f32,
+    /// LAO samples per ray (the clip maps' reach without CAO).
+    pub samples: u32,
+    /// Depth-map edge in pixels.
+    pub resolution: u32,
+    pub cao_mode: CaoMode,
+}
+
+/// What the viewer wants on screen this frame.
+#[derive(Debug, Clone)]
+pub(super) struct Want {
+    /// The full-quality frame, at the viewport's size in pixels.
+    pub frame: Frame,
+    pub clip: Vec<ClipShape>,
+    pub setup: ClipSetup,
+    /// 1: full quality; n: the frame at 1/n of the size, scaled up when drawn.
+    pub scale: u32,
+}
+
+/// An image being made.
+#[derive(Debug)]
+pub(super) struct Work {
+    key: ViewKey,
+    /// CAO's update for `key.clip` (with the CAO generation it belongs to), until all of
+    /// it is submitted.
+    cao: Option<(u64, CaoFrame)>,
+    target: Target,
+    /// Rows per strip.
+    rows: u32,
+    next_row: u32,
+    started: Instant,
+}
+
+impl Work {
+    /// Whether it is still submitting CAO's update.
+    pub(super) fn in_cao(&self) -> bool {
+        self.cao.is_some()
+    }
+
+    /// Fraction submitted in [0, 1]: CAO's bricks, then the rows.
+    pub(super) fn fraction(&self) -> f32 {
+        let rows = self.next_row as f32 / self.key.frame.height.max(1) as f32;
+        match &self.cao {
+            Some((_, f)) => {
+                let (done, all) = f.progress();
+                0.5 * done as f32 / all.max(1) as f32
+            }
+            None => 0.5 + 0.5 * rows.min(1.0),
+        }
+    }
+}
+
+/// What one frame's pump did, for the viewer to report.
+#[derive(Debug, Default)]
+pub(super) struct Pumped {
+    /// The figures of a CAO frame whose counters came back.
+    pub stats: Option<CaoStats>,
+    /// Shapes left out by the clip maps, with why.
+    pub clip_errors: Vec<String>,
+    pub error: Option<String>,
+    /// An image was completed: seconds since its work started.
+    pub completed: Option<f64>,
+}
+
+impl ViewportGpu {
+    /// What an image made for `want` would show now.
+    fn key_of(&self, want: &Want) -> ViewKey {
+        let s = want.scale.max(1);
+        let frame = Frame {
+            width: want.frame.width.max(1).div_ceil(s),
+            height: want.frame.height.max(1).div_ceil(s),
+            ..want.frame
+        };
+        ViewKey {
+            frame,
+            revision: self.revision,
+            clip: want.clip.clone(),
+            scale: s,
+        }
+    }
+
+    /// Whether the image drawn is the full-quality one of `want`.
+    pub(super) fn is_current(&self, want: &Want) -> bool {
+        self.work.is_none()
+            && want.scale <= 1
+            && self
+                .shown
+                .as_ref()
+                .is_some_and(|s| s.key == self.key_of(want))
+    }
+
+    /// Whether an image is being made.
+    pub(super) fn working(&self) -> bool {
+        self.work.is_some()
+    }
+
+    /// How far the image being made is, if one is, and whether it is in CAO's update.
+    pub(super) fn work_fraction(&self) -> Option<(f32, bool)> {
+        self.work.as_ref().map(|w| (w.fraction(), w.in_cao()))
+    }
+
+    /// Whether a CAO update is being submitted or its figures have not come back.
+    pub(super) fn cao_in_flight(&self) -> bool {
+        self.work.as_ref().is_some_and(Work::in_cao) || self.stats_pending.is_some()
+    }
+
+    /// The interactive scale of the image drawn (1: full quality).
+    pub(super) fn shown_scale(&self) -> u32 {
+        self.shown.as_ref().map_or(1, |s| s.key.scale)
+    }
+
+    /// Moves the viewport's image towards `want` within the pacer's slice (see the
+    /// module's documentation). Never waits for the GPU.
+    pub(super) fn pump(&mut self, gpu: &Gpu, want: &Want, pacer: &mut Pacer) -> Pumped {
+        let mut out = Pumped::default();
+        if let (Some(cao), Some(f)) = (&self.cao, &mut self.stats_pending)
+            && let Some(result) = cao.poll_stats(f)
+        {
+            match result {
+                Ok(stats) => out.stats = Some(stats),
+                Err(e) => out.error = Some(e.to_string()),
+            }
+            self.stats_pending = None;
+        }
+        if self.volume.is_none() {
+            self.work = None;
+            return out;
+        }
+        let key = self.key_of(want);
+        if let Some(w) = &mut self.work {
+            let stale_cao = w
+                .cao
+                .as_ref()
+                .is_some_and(|(generation, _)| *generation != self.cao_generation);
+            let superseded = w.cao.is_none() && w.key.scale == 1 && key.scale > 1;
+            if stale_cao || superseded {
+                if stale_cao {
+                    self.synced_clip = None;
+                }
+                self.work = None;
+            } else if w.cao.is_none() && w.key.revision != self.revision {
+                w.key.revision = self.revision;
+                w.next_row = 0;
+            }
+        }
+        if self.work.is_none() {
+            if self.shown.as_ref().is_some_and(|s| s.key == key) {
+                return out;
+            }
+            let pixel_rate = pacer.rate(STRIP).unwrap_or_else(|| first_pixel_rate(gpu));
+            let fit = (pixel_rate * pacer.slice.as_secs_f64()) as u64;
+            match self.start(gpu, key, want, fit) {
+                Ok(errors) => out.clip_errors = errors,
+                Err(e) => {
+                    out.error = Some(e);
+                    return out;
+                }
+            }
+        }
+        match self.advance(gpu, pacer) {
+            Ok(false) => {}
+            Ok(true) => {
+                if let Some(w) = self.work.take() {
+                    out.completed = Some(w.started.elapsed().as_secs_f64());
+                    if let Some(old) = self.shown.take() {
+                        self.spare = Some(old.target);
+                    }
+                    self.shown = Some(Shown {
+                        target: w.target,
+                        key: w.key,
+                    });
+                    self.frames_rendered += 1;
+                    self.last_error = None;
+                }
+            }
+            Err(e) => {
+                self.work = None;
+                self.last_error = Some(e.to_string());
+                out.error = Some(e.to_string());
+            }
+        }
+        out
+    }
+
+    /// Starts an image for `key`: poses CAO or the clip maps when the shapes moved,
+    /// allocates the back image with strips of about `pixels` each. Returns the shapes
+    /// left out, with why.
+    fn start(
+        &mut self,
+        gpu: &Gpu,
+        key: ViewKey,
+        want: &Want,
+        pixels: u64,
+    ) -> Result<Vec<String>, String> {
+        let mut errors = Vec::new();
+        let mut cao_frame = None;
+        if self.synced_clip.as_ref() != Some(&key.clip) {
+            // Whatever happens, these shapes are done with (an error is not retried).
+            self.synced_clip = Some(key.clip.clone());
+            let Some(vol) = &self.volume else {
+                return Err("no volume".into());
+            };
+            let setup = want.setup;
+            if let Some(cao) = &mut self.cao {
+                let reach = cao.reach_mm(&vol.texels);
+                let frame = cao
+                    .begin(
+                        gpu,
+                        &vol.texels,
+                        &key.clip,
+                        setup.resolution,
+                        reach,
+                        setup.cao_mode,
+                    )
+                    .map_err(|e| e.to_string())?;
+                errors = frame.clip_errors().to_vec();
+                cao_frame = Some((self.cao_generation, frame));
+            } else if key.clip.is_empty() {
+                self.clip = None;
+            } else {
+                if self.clip.is_none() {
+                    self.clip = Some(ClipMaps::new(gpu).map_err(|e| e.to_string())?);
+                }
+                let reach = crate::ao::cao::reach_mm(setup.samples, vol.texels.spacing);
+                if let Some(clip) = &mut self.clip {
+                    let report = clip
+                        .update(gpu, &key.clip, setup.radius, reach, setup.resolution)
+                        .map_err(|e| e.to_string())?;
+                    errors = report.errors.iter().map(|e| e.to_string()).collect();
+                }
+            }
+        }
+        let (width, height) = (key.frame.width, key.frame.height);
+        let target = self.target(&gpu.device, (width, height));
+        // Strips as tall as fit in a slice, but of at least MIN_STRIP_PIXELS (a
+        // submission has a fixed cost), rounded down to a power of two (so that their
+        // texture is reused).
+        let fit = (pixels.max(MIN_STRIP_PIXELS) / width.max(1) as u64)
+            .clamp(1, MAX_STRIP_ROWS as u64) as u32;
+        let rows = (1u32 << fit.ilog2()).min(height.next_power_of_two());
+        self.work = Some(Work {
+            key,
+            cao: cao_frame,
+            target,
+            rows,
+            next_row: 0,
+            started: Instant::now(),
+        });
+        Ok(errors)
+    }
+
+    /// Submits what fits of the image being made; true once all of it is submitted.
+    fn advance(&mut self, gpu: &Gpu, pacer: &mut Pacer) -> Result<bool, crate::gpu::GpuError> {
+        let ViewportGpu {
+            work,
+            cao,
+            volume,
+            clip,
+            ray_caster,
+            stats_pending,
+            strip,
+            ..
+        } = self;
+        let (Some(w), Some(vol)) = (work.as_mut(), volume.as_ref()) else {
+            return Ok(false);
+        };
+        if let Some((_, frame)) = &mut w.cao {
+            let Some(cao) = cao.as_ref() else {
+                return Ok(false);
+            };
+            if !cao.advance(gpu, frame, pacer)? {
+                return Ok(false);
+            }
+            *stats_pending = w.cao.take().map(|(_, f)| f);
+        }
+        let clip = cao.as_ref().map(|c| &c.clip).or(clip.as_ref());
+        let (width, height) = (w.key.frame.width, w.key.frame.height);
+        let rows = w.rows;
+        let same = strip
+            .as_ref()
+            .is_some_and(|t| (t.width(), t.height()) == (width, rows));
+        if !same {
+            *strip = Some(crate::gpu::image_texture(
+                &gpu.device,
+                "Viewport::strip",
+                (width, rows),
+                IMAGE_FORMAT,
+                wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+            ));
+        }
+        let Some(strip) = strip.as_ref() else {
+            return Ok(false);
+        };
+        let first_rate = first_pixel_rate(gpu);
+        while w.next_row < height {
+            let left = (height - w.next_row).div_ceil(rows) as u64;
+            let n = pacer.take(gpu, STRIP, ((width * rows) as u64, left), first_rate);
+            if n == 0 {
+                return Ok(false);
+            }
+            for _ in 0..n {
+                let y0 = w.next_row;
+                let piece = (STRIP, (width * rows) as u64);
+                pacer.submit(
+                    gpu,
+                    piece,
+                    first_rate,
+                    || -> Result<(), crate::gpu::GpuError> {
+                        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+                        ray_caster.encode_tile(
+                            (&gpu.device, &gpu.queue),
+                            vol,
+                            &w.key.frame,
+                            clip,
+                            (strip, (0, y0)),
+                            &mut encoder,
+                        )?;
+                        encoder.copy_texture_to_texture(
+                            strip.as_image_copy(),
+                            wgpu::TexelCopyTextureInfo {
+                                texture: &w.target.texture,
+                                mip_level: 0,
+                                origin: wgpu::Origin3d { x: 0, y: y0, z: 0 },
+                                aspect: wgpu::TextureAspect::All,
+                            },
+                            wgpu::Extent3d {
+                                width,
+                                height: rows.min(height - y0),
+                                depth_or_array_layers: 1,
+                            },
+                        );
+                        gpu.queue.submit([encoder.finish()]);
+                        Ok(())
+                    },
+                )?;
+                w.next_row += rows;
+            }
+        }
+        Ok(true)
     }
 }

@@ -36,7 +36,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         options.window_size = size;
     }
     if let Some(n) = args.clip_maps {
-        options.clip_resolution = n;
+        options.clip_resolution = Some(n);
     }
     // A scripted run must not touch the user's recent-files list.
     if args.exit_after_frames.is_some() || args.bench_clip_drag.is_some() {
