@@ -33,7 +33,15 @@ pub struct Progress {
     total: AtomicU64,
     cancel: AtomicBool,
     repaint: Box<dyn Fn() + Send + Sync>,
+    /// When a progress report last asked for a repaint (ms since `born`).
+    repainted_ms: AtomicU64,
+    born: Instant,
 }
+
+/// Progress reports ask for a repaint at most this often: a job reporting every few
+/// milliseconds would otherwise keep the UI drawing (on a CPU adapter, drawing the
+/// window takes the cores the job's GPU work needs).
+const PROGRESS_REPAINT: Duration = Duration::from_millis(100);
 
 impl std::fmt::Debug for Progress {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -52,6 +60,8 @@ impl Progress {
             total: AtomicU64::new(0),
             cancel: AtomicBool::new(false),
             repaint,
+            repainted_ms: AtomicU64::new(0),
+            born: Instant::now(),
         }
     }
 
@@ -59,7 +69,16 @@ impl Progress {
     pub fn set(&self, done: u64, total: u64) {
         self.total.store(total, Ordering::Relaxed);
         self.done.store(done, Ordering::Relaxed);
-        (self.repaint)();
+        let now = self.born.elapsed().as_millis() as u64;
+        let last = self.repainted_ms.load(Ordering::Relaxed);
+        if now >= last + PROGRESS_REPAINT.as_millis() as u64
+            && self
+                .repainted_ms
+                .compare_exchange(last, now, Ordering::Relaxed, Ordering::Relaxed)
+                .is_ok()
+        {
+            (self.repaint)();
+        }
         self.check();
     }
 

@@ -148,8 +148,11 @@ struct Motion {
 /// GPU time the viewport's work may take in one UI frame.
 const VIEWPORT_SLICE: std::time::Duration = std::time::Duration::from_millis(25);
 
-/// How long one submission of a background job (AO, light volume) may take.
-const JOB_SLICE: std::time::Duration = std::time::Duration::from_millis(15);
+/// How long one submission of a background job (AO, light volume) may take. Shorter
+/// slices cost the job dearly on lavapipe (the Engine's 14-ray CAO precomputation in the
+/// viewer: 17 s at 100 ms, 20 s at 60 ms, 42 s at 30 ms; 16 s unsliced, with the UI
+/// frozen for seconds at a time), while a UI frame waits at most one slice behind it.
+const JOB_SLICE: std::time::Duration = std::time::Duration::from_millis(60);
 
 /// Where a scripted run stands: `--exit-after-frames` and `--bench-clip-drag`.
 #[derive(Debug, Default)]

@@ -543,13 +543,50 @@ impl Viewer {
     /// The scale of the interactive image: the smallest (up to 1/4 of the size on each
     /// axis) whose ray cast the measured rate finishes at the target rate.
     fn interactive_scale(&self, frame: &Frame) -> u32 {
-        let Some(rate) = self.pacer.rate(super::viewport::STRIP) else {
-            return 2;
-        };
         let pixels = frame.width as f64 * frame.height as f64;
-        let budget = 1.0 / self.interactive.target_fps.max(0.5) as f64;
-        (1..=MAX_INTERACTIVE_SCALE)
-            .find(|&s| pixels / (s * s) as f64 / rate <= budget)
-            .unwrap_or(MAX_INTERACTIVE_SCALE)
+        interactive_scale(
+            pixels,
+            self.pacer.rate(super::viewport::STRIP),
+            self.interactive.target_fps,
+        )
+    }
+}
+
+/// The smallest reduction (1 to [`MAX_INTERACTIVE_SCALE`] on each axis) at which an
+/// image of `pixels` is ray-cast at `target_fps` at the measured `rate` (pixels per
+/// second); 2 before anything was measured.
+fn interactive_scale(pixels: f64, rate: Option<f64>, target_fps: f32) -> u32 {
+    let Some(rate) = rate.filter(|r| *r > 0.0) else {
+        return 2;
+    };
+    let budget = 1.0 / target_fps.max(0.5) as f64;
+    (1..=MAX_INTERACTIVE_SCALE)
+        .find(|&s| pixels / (s * s) as f64 / rate <= budget)
+        .unwrap_or(MAX_INTERACTIVE_SCALE)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interactive_scale_keeps_the_target_rate_within_its_range() {
+        let px = 512.0 * 512.0;
+        // A GPU that casts the full image 30 times a second needs no reduction at 10/s.
+        assert_eq!(interactive_scale(px, Some(px * 30.0), 10.0), 1);
+        // Twice too slow for 10/s: half the size on each axis is a quarter of the work.
+        assert_eq!(interactive_scale(px, Some(px * 5.0), 10.0), 2);
+        // Nine times too slow: a third on each axis.
+        assert_eq!(interactive_scale(px, Some(px * 10.0 / 9.0), 10.0), 3);
+        // Far too slow: never below a quarter.
+        assert_eq!(
+            interactive_scale(px, Some(1.0), 10.0),
+            MAX_INTERACTIVE_SCALE
+        );
+        // Nothing measured yet, or a broken rate.
+        assert_eq!(interactive_scale(px, None, 10.0), 2);
+        assert_eq!(interactive_scale(px, Some(0.0), 10.0), 2);
+        // A lower target rate asks less reduction.
+        assert_eq!(interactive_scale(px, Some(px * 5.0), 4.0), 1);
     }
 }

@@ -57,6 +57,9 @@ const FIRST_RATE: f64 = 1e8;
 /// A slice grows at most this much from one submission to the next.
 const MAX_GROWTH: f64 = 4.0;
 
+/// How much of the best rate seen survives each new measurement.
+const RATE_DECAY: f64 = 0.95;
+
 impl Slicing {
     /// Sets (or with `None` removes) the time one submission may take.
     pub fn set_target(&self, target: Option<Duration>) {
@@ -96,15 +99,18 @@ impl Slicing {
     }
 
     /// Records that `units` of `label` took `took` (submission to completion).
+    ///
+    /// The time includes whatever ran ahead of the submission on the queue (the UI's
+    /// frames, the viewport's slices), which says nothing about this work's speed: taken
+    /// at face value it would shrink the next submission, whose fixed costs then weigh
+    /// more, and so on down to single bricks. So the rate kept is the best one seen,
+    /// decaying slowly to follow a device that got slower.
     pub fn measured(&self, label: &str, units: u64, took: Duration) {
-        let secs = took.as_secs_f64().max(1e-5);
-        let fresh = units as f64 / secs;
+        let fresh = units as f64 / took.as_secs_f64().max(1e-5);
         let mut rates = self.rates.lock().unwrap_or_else(|e| e.into_inner());
         let rate = match rates.get(label) {
-            // Smooth, and grow at most MAX_GROWTH× per measurement (a slice that finished
-            // early because the queue was empty says little about a full one).
-            Some(&old) => (0.5 * old + 0.5 * fresh).min(old * MAX_GROWTH),
-            None => fresh.min(FIRST_RATE * MAX_GROWTH),
+            Some(&old) => fresh.max(old * RATE_DECAY).min(old * MAX_GROWTH),
+            None => fresh.clamp(FIRST_RATE, FIRST_RATE * MAX_GROWTH),
         };
         rates.insert(label.to_owned(), rate);
     }
@@ -406,6 +412,34 @@ mod tests {
                 assert!(d.depth() == 1 || slab_voxels <= cap);
             }
         }
+    }
+
+    #[test]
+    fn slices_stay_full_when_they_wait_behind_other_work() {
+        let s = Slicing::default();
+        assert_eq!(s.units("x", 1234), 1234, "no slice time: the whole budget");
+        s.set_target(Some(Duration::from_millis(30)));
+        // The device does 1e8 units/s; every other submission also waited 70 ms behind
+        // the UI's frames, which taken at face value would shrink the slices to nothing.
+        let mut units = s.units("x", u64::MAX);
+        for i in 0..200 {
+            let wait = if i % 2 == 1 { 0.07 } else { 0.0 };
+            let took = units as f64 / 1e8 + wait;
+            s.measured("x", units, Duration::from_secs_f64(took));
+            units = s.units("x", u64::MAX);
+        }
+        let slice_ms = units as f64 / 1e8 * 1e3;
+        assert!((20.0..=30.5).contains(&slice_ms), "{slice_ms} ms slices");
+        // A device that really got slower is followed.
+        for _ in 0..200 {
+            s.measured("x", units, Duration::from_secs_f64(units as f64 / 1e7));
+            units = s.units("x", u64::MAX);
+        }
+        let slice_ms = units as f64 / 1e7 * 1e3;
+        assert!(
+            (20.0..=30.5).contains(&slice_ms),
+            "{slice_ms} ms after slowing down"
+        );
     }
 
     #[test]
