@@ -18,6 +18,21 @@ struct Params {
     ao: vec4<f32>,        // AO strength, AO on the ambient term only (0/1)
 }
 
+// Pipeline-overridable constants: render::gpu::Variant builds one pipeline per
+// combination a frame needs, so code for what is off is not compiled in. The defaults
+// (every feature in, composite) give the general shader, in which the uniform flags
+// below decide alone. On lavapipe (Mesa 22.3) both sides of a branch run, masked, so a
+// feature left in costs its texture fetches on every sample even while it is off.
+override MODE: u32 = 0u;          // RenderMode::code
+override PHONG: bool = true;      // shading.w may be 1
+override AO_VOLUME: bool = true;  // an AO volume is bound (else A = 1: a 1×1×1 texel of 1)
+override LIVE_VAO: bool = true;   // extras.flags.x may be 1
+override SHADOWS: bool = true;    // extras.flags.y may be 1
+override SURFACES: bool = true;   // extras.flags.z may be 1
+override CLIP: bool = true;       // clip.counts.x may be > 0
+override MODULATION: bool = true; // an opacity-modulation volume is bound (else × 1)
+override SKIPPING: bool = true;   // step.w may be 1
+
 const MODE_COMPOSITE: u32 = 0u;
 const MODE_MIP: u32 = 1u;
 const MODE_MINIP: u32 = 2u;
@@ -134,16 +149,19 @@ fn light(rgb: vec3<f32>, ao: f32, diffuse: f32, specular: f32, lit: f32) -> vec3
 
 // Blinn–Phong (a headlight, or the directional light of shadows), with the AO factor.
 fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
-    var ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
-    if extras.flags.x != 0u {
+    var ao = 1.0;
+    if AO_VOLUME {
+        ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
+    }
+    if LIVE_VAO && extras.flags.x != 0u {
         ao = 1.0 - positional_ao(uvw);  // live mode: Eq. 8 at this very sample
     }
-    let shadows = extras.flags.y != 0u;
+    let shadows = SHADOWS && extras.flags.y != 0u;
     var diffuse = 1.0;
     var specular = 0.0;
     // cos θ of the shadow lookup's guard limit: 1 where there is no normal.
     var cos_theta = 1.0;
-    if p.shading.w != 0.0 {
+    if PHONG && p.shading.w != 0.0 {
         let d = p.voxel_uvw.xyz;
         // Central differences in texel units per mm.
         let g = vec3<f32>(
@@ -154,7 +172,7 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
         // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
         let strength = length(g) * abs(p.lut_map.x) * p.voxel_uvw.w * p.lut_map.w;
         var edge = clamp(strength, 0.0, 1.0);
-        if u32(p.mode.x) == MODE_ISO && strength > 0.0 {
+        if MODE == MODE_ISO && strength > 0.0 {
             edge = 1.0;  // an isosurface is a surface however soft its gradient
         }
         if strength > 0.0 && shadows {
@@ -187,7 +205,7 @@ fn mode_value(uvw: vec3<f32>) -> f32 {
 }
 
 fn visible(pos: vec3<f32>) -> bool {
-    return clip.counts.x == 0u || clip_visible(pos);
+    return !CLIP || clip.counts.x == 0u || clip_visible(pos);
 }
 
 // MIP, MinIP or average of the mode value over the ray's unclipped samples: opaque
@@ -273,7 +291,7 @@ fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
         if t >= t_exit {
             break;
         }
-        if p.step.w != 0.0 {
+        if SKIPPING && p.step.w != 0.0 {
             // A block whose values all stay below the iso value holds no hit: jump to
             // its last sample, which is then the sample before, as without skipping.
             let block = block_at((origin + dir * t) / (2.0 * p.box_half.xyz) + 0.5);
@@ -328,7 +346,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var pending = false;
     var t_surf = 0.0;
     var surf = vec4<f32>(0.0);
-    if extras.flags.z != 0u {
+    if SURFACES && extras.flags.z != 0u {
         let sp = textureLoad(surface_position, vec2<u32>(px, py), 0);
         if sp.w > 0.0 {
             pending = true;
@@ -336,7 +354,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             surf = textureLoad(surface_color, vec2<u32>(px, py), 0);
         }
     }
-    let mode = u32(p.mode.x);
+    let mode = MODE;
     if t_exit > t_enter && mode != MODE_COMPOSITE {
         var offset = 0.0;
         if p.step.y != 0.0 {
@@ -388,7 +406,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             let pos = origin + dir * t;
             let uvw = pos / (2.0 * half) + 0.5;
-            if p.step.w != 0.0 {
+            if SKIPPING && p.step.w != 0.0 {
                 // Empty-space skipping: jump to the first sample past a transparent block.
                 let block = block_at(uvw);
                 if textureLoad(occupancy, block, 0).r == 0u {
@@ -397,14 +415,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             }
             // Shadow-test clipping (CAO step VI): clipped samples are empty.
-            if clip.counts.x > 0u && !clip_visible(pos) {
+            if CLIP && clip.counts.x > 0u && !clip_visible(pos) {
                 k = k + 1u;
                 continue;
             }
             let norm = sample_norm(uvw);
             var rgba = classify(norm);
             if rgba.a > 0.0 {
-                rgba.a = rgba.a * textureSampleLevel(opacity_modulation, linear_clamp, uvw, 0.0).r;
+                if MODULATION {
+                    rgba.a = rgba.a * textureSampleLevel(opacity_modulation, linear_clamp, uvw, 0.0).r;
+                }
                 // The last step ends at the box exit: correct its opacity for its length.
                 let len = min(dt, t_exit - t);
                 let rgb = shade(rgba.rgb, uvw, -dir);
