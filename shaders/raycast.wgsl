@@ -32,6 +32,7 @@ override SURFACES: bool = true;   // extras.flags.z may be 1
 override CLIP: bool = true;       // clip.counts.x may be > 0
 override MODULATION: bool = true; // an opacity-modulation volume is bound (else × 1)
 override SKIPPING: bool = true;   // step.w may be 1
+override FIND: bool = true;       // shading fetches: find a sample with opacity first
 
 const MODE_COMPOSITE: u32 = 0u;
 const MODE_MIP: u32 = 1u;
@@ -214,17 +215,32 @@ fn project(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
     var best = 0.0;
     var sum = 0.0;
     var count = 0u;
-    for (var k = 0u; k < max_steps; k = k + 1u) {
+    // MIP and MinIP jump over blocks that cannot change the pixel: the grey is
+    // clamp(best, 0, 1), so once a sample is in, a block whose values all stay at or
+    // below max(best, 0) (MIP), or at or above min(best, 1) (MinIP), changes nothing.
+    let skip = (mode == MODE_MIP || mode == MODE_MINIP) && SKIPPING && p.step.w != 0.0;
+    var k = 0u;
+    loop {
+        if k >= max_steps {
+            break;
+        }
         let t = t_enter + (f32(k) + offset) * p.step.x;
         if t >= t_exit {
             break;
         }
         let pos = origin + dir * t;
+        if skip && count > 0u {
+            let block = block_at(pos / (2.0 * p.box_half.xyz) + 0.5);
+            let r = block_u(block);
+            if (mode == MODE_MIP && r.y <= max(best, 0.0)) || (mode == MODE_MINIP && r.x >= min(best, 1.0)) {
+                k = max(k + 1u, past_block(origin, dir, block, t_enter, offset));
+                continue;
+            }
+        }
+        k = k + 1u;
         if !visible(pos) {
             continue;
         }
-        // No block skipping here: measured on lavapipe, the loop that can jump ran MIP
-        // slower (702 against 572 ms on the cranium) and the average too.
         let u = mode_value(pos / (2.0 * p.box_half.xyz) + 0.5);
         if count == 0u {
             best = u;
@@ -253,7 +269,8 @@ fn project(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
 // The occupancy block of a sample.
 fn block_at(uvw: vec3<f32>) -> vec3<u32> {
     let dims = vec3<f32>(textureDimensions(volume));
-    return min(vec3<u32>(clamp(uvw, vec3<f32>(0.0), vec3<f32>(1.0)) * dims) / p.grid.w, p.grid.xyz - vec3<u32>(1u));
+    // The block edge is a power of two: a shift, not a division (exact for u32).
+    return min(vec3<u32>(clamp(uvw, vec3<f32>(0.0), vec3<f32>(1.0)) * dims) >> vec3<u32>(countTrailingZeros(p.grid.w)), p.grid.xyz - vec3<u32>(1u));
 }
 
 // The mode value's range (lo, hi) over every sample a block can give.
@@ -286,6 +303,8 @@ const ISO_REFINE: u32 = 6u;
 // between the last sample outside and the first inside; -1 when there is none.
 fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset: f32, max_steps: u32) -> f32 {
     var before = t_enter;
+    var after = t_enter;
+    var found = false;
     for (var k = 0u; k < max_steps; k = k + 1u) {
         let t = t_enter + (f32(k) + offset) * p.step.x;
         if t >= t_exit {
@@ -303,21 +322,28 @@ fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
             }
         }
         if inside_surface(origin, dir, t) {
-            var lo = before;
-            var hi = t;
-            for (var i = 0u; i < ISO_REFINE; i = i + 1u) {
-                let mid = 0.5 * (lo + hi);
-                if inside_surface(origin, dir, mid) {
-                    hi = mid;
-                } else {
-                    lo = mid;
-                }
-            }
-            return hi;
+            found = true;
+            after = t;
+            break;
         }
         before = t;
     }
-    return -1.0;
+    if !found {
+        return -1.0;
+    }
+    // Refined after the loop, not inside it: on SIMD drivers that run branches masked
+    // (lavapipe) the bisection's fetches would otherwise cost every step.
+    var lo = before;
+    var hi = after;
+    for (var i = 0u; i < ISO_REFINE; i = i + 1u) {
+        let mid = 0.5 * (lo + hi);
+        if inside_surface(origin, dir, mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    return hi;
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -386,68 +412,102 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             offset = jitter(px, py);
         }
         let max_steps = u32(p.step.z);
+        // The three nested loops visit the samples of the CPU twin's single loop in the
+        // same order with the same arithmetic. They serve drivers that run every branch
+        // masked on SIMD lanes (lavapipe): the innermost jumps over transparent blocks
+        // without fetching, the middle one fetches and classifies and, with FIND, goes on
+        // until a sample has opacity, so shading (gradient, AO, shadows) runs once per
+        // sample that shows instead of once per step.
         var k = 0u;
         loop {
-            if k >= max_steps {
+            var t = 0.0;
+            var uvw = vec3<f32>(0.0);
+            var rgba = vec4<f32>(0.0);
+            var found = false;
+            var stop = false;
+            loop {
+                loop {
+                    if k >= max_steps {
+                        stop = true;
+                        break;
+                    }
+                    t = t_enter + (f32(k) + offset) * dt;
+                    if pending && t_surf <= t {
+                        // The surface lies before this sample in transparent space (or
+                        // before the first one): composite it here.
+                        acc = over(acc, surf.rgb, surf.a);
+                        pending = false;
+                        if surf.a >= 1.0 {
+                            stop = true;
+                            break;
+                        }
+                    }
+                    if t >= t_exit {
+                        stop = true;
+                        break;
+                    }
+                    let pos = origin + dir * t;
+                    uvw = pos / (2.0 * half) + 0.5;
+                    if !(SKIPPING && p.step.w != 0.0) {
+                        break;
+                    }
+                    // Empty-space skipping: jump to the first sample past a transparent block.
+                    let block = block_at(uvw);
+                    if textureLoad(occupancy, block, 0).r != 0u {
+                        break;
+                    }
+                    k = max(k + 1u, past_block(origin, dir, block, t_enter, offset));
+                }
+                if stop {
+                    break;
+                }
+                // Shadow-test clipping (CAO step VI): clipped samples are empty.
+                if CLIP && clip.counts.x > 0u && !clip_visible(origin + dir * t) {
+                    k = k + 1u;
+                    continue;
+                }
+                let norm = sample_norm(uvw);
+                rgba = classify(norm);
+                if rgba.a > 0.0 {
+                    found = true;
+                    break;
+                }
+                k = k + 1u;
+                if !FIND {
+                    break;
+                }
+            }
+            if stop {
                 break;
             }
-            let t = t_enter + (f32(k) + offset) * dt;
-            if pending && t_surf <= t {
-                // The surface lies before this sample in transparent space (or before the
-                // first one): composite it here.
+            if !found {
+                continue;
+            }
+            if MODULATION {
+                rgba.a = rgba.a * textureSampleLevel(opacity_modulation, linear_clamp, uvw, 0.0).r;
+            }
+            // The last step ends at the box exit: correct its opacity for its length.
+            let len = min(dt, t_exit - t);
+            let rgb = shade(rgba.rgb, uvw, -dir);
+            if pending && t_surf < t + len {
+                // The surface cuts this step: the part before it, the surface, then (if
+                // it is translucent) the part behind it, each for its true length.
+                let before = max(t_surf - t, 0.0);
+                acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, before / dt));
                 acc = over(acc, surf.rgb, surf.a);
                 pending = false;
                 if surf.a >= 1.0 {
                     break;
                 }
+                acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, (len - before) / dt));
+            } else {
+                if len < dt {
+                    rgba.a = 1.0 - pow(1.0 - rgba.a, len / dt);
+                }
+                acc = vec4<f32>(acc.rgb + (1.0 - acc.a) * rgba.a * rgb, acc.a + (1.0 - acc.a) * rgba.a);
             }
-            if t >= t_exit {
+            if acc.a > OPAQUE {
                 break;
-            }
-            let pos = origin + dir * t;
-            let uvw = pos / (2.0 * half) + 0.5;
-            if SKIPPING && p.step.w != 0.0 {
-                // Empty-space skipping: jump to the first sample past a transparent block.
-                let block = block_at(uvw);
-                if textureLoad(occupancy, block, 0).r == 0u {
-                    k = max(k + 1u, past_block(origin, dir, block, t_enter, offset));
-                    continue;
-                }
-            }
-            // Shadow-test clipping (CAO step VI): clipped samples are empty.
-            if CLIP && clip.counts.x > 0u && !clip_visible(pos) {
-                k = k + 1u;
-                continue;
-            }
-            let norm = sample_norm(uvw);
-            var rgba = classify(norm);
-            if rgba.a > 0.0 {
-                if MODULATION {
-                    rgba.a = rgba.a * textureSampleLevel(opacity_modulation, linear_clamp, uvw, 0.0).r;
-                }
-                // The last step ends at the box exit: correct its opacity for its length.
-                let len = min(dt, t_exit - t);
-                let rgb = shade(rgba.rgb, uvw, -dir);
-                if pending && t_surf < t + len {
-                    // The surface cuts this step: the part before it, the surface, then
-                    // (if it is translucent) the part behind it, each for its true length.
-                    let before = max(t_surf - t, 0.0);
-                    acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, before / dt));
-                    acc = over(acc, surf.rgb, surf.a);
-                    pending = false;
-                    if surf.a >= 1.0 {
-                        break;
-                    }
-                    acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, (len - before) / dt));
-                } else {
-                    if len < dt {
-                        rgba.a = 1.0 - pow(1.0 - rgba.a, len / dt);
-                    }
-                    acc = vec4<f32>(acc.rgb + (1.0 - acc.a) * rgba.a * rgb, acc.a + (1.0 - acc.a) * rgba.a);
-                }
-                if acc.a > OPAQUE {
-                    break;
-                }
             }
             k = k + 1u;
         }

@@ -105,9 +105,12 @@ impl Variant {
     }
 
     /// The values of the shader's `override` constants.
-    fn constants(&self) -> [(&'static str, f64); 9] {
+    fn constants(&self) -> [(&'static str, f64); 10] {
         let b = |on: bool| f64::from(u8::from(on));
+        // Shading that fetches: worth finding a sample with opacity before shading.
+        let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
         [
+            ("FIND", b(find)),
             ("MODE", f64::from(self.mode)),
             ("PHONG", b(self.phong)),
             ("AO_VOLUME", b(self.ao_volume)),
