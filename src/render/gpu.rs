@@ -72,19 +72,23 @@ impl Variant {
         surfaces: bool,
     ) -> Variant {
         let s = &frame.settings;
+        // Only composite and iso shade their samples (and only composite modulates):
+        // the projections get one pipeline whatever the lighting settings.
+        let lit = s.mode.uses_ao();
+        let shadows = lit && vol.extras.light.is_some();
         Variant {
             mode: s.mode.code(),
-            phong: s.shading == super::Shading::Phong,
-            ao_volume: vol.ao_bound,
-            live_vao: vol.extras.live_vao.is_some(),
-            shadows: vol.extras.light.is_some(),
+            phong: lit && s.shading == super::Shading::Phong,
+            ao_volume: lit && vol.ao_bound,
+            live_vao: lit && vol.extras.live_vao.is_some(),
+            shadows,
             // With shadows, the surface code stays in: lavapipe (Mesa 22.3.6) segfaults
             // in a worker thread running Phong pipelines that read the light volume and
             // neither the surfaces nor live AO in group 2 (composite and iso seen). The
             // surfaces' uniform flag still decides, so the pixels are the same.
-            surfaces: surfaces || vol.extras.light.is_some(),
+            surfaces: surfaces || shadows,
             clip: clip.is_some_and(|c| c.uniforms.counts[0] > 0),
-            modulation: vol.modulation_bound,
+            modulation: s.mode.is_composite() && vol.modulation_bound,
             skipping: s.empty_space_skipping,
         }
     }
