@@ -18,6 +18,22 @@ struct Params {
     ao: vec4<f32>,        // AO strength, AO on the ambient term only (0/1)
 }
 
+// Pipeline-overridable constants: render::gpu::Variant builds one pipeline per
+// combination a frame needs, so code for what is off is not compiled in. The defaults
+// (every feature in, composite) give the general shader, in which the uniform flags
+// below decide alone. On lavapipe (Mesa 22.3) both sides of a branch run, masked, so a
+// feature left in costs its texture fetches on every sample even while it is off.
+override MODE: u32 = 0u;          // RenderMode::code
+override PHONG: bool = true;      // shading.w may be 1
+override AO_VOLUME: bool = true;  // an AO volume is bound (else A = 1: a 1×1×1 texel of 1)
+override LIVE_VAO: bool = true;   // extras.flags.x may be 1
+override SHADOWS: bool = true;    // extras.flags.y may be 1
+override SURFACES: bool = true;   // extras.flags.z may be 1
+override CLIP: bool = true;       // clip.counts.x may be > 0
+override MODULATION: bool = true; // an opacity-modulation volume is bound (else × 1)
+override SKIPPING: bool = true;   // step.w may be 1
+override FIND: bool = true;       // shading fetches: find a sample with opacity first
+
 const MODE_COMPOSITE: u32 = 0u;
 const MODE_MIP: u32 = 1u;
 const MODE_MINIP: u32 = 2u;
@@ -134,16 +150,19 @@ fn light(rgb: vec3<f32>, ao: f32, diffuse: f32, specular: f32, lit: f32) -> vec3
 
 // Blinn–Phong (a headlight, or the directional light of shadows), with the AO factor.
 fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
-    var ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
-    if extras.flags.x != 0u {
+    var ao = 1.0;
+    if AO_VOLUME {
+        ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
+    }
+    if LIVE_VAO && extras.flags.x != 0u {
         ao = 1.0 - positional_ao(uvw);  // live mode: Eq. 8 at this very sample
     }
-    let shadows = extras.flags.y != 0u;
+    let shadows = SHADOWS && extras.flags.y != 0u;
     var diffuse = 1.0;
     var specular = 0.0;
     // cos θ of the shadow lookup's guard limit: 1 where there is no normal.
     var cos_theta = 1.0;
-    if p.shading.w != 0.0 {
+    if PHONG && p.shading.w != 0.0 {
         let d = p.voxel_uvw.xyz;
         // Central differences in texel units per mm.
         let g = vec3<f32>(
@@ -154,7 +173,7 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
         // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
         let strength = length(g) * abs(p.lut_map.x) * p.voxel_uvw.w * p.lut_map.w;
         var edge = clamp(strength, 0.0, 1.0);
-        if u32(p.mode.x) == MODE_ISO && strength > 0.0 {
+        if MODE == MODE_ISO && strength > 0.0 {
             edge = 1.0;  // an isosurface is a surface however soft its gradient
         }
         if strength > 0.0 && shadows {
@@ -187,7 +206,7 @@ fn mode_value(uvw: vec3<f32>) -> f32 {
 }
 
 fn visible(pos: vec3<f32>) -> bool {
-    return clip.counts.x == 0u || clip_visible(pos);
+    return !CLIP || clip.counts.x == 0u || clip_visible(pos);
 }
 
 // MIP, MinIP or average of the mode value over the ray's unclipped samples: opaque
@@ -196,17 +215,32 @@ fn project(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
     var best = 0.0;
     var sum = 0.0;
     var count = 0u;
-    for (var k = 0u; k < max_steps; k = k + 1u) {
+    // MIP and MinIP jump over blocks that cannot change the pixel: the grey is
+    // clamp(best, 0, 1), so once a sample is in, a block whose values all stay at or
+    // below max(best, 0) (MIP), or at or above min(best, 1) (MinIP), changes nothing.
+    let skip = (mode == MODE_MIP || mode == MODE_MINIP) && SKIPPING && p.step.w != 0.0;
+    var k = 0u;
+    loop {
+        if k >= max_steps {
+            break;
+        }
         let t = t_enter + (f32(k) + offset) * p.step.x;
         if t >= t_exit {
             break;
         }
         let pos = origin + dir * t;
+        if skip && count > 0u {
+            let block = block_at(pos / (2.0 * p.box_half.xyz) + 0.5);
+            let r = block_u(block);
+            if (mode == MODE_MIP && r.y <= max(best, 0.0)) || (mode == MODE_MINIP && r.x >= min(best, 1.0)) {
+                k = max(k + 1u, past_block(origin, dir, block, t_enter, offset));
+                continue;
+            }
+        }
+        k = k + 1u;
         if !visible(pos) {
             continue;
         }
-        // No block skipping here: measured on lavapipe, the loop that can jump ran MIP
-        // slower (702 against 572 ms on the cranium) and the average too.
         let u = mode_value(pos / (2.0 * p.box_half.xyz) + 0.5);
         if count == 0u {
             best = u;
@@ -235,7 +269,8 @@ fn project(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
 // The occupancy block of a sample.
 fn block_at(uvw: vec3<f32>) -> vec3<u32> {
     let dims = vec3<f32>(textureDimensions(volume));
-    return min(vec3<u32>(clamp(uvw, vec3<f32>(0.0), vec3<f32>(1.0)) * dims) / p.grid.w, p.grid.xyz - vec3<u32>(1u));
+    // The block edge is a power of two: a shift, not a division (exact for u32).
+    return min(vec3<u32>(clamp(uvw, vec3<f32>(0.0), vec3<f32>(1.0)) * dims) >> vec3<u32>(countTrailingZeros(p.grid.w)), p.grid.xyz - vec3<u32>(1u));
 }
 
 // The mode value's range (lo, hi) over every sample a block can give.
@@ -268,12 +303,14 @@ const ISO_REFINE: u32 = 6u;
 // between the last sample outside and the first inside; -1 when there is none.
 fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset: f32, max_steps: u32) -> f32 {
     var before = t_enter;
+    var after = t_enter;
+    var found = false;
     for (var k = 0u; k < max_steps; k = k + 1u) {
         let t = t_enter + (f32(k) + offset) * p.step.x;
         if t >= t_exit {
             break;
         }
-        if p.step.w != 0.0 {
+        if SKIPPING && p.step.w != 0.0 {
             // A block whose values all stay below the iso value holds no hit: jump to
             // its last sample, which is then the sample before, as without skipping.
             let block = block_at((origin + dir * t) / (2.0 * p.box_half.xyz) + 0.5);
@@ -285,21 +322,28 @@ fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
             }
         }
         if inside_surface(origin, dir, t) {
-            var lo = before;
-            var hi = t;
-            for (var i = 0u; i < ISO_REFINE; i = i + 1u) {
-                let mid = 0.5 * (lo + hi);
-                if inside_surface(origin, dir, mid) {
-                    hi = mid;
-                } else {
-                    lo = mid;
-                }
-            }
-            return hi;
+            found = true;
+            after = t;
+            break;
         }
         before = t;
     }
-    return -1.0;
+    if !found {
+        return -1.0;
+    }
+    // Refined after the loop, not inside it: on SIMD drivers that run branches masked
+    // (lavapipe) the bisection's fetches would otherwise cost every step.
+    var lo = before;
+    var hi = after;
+    for (var i = 0u; i < ISO_REFINE; i = i + 1u) {
+        let mid = 0.5 * (lo + hi);
+        if inside_surface(origin, dir, mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    return hi;
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -328,7 +372,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var pending = false;
     var t_surf = 0.0;
     var surf = vec4<f32>(0.0);
-    if extras.flags.z != 0u {
+    if SURFACES && extras.flags.z != 0u {
         let sp = textureLoad(surface_position, vec2<u32>(px, py), 0);
         if sp.w > 0.0 {
             pending = true;
@@ -336,7 +380,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             surf = textureLoad(surface_color, vec2<u32>(px, py), 0);
         }
     }
-    let mode = u32(p.mode.x);
+    let mode = MODE;
     if t_exit > t_enter && mode != MODE_COMPOSITE {
         var offset = 0.0;
         if p.step.y != 0.0 {
@@ -368,66 +412,102 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             offset = jitter(px, py);
         }
         let max_steps = u32(p.step.z);
+        // The three nested loops visit the samples of the CPU twin's single loop in the
+        // same order with the same arithmetic. They serve drivers that run every branch
+        // masked on SIMD lanes (lavapipe): the innermost jumps over transparent blocks
+        // without fetching, the middle one fetches and classifies and, with FIND, goes on
+        // until a sample has opacity, so shading (gradient, AO, shadows) runs once per
+        // sample that shows instead of once per step.
         var k = 0u;
         loop {
-            if k >= max_steps {
+            var t = 0.0;
+            var uvw = vec3<f32>(0.0);
+            var rgba = vec4<f32>(0.0);
+            var found = false;
+            var stop = false;
+            loop {
+                loop {
+                    if k >= max_steps {
+                        stop = true;
+                        break;
+                    }
+                    t = t_enter + (f32(k) + offset) * dt;
+                    if pending && t_surf <= t {
+                        // The surface lies before this sample in transparent space (or
+                        // before the first one): composite it here.
+                        acc = over(acc, surf.rgb, surf.a);
+                        pending = false;
+                        if surf.a >= 1.0 {
+                            stop = true;
+                            break;
+                        }
+                    }
+                    if t >= t_exit {
+                        stop = true;
+                        break;
+                    }
+                    let pos = origin + dir * t;
+                    uvw = pos / (2.0 * half) + 0.5;
+                    if !(SKIPPING && p.step.w != 0.0) {
+                        break;
+                    }
+                    // Empty-space skipping: jump to the first sample past a transparent block.
+                    let block = block_at(uvw);
+                    if textureLoad(occupancy, block, 0).r != 0u {
+                        break;
+                    }
+                    k = max(k + 1u, past_block(origin, dir, block, t_enter, offset));
+                }
+                if stop {
+                    break;
+                }
+                // Shadow-test clipping (CAO step VI): clipped samples are empty.
+                if CLIP && clip.counts.x > 0u && !clip_visible(origin + dir * t) {
+                    k = k + 1u;
+                    continue;
+                }
+                let norm = sample_norm(uvw);
+                rgba = classify(norm);
+                if rgba.a > 0.0 {
+                    found = true;
+                    break;
+                }
+                k = k + 1u;
+                if !FIND {
+                    break;
+                }
+            }
+            if stop {
                 break;
             }
-            let t = t_enter + (f32(k) + offset) * dt;
-            if pending && t_surf <= t {
-                // The surface lies before this sample in transparent space (or before the
-                // first one): composite it here.
+            if !found {
+                continue;
+            }
+            if MODULATION {
+                rgba.a = rgba.a * textureSampleLevel(opacity_modulation, linear_clamp, uvw, 0.0).r;
+            }
+            // The last step ends at the box exit: correct its opacity for its length.
+            let len = min(dt, t_exit - t);
+            let rgb = shade(rgba.rgb, uvw, -dir);
+            if pending && t_surf < t + len {
+                // The surface cuts this step: the part before it, the surface, then (if
+                // it is translucent) the part behind it, each for its true length.
+                let before = max(t_surf - t, 0.0);
+                acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, before / dt));
                 acc = over(acc, surf.rgb, surf.a);
                 pending = false;
                 if surf.a >= 1.0 {
                     break;
                 }
+                acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, (len - before) / dt));
+            } else {
+                if len < dt {
+                    rgba.a = 1.0 - pow(1.0 - rgba.a, len / dt);
+                }
+                acc = vec4<f32>(acc.rgb + (1.0 - acc.a) * rgba.a * rgb, acc.a + (1.0 - acc.a) * rgba.a);
             }
-            if t >= t_exit {
+            if acc.a > OPAQUE {
                 break;
-            }
-            let pos = origin + dir * t;
-            let uvw = pos / (2.0 * half) + 0.5;
-            if p.step.w != 0.0 {
-                // Empty-space skipping: jump to the first sample past a transparent block.
-                let block = block_at(uvw);
-                if textureLoad(occupancy, block, 0).r == 0u {
-                    k = max(k + 1u, past_block(origin, dir, block, t_enter, offset));
-                    continue;
-                }
-            }
-            // Shadow-test clipping (CAO step VI): clipped samples are empty.
-            if clip.counts.x > 0u && !clip_visible(pos) {
-                k = k + 1u;
-                continue;
-            }
-            let norm = sample_norm(uvw);
-            var rgba = classify(norm);
-            if rgba.a > 0.0 {
-                rgba.a = rgba.a * textureSampleLevel(opacity_modulation, linear_clamp, uvw, 0.0).r;
-                // The last step ends at the box exit: correct its opacity for its length.
-                let len = min(dt, t_exit - t);
-                let rgb = shade(rgba.rgb, uvw, -dir);
-                if pending && t_surf < t + len {
-                    // The surface cuts this step: the part before it, the surface, then
-                    // (if it is translucent) the part behind it, each for its true length.
-                    let before = max(t_surf - t, 0.0);
-                    acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, before / dt));
-                    acc = over(acc, surf.rgb, surf.a);
-                    pending = false;
-                    if surf.a >= 1.0 {
-                        break;
-                    }
-                    acc = over(acc, rgb, 1.0 - pow(1.0 - rgba.a, (len - before) / dt));
-                } else {
-                    if len < dt {
-                        rgba.a = 1.0 - pow(1.0 - rgba.a, len / dt);
-                    }
-                    acc = vec4<f32>(acc.rgb + (1.0 - acc.a) * rgba.a * rgb, acc.a + (1.0 - acc.a) * rgba.a);
-                }
-                if acc.a > OPAQUE {
-                    break;
-                }
             }
             k = k + 1u;
         }

@@ -580,3 +580,85 @@ fn scenes_keep_where_the_ao_applies_and_its_strength_and_old_ones_get_the_new_sh
     assert!(back.render.ao_ambient_only);
     assert_eq!(back.render.ao_strength, 0.75);
 }
+
+const MODES: [volao::render::RenderMode; 5] = [
+    volao::render::RenderMode::Composite,
+    volao::render::RenderMode::Mip,
+    volao::render::RenderMode::Minip,
+    volao::render::RenderMode::Average,
+    volao::render::RenderMode::Iso(None),
+];
+
+/// The pipeline specialised for a frame (`render::gpu::Variant`) draws the general
+/// shader's pixels, in every mode, shaded and not (bit for bit: specialising only
+/// leaves out code for what is off).
+#[test]
+fn specialised_pipelines_draw_the_general_pixels() {
+    use volao::render::gpu::Variant;
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let v = load("raw/engine.raw");
+    let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
+    let vol = GpuVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let mut failures = Vec::new();
+    for mode in MODES {
+        for shading in [Shading::None, Shading::Phong] {
+            let mut f = frame(48, shading);
+            f.settings.mode = mode;
+            let render = |variant| {
+                rc.render_variant(&gpu, &vol, &f, None, variant)
+                    .unwrap_or_else(|e| panic!("{e}"))
+            };
+            if render(None).pixels != render(Some(Variant::general(mode))).pixels {
+                failures.push(format!("{mode} {shading:?}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "differ: {}", failures.join(", "));
+}
+
+/// Every variant `Variant::of` can choose, with the frame's features off at run time,
+/// draws the general shader's pixels: 5 modes × 256 pipelines (~2 min on lavapipe).
+/// `cargo test --release --test render every_variant -- --ignored`
+#[test]
+#[ignore = "sweep of 1280 pipelines, ~2 min on lavapipe"]
+fn every_variant_draws_the_general_pixels() {
+    use volao::render::gpu::Variant;
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let v = load("raw/engine.raw");
+    let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
+    let vol = GpuVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let mut failures = Vec::new();
+    for mode in MODES {
+        for bits in 0u32..256 {
+            let on = |i: u32| bits & (1 << i) != 0;
+            let variant = Variant {
+                mode: mode.code(),
+                phong: on(7),
+                ao_volume: on(0),
+                live_vao: on(1),
+                shadows: on(2),
+                surfaces: on(3),
+                clip: on(4),
+                modulation: on(5),
+                skipping: on(6),
+            };
+            // Never chosen: lavapipe crashes on it (see `Variant::of`).
+            if variant.shadows && !variant.surfaces {
+                continue;
+            }
+            let mut f = frame(24, if on(7) { Shading::Phong } else { Shading::None });
+            f.settings.mode = mode;
+            f.settings.empty_space_skipping = on(6);
+            let render = |variant| {
+                rc.render_variant(&gpu, &vol, &f, None, Some(variant))
+                    .unwrap_or_else(|e| panic!("{e}"))
+            };
+            if render(variant).pixels != render(Variant::general(mode)).pixels {
+                failures.push(format!("{mode} {variant:?}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

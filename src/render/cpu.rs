@@ -233,11 +233,24 @@ impl Ray<'_> {
     /// MIP, MinIP or average over the unclipped samples (raycast.wgsl's `project`).
     fn project(&self, mode: u32) -> Vec4 {
         let (mut best, mut sum, mut count) = (0.0f32, 0.0f32, 0u32);
+        // MIP and MinIP jump over blocks that cannot change the pixel: the grey is
+        // clamp(best, 0, 1), so once a sample is in, a block whose values all stay at or
+        // below max(best, 0) (MIP), or at or above min(best, 1) (MinIP), changes nothing.
+        let skip = mode == MODE_MIP || mode == MODE_MINIP;
         let mut k = 0u32;
         while k < self.p.step[2] as u32 {
             let (t, pos) = self.sample(k);
             if t >= self.t_exit {
                 break;
+            }
+            if skip
+                && count > 0
+                && let Some(((lo, hi), next)) = self.block_u(pos)
+                && ((mode == MODE_MIP && hi <= best.max(0.0))
+                    || (mode == MODE_MINIP && lo >= best.min(1.0)))
+            {
+                k = (k + 1).max(next);
+                continue;
             }
             k += 1;
             if !self.visible(pos) {
@@ -275,6 +288,7 @@ impl Ray<'_> {
     /// The first point inside the isosurface, refined (raycast.wgsl's `iso_hit`).
     fn iso_hit(&self) -> Option<f32> {
         let mut before = self.t_enter;
+        let mut after = None;
         let mut k = 0u32;
         while k < self.p.step[2] as u32 {
             let (t, pos) = self.sample(k);
@@ -292,21 +306,22 @@ impl Ray<'_> {
                 continue;
             }
             if self.inside_surface(t) {
-                let (mut lo, mut hi) = (before, t);
-                for _ in 0..ISO_REFINE {
-                    let mid = 0.5 * (lo + hi);
-                    if self.inside_surface(mid) {
-                        hi = mid;
-                    } else {
-                        lo = mid;
-                    }
-                }
-                return Some(hi);
+                after = Some(t);
+                break;
             }
             before = t;
             k += 1;
         }
-        None
+        let (mut lo, mut hi) = (before, after?);
+        for _ in 0..ISO_REFINE {
+            let mid = 0.5 * (lo + hi);
+            if self.inside_surface(mid) {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        Some(hi)
     }
 }
 
@@ -381,6 +396,8 @@ pub fn pixel(
         };
         let max_steps = p.step[2] as u32;
         let dims = Vec3::new(vol.dims[0] as f32, vol.dims[1] as f32, vol.dims[2] as f32);
+        // One loop over the samples; the shader nests three around the same steps (skip,
+        // fetch, shade) for SIMD drivers that run every branch masked.
         let mut k = 0u32;
         while k < max_steps {
             let t = t_enter + (k as f32 + offset) * dt;

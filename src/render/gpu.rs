@@ -23,7 +23,10 @@ pub use super::texels::MAX_VOLUME_BYTES;
 /// Long-lived ray-casting state: built once per device.
 #[derive(Debug)]
 pub struct RayCaster {
-    pipeline: wgpu::ComputePipeline,
+    module: wgpu::ShaderModule,
+    pipeline_layout: wgpu::PipelineLayout,
+    /// One pipeline per [`Variant`] used so far, built on first use.
+    pipelines: std::sync::Mutex<Vec<(Variant, wgpu::ComputePipeline)>>,
     layout: wgpu::BindGroupLayout,
     clip_layout: wgpu::BindGroupLayout,
     /// `@group(1)` with no clip shapes (zeroed uniforms, a blank map).
@@ -38,6 +41,91 @@ pub struct RayCaster {
     bound: std::sync::Mutex<Vec<Bound>>,
     /// Tile textures of [`Self::render`], by size.
     tiles: std::sync::Mutex<Vec<wgpu::Texture>>,
+}
+
+/// What a frame's pipeline is specialised for: the `override` constants of
+/// `shaders/raycast.wgsl`. A feature that is off is left out of the shader (on lavapipe
+/// a branch not taken still costs its work); what is on is still decided per frame by
+/// the uniforms, so every variant draws the same pixels as the general shader.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Variant {
+    /// [`super::RenderMode::code`].
+    pub mode: u32,
+    pub phong: bool,
+    /// An AO volume is bound (not the 1×1×1 texel of 1).
+    pub ao_volume: bool,
+    pub live_vao: bool,
+    pub shadows: bool,
+    pub surfaces: bool,
+    pub clip: bool,
+    /// An opacity-modulation volume is bound (not the 1×1×1 texel of 1).
+    pub modulation: bool,
+    pub skipping: bool,
+}
+
+impl Variant {
+    /// The variant that draws `frame` of `vol` with `clip` and the surface layer (or not).
+    pub fn of(
+        vol: &GpuVolume,
+        frame: &Frame,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        surfaces: bool,
+    ) -> Variant {
+        let s = &frame.settings;
+        // Only composite and iso shade their samples (and only composite modulates):
+        // the projections get one pipeline whatever the lighting settings.
+        let lit = s.mode.uses_ao();
+        let shadows = lit && vol.extras.light.is_some();
+        Variant {
+            mode: s.mode.code(),
+            phong: lit && s.shading == super::Shading::Phong,
+            ao_volume: lit && vol.ao_bound,
+            live_vao: lit && vol.extras.live_vao.is_some(),
+            shadows,
+            // With shadows, the surface code stays in: lavapipe (Mesa 22.3.6) segfaults
+            // in a worker thread running Phong pipelines that read the light volume and
+            // neither the surfaces nor live AO in group 2 (composite and iso seen). The
+            // surfaces' uniform flag still decides, so the pixels are the same.
+            surfaces: surfaces || shadows,
+            clip: clip.is_some_and(|c| c.uniforms.counts[0] > 0),
+            modulation: s.mode.is_composite() && vol.modulation_bound,
+            skipping: s.empty_space_skipping,
+        }
+    }
+
+    /// Every feature compiled in, as the shader's defaults: the uniforms decide alone.
+    pub fn general(mode: super::RenderMode) -> Variant {
+        Variant {
+            mode: mode.code(),
+            phong: true,
+            ao_volume: true,
+            live_vao: true,
+            shadows: true,
+            surfaces: true,
+            clip: true,
+            modulation: true,
+            skipping: true,
+        }
+    }
+
+    /// The values of the shader's `override` constants.
+    fn constants(&self) -> [(&'static str, f64); 10] {
+        let b = |on: bool| f64::from(u8::from(on));
+        // Shading that fetches: worth finding a sample with opacity before shading.
+        let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
+        [
+            ("FIND", b(find)),
+            ("MODE", f64::from(self.mode)),
+            ("PHONG", b(self.phong)),
+            ("AO_VOLUME", b(self.ao_volume)),
+            ("LIVE_VAO", b(self.live_vao)),
+            ("SHADOWS", b(self.shadows)),
+            ("SURFACES", b(self.surfaces)),
+            ("CLIP", b(self.clip)),
+            ("MODULATION", b(self.modulation)),
+            ("SKIPPING", b(self.skipping)),
+        ]
+    }
 }
 
 /// Render targets whose bindings are kept (the viewport, a screenshot tile, a CLI tile).
@@ -63,7 +151,11 @@ pub struct GpuVolume {
     ranges: BlockRanges,
     volume_view: wgpu::TextureView,
     ao_view: wgpu::TextureView,
+    /// `ao_view` is an AO volume, not the 1×1×1 texel of 1 (see [`Variant`]).
+    ao_bound: bool,
     modulation_view: wgpu::TextureView,
+    /// `modulation_view` is a modulation volume, not the 1×1×1 texel of 1.
+    modulation_bound: bool,
     occupancy: wgpu::Texture,
     occupancy_view: wgpu::TextureView,
     /// (min, max) of `norm` per occupancy block: the projection and iso modes' skip test.
@@ -204,7 +296,9 @@ impl GpuVolume {
             GpuVolume {
                 volume_view: volume.create_view(&Default::default()),
                 ao_view: ao.create_view(&Default::default()),
+                ao_bound: false,
                 modulation_view: no_modulation(device, queue),
+                modulation_bound: false,
                 occupancy_view: occupancy.create_view(&Default::default()),
                 block_range_view: block_range.create_view(&Default::default()),
                 occupancy,
@@ -264,6 +358,7 @@ impl GpuVolume {
         );
         write_3d(&gpu.queue, &texture, dims, 4, bytemuck::cast_slice(values));
         self.ao_view = texture.create_view(&Default::default());
+        self.ao_bound = true;
     }
 
     /// Uses an AO volume already on the GPU (R32Float, the volume's dims), such as
@@ -271,6 +366,7 @@ impl GpuVolume {
     pub fn set_ambient_occlusion_view(&mut self, view: &wgpu::TextureView) {
         self.generation = next_generation();
         self.ao_view = view.clone();
+        self.ao_bound = true;
     }
 
     /// Back to no ambient occlusion (A = 1 everywhere), as right after upload. The viewer
@@ -285,12 +381,14 @@ impl GpuVolume {
         );
         write_3d(&gpu.queue, &ao, [1, 1, 1], 4, bytemuck::bytes_of(&1.0f32));
         self.ao_view = ao.create_view(&Default::default());
+        self.ao_bound = false;
     }
 
     /// Drops the opacity modulation (factor 1 everywhere).
     pub fn clear_opacity_modulation(&mut self, gpu: &Gpu) {
         self.generation = next_generation();
         self.modulation_view = no_modulation(&gpu.device, &gpu.queue);
+        self.modulation_bound = false;
     }
 
     /// Uses `values` (one per voxel, x fastest, in [0, 1]) as the opacity factor of
@@ -317,6 +415,7 @@ impl GpuVolume {
             bytemuck::cast_slice(&quantised),
         );
         self.modulation_view = texture.create_view(&Default::default());
+        self.modulation_bound = true;
         quantised.iter().map(|&q| q as f32 / 65535.0).collect()
     }
 
@@ -375,17 +474,12 @@ impl RayCaster {
                 bind_group_layouts: &[Some(&layout), Some(&clip_layout), Some(&layout_2)],
                 immediate_size: 0,
             });
-            let pipeline = crate::gpu::compute_pipeline(
-                device,
-                "RayCaster::pipeline",
-                &module,
-                "main",
-                Some(&pipeline_layout),
-            );
             let sampler = crate::gpu::linear_sampler(device, "RayCaster::linear_clamp");
             let no_clip = crate::clip::gpu::empty_bind_group(device, &clip_layout);
             RayCaster {
-                pipeline,
+                module,
+                pipeline_layout,
+                pipelines: Default::default(),
                 layout,
                 clip_layout,
                 no_clip,
@@ -424,9 +518,10 @@ impl RayCaster {
                 &vol.texels,
             )?),
         };
+        let variant = Variant::of(vol, frame, clip, layer.is_some());
         self.encode(
             (device, queue),
-            vol,
+            (vol, variant),
             frame,
             clip,
             layer.as_ref(),
@@ -435,8 +530,38 @@ impl RayCaster {
         )
     }
 
-    /// Writes this frame's uniforms for `target` and encodes its dispatch; the bind groups
-    /// are reused while `vol`'s resources and the surface layer stay the same.
+    /// The pipeline of `variant`, built on first use (shader compilation: ~30 ms on
+    /// lavapipe) and kept for the device's lifetime.
+    fn pipeline(
+        &self,
+        device: &wgpu::Device,
+        variant: Variant,
+    ) -> Result<wgpu::ComputePipeline, GpuError> {
+        let mut pipelines = self.pipelines.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, p)) = pipelines.iter().find(|(v, _)| *v == variant) {
+            return Ok(p.clone());
+        }
+        let constants = variant.constants();
+        let pipeline = validated(device, "RayCaster::pipeline", || {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("RayCaster::pipeline"),
+                layout: Some(&self.pipeline_layout),
+                module: &self.module,
+                entry_point: Some("main"),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &constants,
+                    ..Default::default()
+                },
+                cache: None,
+            })
+        })?;
+        pipelines.push((variant, pipeline.clone()));
+        Ok(pipeline)
+    }
+
+    /// Writes this frame's uniforms for `target` and encodes its dispatch with `variant`'s
+    /// pipeline; the bind groups are reused while `vol`'s resources and the surface layer
+    /// stay the same.
     #[allow(
         clippy::too_many_arguments,
         reason = "one tile of one frame: every argument is a different input"
@@ -444,7 +569,7 @@ impl RayCaster {
     fn encode(
         &self,
         (device, queue): (&wgpu::Device, &wgpu::Queue),
-        vol: &GpuVolume,
+        (vol, variant): (&GpuVolume, Variant),
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         layer: Option<&super::surface::SurfaceLayer>,
@@ -452,6 +577,7 @@ impl RayCaster {
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
         let params = frame.params(&vol.texels, &vol.lut, origin.0, origin.1);
+        let pipeline = self.pipeline(device, variant)?;
         let clip_group = clip.map(|c| c.bind_group(device, &self.clip_layout));
         let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
         let (tw, th) = (target.width(), target.height());
@@ -499,7 +625,7 @@ impl RayCaster {
                 label: Some("RayCaster::encode_tile"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(&self.pipeline);
+            pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &b.group, &[]);
             pass.set_bind_group(1, clip_group, &[]);
             pass.set_bind_group(2, &b.group_2, &[]);
@@ -556,6 +682,20 @@ impl RayCaster {
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
     ) -> Result<Image, GpuError> {
+        self.render_variant(gpu, vol, frame, clip, None)
+    }
+
+    /// [`Self::render`] with the pipeline of `variant` (`None`: the frame's own,
+    /// [`Variant::of`]). A variant with more features than the frame uses draws the same
+    /// pixels; tests compare them.
+    pub fn render_variant(
+        &self,
+        gpu: &Gpu,
+        vol: &GpuVolume,
+        frame: &Frame,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        variant: Option<Variant>,
+    ) -> Result<Image, GpuError> {
         let device = &gpu.device;
         let (w, h) = (frame.width.max(1), frame.height.max(1));
         let mut image = Image {
@@ -583,9 +723,11 @@ impl RayCaster {
                 let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("RayCaster::tile"),
                 });
+                let variant =
+                    variant.unwrap_or_else(|| Variant::of(vol, frame, clip, layer.is_some()));
                 self.encode(
                     (device, &gpu.queue),
-                    vol,
+                    (vol, variant),
                     frame,
                     clip,
                     layer.as_ref(),
