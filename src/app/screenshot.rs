@@ -74,16 +74,21 @@ pub struct PendingShot {
     path: PathBuf,
     image: Image,
     tiles: Vec<(u32, u32)>,
+    /// Edge of the tiles (one submission each).
+    tile: u32,
     next: usize,
     in_flight: Option<TileInFlight>,
 }
 
 impl PendingShot {
-    /// Plans the tiles of `frame` (whose size is the screenshot's).
-    pub fn new(frame: Frame, scene: Scene, path: PathBuf) -> Self {
+    /// Plans the tiles of `frame` (whose size is the screenshot's), of at most `tile`²
+    /// pixels (at most [`TILE`]): one tile is one submission, which the UI's frames wait
+    /// behind.
+    pub fn new(frame: Frame, scene: Scene, path: PathBuf, tile: u32) -> Self {
         let (w, h) = (frame.width.max(1), frame.height.max(1));
-        let tiles = (0..h.div_ceil(TILE))
-            .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE)))
+        let tile = tile.clamp(1, TILE);
+        let tiles = (0..h.div_ceil(tile))
+            .flat_map(|ty| (0..w.div_ceil(tile)).map(move |tx| (tx * tile, ty * tile)))
             .collect();
         PendingShot {
             frame,
@@ -95,6 +100,7 @@ impl PendingShot {
                 pixels: vec![[0; 4]; (w as usize) * (h as usize)],
             },
             tiles,
+            tile,
             next: 0,
             in_flight: None,
         }
@@ -156,8 +162,8 @@ impl PendingShot {
     ) -> Result<(), String> {
         let (x0, y0) = self.tiles[self.next];
         let size = (
-            (self.image.width - x0).min(TILE),
-            (self.image.height - y0).min(TILE),
+            (self.image.width - x0).min(self.tile),
+            (self.image.height - y0).min(self.tile),
         );
         let device = &gpu.device;
         let texture = crate::gpu::image_texture(
@@ -286,14 +292,17 @@ mod tests {
             "width": 7680, "height": 4320
         }))
         .expect("scene");
-        let shot = PendingShot::new(frame, scene, "x.png".into());
-        assert_eq!(shot.tiles.len(), 4 * 3);
-        let covered: u64 = shot
-            .tiles
-            .iter()
-            .map(|&(x, y)| ((7680 - x).min(TILE) as u64) * ((4320 - y).min(TILE) as u64))
-            .sum();
-        assert_eq!(covered, 7680 * 4320);
+        for (tile, count) in [(TILE, 4 * 3), (4096, 4 * 3), (512, 15 * 9), (1000, 8 * 5)] {
+            let shot = PendingShot::new(frame, scene.clone(), "x.png".into(), tile);
+            assert_eq!(shot.tiles.len(), count, "{tile}");
+            let t = tile.min(TILE);
+            let covered: u64 = shot
+                .tiles
+                .iter()
+                .map(|&(x, y)| ((7680 - x).min(t) as u64) * ((4320 - y).min(t) as u64))
+                .sum();
+            assert_eq!(covered, 7680 * 4320);
+        }
         assert_eq!(
             scene_path(Path::new("/a/fig.png")),
             Path::new("/a/fig.json")

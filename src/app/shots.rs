@@ -81,7 +81,8 @@ impl Viewer {
                         width: w,
                         height: h,
                     };
-                    self.shots.pending = Some(PendingShot::new(frame, scene, path));
+                    let tile = shot_tile(self.pacer.rate(super::viewport::STRIP));
+                    self.shots.pending = Some(PendingShot::new(frame, scene, path, tile));
                 }
             }
         }
@@ -129,5 +130,34 @@ impl Viewer {
             .map(|n| self.options.screenshot_dir.join(format!("volao-{n}.png")))
             .find(|p| !p.exists() && !scene_path(p).exists())
             .unwrap_or_else(|| self.options.screenshot_dir.join("volao.png"))
+    }
+}
+
+/// Screenshot tiles of about a tenth of a second each at the viewport's measured ray-cast
+/// rate (pixels per second): the UI's frames wait behind one tile at most. A power of two
+/// from 256 to [`super::screenshot`]'s largest; the largest before anything was measured.
+fn shot_tile(rate: Option<f64>) -> u32 {
+    match rate {
+        Some(r) if r > 0.0 => {
+            let side = (r * 0.1)
+                .sqrt()
+                .clamp(256.0, crate::render::gpu::TILE as f64) as u32;
+            1 << side.ilog2()
+        }
+        _ => crate::render::gpu::TILE,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn screenshot_tiles_follow_the_measured_rate() {
+        use super::shot_tile;
+        use crate::render::gpu::TILE;
+        assert_eq!(shot_tile(None), TILE);
+        // lavapipe on two cores: ~2.4 Mpx/s, a 256² tile takes ~27 ms.
+        assert_eq!(shot_tile(Some(2.4e6)), 256);
+        assert_eq!(shot_tile(Some(1e7)), 512);
+        assert_eq!(shot_tile(Some(1e10)), TILE);
     }
 }

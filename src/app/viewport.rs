@@ -16,8 +16,11 @@ use crate::clip::gpu::ClipMaps;
 use crate::gpu::pacer::Pacer;
 use crate::gpu::{Gpu, GpuError, shaders, validated};
 use crate::render::Frame;
-use crate::render::gpu::{GpuVolume, RayCaster};
+use crate::render::gpu::{GpuVolume, RayCaster, Variant};
 use std::time::Instant;
+
+/// Set by the thread building a pipeline: `Some(error)` when it failed.
+type Compiled = std::sync::Arc<std::sync::Mutex<Option<Option<String>>>>;
 
 /// Format of the ray caster's output (its storage texture is Rgba8Unorm).
 pub const IMAGE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -25,7 +28,10 @@ pub const IMAGE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 /// Everything the viewport keeps on the GPU between frames.
 #[derive(Debug)]
 pub struct ViewportGpu {
-    pub ray_caster: RayCaster,
+    /// Shared with the thread that builds a pipeline variant before it is first used.
+    pub ray_caster: std::sync::Arc<RayCaster>,
+    /// The ray caster's pipeline being built on a worker thread, and how that went.
+    compiling: Option<(Variant, Compiled)>,
     /// Draws an image 1:1 (exact) or scaled up (interactive quality).
     pipelines: [wgpu::RenderPipeline; 2],
     layout: wgpu::BindGroupLayout,
@@ -142,7 +148,8 @@ impl ViewportGpu {
                 false => [pipeline("fs_main"), pipeline("fs_scaled")],
             };
             ViewportGpu {
-                ray_caster,
+                ray_caster: std::sync::Arc::new(ray_caster),
+                compiling: None,
                 pipelines,
                 layout,
                 sampler: crate::gpu::linear_sampler(device, "Viewport::sampler"),
@@ -601,6 +608,7 @@ impl ViewportGpu {
             ray_caster,
             stats_pending,
             strip,
+            compiling,
             ..
         } = self;
         let (Some(w), Some(vol)) = (work.as_mut(), volume.as_ref()) else {
@@ -633,6 +641,44 @@ impl ViewportGpu {
         let Some(strip) = strip.as_ref() else {
             return Ok(false);
         };
+        // A pipeline variant not built yet compiles on a worker thread (~0.1 s on
+        // lavapipe), not in the UI's frame; the image waits for it.
+        let surfaces = !vol.extras.surfaces.is_empty();
+        let variant = Variant::of(vol, &w.key.frame, clip, surfaces);
+        if !ray_caster.has_pipeline(variant) {
+            match compiling {
+                Some((v, state)) if *v == variant => {
+                    let failed = state.lock().ok().and_then(|s| s.clone());
+                    match failed {
+                        // Still compiling.
+                        None => return Ok(false),
+                        // It failed there: the ray cast below builds it again and
+                        // reports the error.
+                        Some(_) => *compiling = None,
+                    }
+                }
+                _ => {
+                    let state: Compiled = Default::default();
+                    let (rc, device, s) = (
+                        std::sync::Arc::clone(ray_caster),
+                        gpu.device.clone(),
+                        std::sync::Arc::clone(&state),
+                    );
+                    let spawned = std::thread::Builder::new()
+                        .name("volao-pipeline".into())
+                        .spawn(move || {
+                            let r = rc.build_pipeline(&device, variant);
+                            if let Ok(mut s) = s.lock() {
+                                *s = Some(r.err().map(|e| e.to_string()));
+                            }
+                        });
+                    if spawned.is_ok() {
+                        *compiling = Some((variant, state));
+                        return Ok(false);
+                    }
+                }
+            }
+        }
         let first_rate = first_pixel_rate(gpu);
         while w.next_row < height {
             let left = (height - w.next_row).div_ceil(rows) as u64;

@@ -537,10 +537,11 @@ impl RayCaster {
         device: &wgpu::Device,
         variant: Variant,
     ) -> Result<wgpu::ComputePipeline, GpuError> {
-        let mut pipelines = self.pipelines.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((_, p)) = pipelines.iter().find(|(v, _)| *v == variant) {
-            return Ok(p.clone());
+        if let Some(p) = self.built(variant) {
+            return Ok(p);
         }
+        // Compiled outside the lock (~0.1 s on lavapipe): another thread may look up or
+        // build other variants meanwhile.
         let constants = variant.constants();
         let pipeline = validated(device, "RayCaster::pipeline", || {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -555,8 +556,32 @@ impl RayCaster {
                 cache: None,
             })
         })?;
+        let mut pipelines = self.pipelines.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, p)) = pipelines.iter().find(|(v, _)| *v == variant) {
+            return Ok(p.clone());
+        }
         pipelines.push((variant, pipeline.clone()));
         Ok(pipeline)
+    }
+
+    /// `variant`'s pipeline if it is built.
+    fn built(&self, variant: Variant) -> Option<wgpu::ComputePipeline> {
+        let pipelines = self.pipelines.lock().unwrap_or_else(|e| e.into_inner());
+        pipelines
+            .iter()
+            .find(|(v, _)| *v == variant)
+            .map(|(_, p)| p.clone())
+    }
+
+    /// Whether the pipeline for `variant` is built (drawing with another compiles it
+    /// first, ~0.1 s on lavapipe: the viewer builds it on a worker thread instead).
+    pub fn has_pipeline(&self, variant: Variant) -> bool {
+        self.built(variant).is_some()
+    }
+
+    /// Builds the pipeline for `variant` (any thread).
+    pub fn build_pipeline(&self, device: &wgpu::Device, variant: Variant) -> Result<(), GpuError> {
+        self.pipeline(device, variant).map(|_| ())
     }
 
     /// Writes this frame's uniforms for `target` and encodes its dispatch with `variant`'s
