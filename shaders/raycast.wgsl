@@ -15,7 +15,7 @@ struct Params {
     image: vec4<u32>,     // width, height, tile x0, tile y0
     grid: vec4<u32>,      // occupancy grid dims, block edge (voxels)
     mode: vec4<f32>,      // render mode (0 composite … 4 iso), u = norm · y + z
-    ao: vec4<f32>,        // AO strength, AO on the ambient term only (0/1)
+    ao: vec4<f32>,        // AO strength, AO on the ambient term only (0/1), AO read offset (voxels), A_open
 }
 
 // Pipeline-overridable constants: render::gpu::Variant builds one pipeline per
@@ -33,6 +33,11 @@ override CLIP: bool = true;       // clip.counts.x may be > 0
 override MODULATION: bool = true; // an opacity-modulation volume is bound (else × 1)
 override SKIPPING: bool = true;   // step.w may be 1
 override FIND: bool = true;       // shading fetches: find a sample with opacity first
+
+// The AO is read the full offset out wherever the gradient is at least 1/AO_EDGE_GAIN
+// of a full edge: through the whole soft ramp of a CT surface, whose deeper samples
+// would otherwise read the occluded inside (CPU twin: render::cpu::AO_EDGE_GAIN).
+const AO_EDGE_GAIN: f32 = 8.0;
 
 const MODE_COMPOSITE: u32 = 0u;
 const MODE_MIP: u32 = 1u;
@@ -131,10 +136,11 @@ fn sample_norm(uvw: vec3<f32>) -> f32 {
 }
 
 // The lit colour of a sample (CPU twin: render::cpu::light), docs/algorithms.md "Shading
-// with ambient occlusion". By default the AO factor A_s = clamp(1 − s(1 − min(2A, 1)), 0, 1)
-// (2A: a surface sees at most half the sphere the AO is taken over) scales ambient and
-// diffuse light, C_TF · A_s · (k + (1 − k) · D · S) + spec · S; with ao.y, the ambient
-// term only, with A_s = clamp(1 − s(1 − A), 0, 1): C_TF · (k · A_s + (1 − k) · D · S) + spec · S.
+// with ambient occlusion". By default the AO factor A_s = clamp(1 − s(1 − min(A / A_open, 1)), 0, 1)
+// (A_open = ao.w: what the AO method gives an open flat surface, so such a surface keeps
+// its light) scales ambient and diffuse light, C_TF · A_s · (k + (1 − k) · D · S) + spec · S;
+// with ao.y, the ambient term only, with A_s = clamp(1 − s(1 − A), 0, 1):
+// C_TF · (k · A_s + (1 − k) · D · S) + spec · S.
 fn light(rgb: vec3<f32>, ao: f32, diffuse: f32, specular: f32, lit: f32) -> vec3<f32> {
     let k = p.shading.x;
     var c: vec3<f32>;
@@ -142,7 +148,7 @@ fn light(rgb: vec3<f32>, ao: f32, diffuse: f32, specular: f32, lit: f32) -> vec3
         let a = clamp(1.0 - p.ao.x * (1.0 - ao), 0.0, 1.0);
         c = rgb * (k * a + (1.0 - k) * diffuse * lit);
     } else {
-        let a = clamp(1.0 - p.ao.x * (1.0 - min(2.0 * ao, 1.0)), 0.0, 1.0);
+        let a = clamp(1.0 - p.ao.x * (1.0 - min(ao / p.ao.w, 1.0)), 0.0, 1.0);
         c = rgb * a * (k + (1.0 - k) * diffuse * lit);
     }
     return c + vec3<f32>(specular * lit);
@@ -150,19 +156,17 @@ fn light(rgb: vec3<f32>, ao: f32, diffuse: f32, specular: f32, lit: f32) -> vec3
 
 // Blinn–Phong (a headlight, or the directional light of shadows), with the AO factor.
 fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
-    var ao = 1.0;
-    if AO_VOLUME {
-        ao = textureSampleLevel(ambient_occlusion, linear_clamp, uvw, 0.0).r;
-    }
-    if LIVE_VAO && extras.flags.x != 0u {
-        ao = 1.0 - positional_ao(uvw);  // live mode: Eq. 8 at this very sample
-    }
     let shadows = SHADOWS && extras.flags.y != 0u;
+    let phong = PHONG && p.shading.w != 0.0;
     var diffuse = 1.0;
     var specular = 0.0;
     // cos θ of the shadow lookup's guard limit: 1 where there is no normal.
     var cos_theta = 1.0;
-    if PHONG && p.shading.w != 0.0 {
+    // Where the AO is read: off the surface, ao.z voxels (of the smallest spacing) out of
+    // the material along the normal (docs/algorithms.md): inside the material every
+    // voxel is occluded.
+    var ao_at = uvw;
+    if phong || ((AO_VOLUME || (LIVE_VAO && extras.flags.x != 0u)) && p.ao.z > 0.0) {
         let d = p.voxel_uvw.xyz;
         // Central differences in texel units per mm.
         let g = vec3<f32>(
@@ -176,7 +180,12 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
         if MODE == MODE_ISO && strength > 0.0 {
             edge = 1.0;  // an isosurface is a surface however soft its gradient
         }
-        if strength > 0.0 && shadows {
+        if strength > 0.0 {
+            // The gradient points into denser material: out of it is −g.
+            let out = p.ao.z * min(AO_EDGE_GAIN * edge, 1.0) * p.voxel_uvw.w;
+            ao_at = uvw - normalize(g) * out / (2.0 * p.box_half.xyz);
+        }
+        if phong && strength > 0.0 && shadows {
             // Directional light: two-sided Blinn–Phong with the half vector of light and eye.
             let n = normalize(g);
             diffuse = mix(1.0, abs(dot(n, extras.light.xyz)), edge);
@@ -185,12 +194,19 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
             if dot(h, h) > 1e-12 {
                 specular = p.shading.y * pow(abs(dot(n, normalize(h))), p.shading.z) * edge;
             }
-        } else if strength > 0.0 {
+        } else if phong && strength > 0.0 {
             // Headlight: the light comes from the eye, so the half vector is the view vector.
             let n_dot_v = abs(dot(normalize(g), view));
             diffuse = mix(1.0, n_dot_v, edge);
             specular = p.shading.y * pow(n_dot_v, p.shading.z) * edge;
         }
+    }
+    var ao = 1.0;
+    if AO_VOLUME {
+        ao = textureSampleLevel(ambient_occlusion, linear_clamp, ao_at, 0.0).r;
+    }
+    if LIVE_VAO && extras.flags.x != 0u {
+        ao = 1.0 - positional_ao(ao_at);  // live mode: Eq. 8 where the AO is read
     }
     var lit = 1.0;
     if shadows {

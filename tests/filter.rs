@@ -480,7 +480,7 @@ fn offscreen_render_gpu_matches_cpu_for_every_method_and_modulation() {
             ..AoSettings::default()
         };
         // Penner's Chebyshev bound stays at or above ½ on this phantom, which the default
-        // shading (AO factor min(2A, 1) on ambient and diffuse) counts as an open
+        // shading (AO factor min(2A, 1) on ambient and diffuse, A_open = ½) counts as an open
         // surface: its darkening is checked with the ambient-only shading of before #18.
         let mut f = frame(None);
         f.settings.ao_ambient_only = method == AoMethod::Penner;

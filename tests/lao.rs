@@ -135,6 +135,44 @@ fn opaque_half_space_occludes_the_rays_pointing_into_it() {
     }
 }
 
+/// The shading divides A by what LAO gives a point in front of an open flat surface
+/// (`AoReference::open_plane`): that value, computed from the rays alone, is what LAO
+/// really computes there, at every distance from the surface.
+#[test]
+fn open_plane_reference_is_what_lao_computes_in_front_of_an_opaque_plane() {
+    use volao::render::AoReference;
+    let n = 40;
+    let m = 12u32;
+    // Opaque for z < 16; the step TF puts the surface at z = 15.5 (half-way between the
+    // last full and the first empty voxel), so voxel 16 + k is k + 0.5 mm in front of it.
+    let v = filled(n, |_, _, z| if z < 16 { 255 } else { 0 });
+    for set in [
+        RaySet::Six,
+        RaySet::Fourteen,
+        RaySet::TwentySix,
+        RaySet::FiftyFour,
+    ] {
+        let a = cpu(&v, &step_tf(), set, m);
+        let reference = AoReference::Rays { set, samples: m };
+        let mut previous = 0.0;
+        for k in 0..6 {
+            let h = k as f32 + 0.5;
+            let got = a[20 + n * (20 + n * (16 + k))];
+            let open = reference.open_plane(h);
+            eprintln!("{set:?}, {h} mm in front: LAO {got:.4}, reference {open:.4}");
+            // The crossing sample is partly opaque (the TF's ramp): one sample per ray.
+            assert!(
+                (got - open).abs() <= 1.0 / m as f32 + 1e-4,
+                "{set:?}, {h} mm in front: LAO {got}, reference {open}"
+            );
+            assert!(open > previous, "farther from the surface, less occluded");
+            previous = open;
+        }
+    }
+    // Without rays to go by, half the sphere.
+    assert_eq!(AoReference::Half.open_plane(3.0), 0.5);
+}
+
 #[test]
 fn anisotropic_spacing_is_respected() {
     // The same physical scene at 1 mm and at 2 mm slices: A agrees where both sample.

@@ -458,7 +458,8 @@ fn gpu_matches_cpu_twin_with_lao() {
 fn ao_scales_ambient_and_diffuse_light_or_the_ambient_term_only_gpu_and_cpu() {
     // A homogeneous opaque cube with A(x) = 0.3 everywhere, unshaded (D = 1, no shadows):
     // the pixel at the centre is C_TF · α_acc · F with, by default, F = A_s·(k + 1 − k) =
-    // A_s, A_s = clamp(1 − s(1 − min(2A, 1)), 0, 1); with ao_ambient_only F = k·A_s + 1 − k,
+    // A_s, A_s = clamp(1 − s(1 − min(A / A_open, 1)), 0, 1) with A_open = ½ (AO from no
+    // method in particular); with ao_ambient_only F = k·A_s + 1 − k,
     // A_s = clamp(1 − s(1 − A), 0, 1).
     let gpu = device();
     assert_ne!(
@@ -549,6 +550,140 @@ fn ao_scales_ambient_and_diffuse_light_or_the_ambient_term_only_gpu_and_cpu() {
     );
 }
 
+/// A slab whose face looks at the camera, with a slot cut into it. LAO is taken over the
+/// whole sphere, so inside the material every voxel is occluded: read at the sample, the
+/// AO greys a flat lit face (issue #18's "AO barely reads"); read `ao_offset` voxels out
+/// of the material along the normal, the face keeps its brightness and the slot's floor,
+/// which its walls hide, darkens. GPU and CPU twin.
+#[test]
+fn ao_read_off_the_surface_keeps_a_flat_face_bright_and_darkens_a_slot_gpu_and_cpu() {
+    use volao::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
+    use volao::ao::rays::RaySet;
+    let gpu = device();
+    assert_ne!(
+        gpu.info.backend,
+        wgpu::Backend::Gl,
+        "lavapipe or a real GPU, not GL"
+    );
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let lao = gpu.stage::<LaoGpu>().unwrap_or_else(|e| panic!("{e}"));
+    // Opacity 0.9 in the material, like ct-bone's bone.
+    // The default camera looks along −y: material for y < 30, the slot 8 voxels wide
+    // (x ∈ [20, 28)) and 12 deep, across the whole of z.
+    let n = 48usize;
+    let data: Vec<u8> = (0..n * n * n)
+        .map(|i| {
+            let (x, y) = (i % n, (i / n) % n);
+            let slot = (20..28).contains(&x) && y >= 18;
+            if y < 30 && !slot { 200 } else { 0 }
+        })
+        .collect();
+    let v = Volume::new([n; 3], [1.0; 3], volume::VoxelData::U8(data)).expect("valid volume");
+    let tf = TransferFunction {
+        name: "white".into(),
+        opacity: vec![
+            volao::tf::OpacityPoint {
+                value: 0.0,
+                alpha: 0.0,
+            },
+            volao::tf::OpacityPoint {
+                value: 200.0,
+                alpha: 0.9,
+            },
+        ],
+        color: vec![volao::tf::ColorStop {
+            value: 0.0,
+            rgb: [0.7; 3],
+        }],
+    };
+    let t = VolumeTexels::new(&v, UploadLimits::NONE);
+    let mut vol =
+        GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let rays = Rays::uniform(RaySet::Fourteen.directions());
+    let lut = lao_lut(&tf, &t);
+    let bricks = volao::ao::sparse::Coverage::Readable.bricks(&t, vol.ranges(), &tf);
+    let a = lao
+        .compute(&gpu, &vol, &lut, &rays, 12, &bricks, &|_, _| {})
+        .unwrap_or_else(|e| panic!("{e}"));
+    vol.set_ambient_occlusion(&gpu, &a);
+    let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
+    cv.ao = Some(lao_cpu(&t, &lut, &rays, 12, &bricks, &|_, _| {}));
+    let size = 64u32;
+    let frame = |offset: f32| Frame {
+        camera: Camera::default(),
+        settings: RenderSettings {
+            ao_offset: offset,
+            ao_reference: volao::render::AoReference::Rays {
+                set: RaySet::Fourteen,
+                samples: 12,
+            },
+            specular: 0.0,
+            ..Default::default()
+        },
+        width: size,
+        height: size,
+    };
+    // Green of the middle row's pixel in column `x`.
+    let at = |img: &Image, x: u32| img.pixels[((size / 2) * size + x) as usize][1] as f32;
+    let (face, floor) = (14, size / 2);
+    // A = 1: the reference brightness.
+    let no_ao = {
+        let mut flat = cv.clone();
+        flat.ao = None;
+        cpu::render(&t, &flat, &vol.lut, &occ, &frame(2.0))
+    };
+    let mut looks = Vec::new();
+    for offset in [0.0, 2.0] {
+        let f = frame(offset);
+        let g = rc
+            .render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let c = cpu::render(&t, &cv, &vol.lut, &occ, &f);
+        check(
+            &format!("twin_ao_offset_{offset}"),
+            &g,
+            &c,
+            TWIN,
+            &out_dir(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let (face_ratio, floor_ratio) = (
+            at(&g, face) / at(&no_ao, face),
+            at(&g, floor) / at(&no_ao, floor),
+        );
+        eprintln!(
+            "offset {offset}: flat face {:.0} ({face_ratio:.2} × no AO), slot floor {:.0} ({floor_ratio:.2} × no AO)",
+            at(&g, face),
+            at(&g, floor)
+        );
+        looks.push((face_ratio, floor_ratio));
+    }
+    eprintln!(
+        "no AO: face {} floor {}",
+        at(&no_ao, face),
+        at(&no_ao, floor)
+    );
+    assert!(
+        at(&no_ao, face) > 100.0 && at(&no_ao, floor) > 50.0,
+        "both in view and lit"
+    );
+    let [(face_0, _), (face_2, floor_2)] = looks[..] else {
+        unreachable!()
+    };
+    assert!(
+        face_0 < 0.75,
+        "read at the sample, the AO greys the flat face ({face_0:.2})"
+    );
+    assert!(
+        face_2 > 0.85,
+        "read off the surface, the flat face keeps its light ({face_2:.2})"
+    );
+    assert!(
+        floor_2 < 0.85 * face_2,
+        "the slot's floor is darker than the open face ({floor_2:.2} vs {face_2:.2})"
+    );
+}
+
 #[test]
 fn scenes_keep_where_the_ao_applies_and_its_strength_and_old_ones_get_the_new_shading() {
     use volao::render::DEFAULT_AO_STRENGTH;
@@ -563,6 +698,7 @@ fn scenes_keep_where_the_ao_applies_and_its_strength_and_old_ones_get_the_new_sh
         .unwrap_or_else(|e| panic!("{e}"));
     assert!(!old.render.ao_ambient_only);
     assert_eq!(old.render.ao_strength, DEFAULT_AO_STRENGTH);
+    assert_eq!(old.render.ao_offset, volao::render::DEFAULT_AO_OFFSET);
     assert_eq!(old.render.ambient, 0.6);
     // The old shading, asked for, survives a save and a load.
     let mut scene = Scene::parse(
@@ -575,10 +711,15 @@ fn scenes_keep_where_the_ao_applies_and_its_strength_and_old_ones_get_the_new_sh
     let dir = tempfile::tempdir().expect("temp dir");
     let file = dir.path().join("s.json");
     scene.render.ao_strength = 0.75;
+    scene.render.ao_offset = 0.0;
     scene.save(&file).unwrap_or_else(|e| panic!("{e}"));
     let back = Scene::load(&file).unwrap_or_else(|e| panic!("{e}"));
     assert!(back.render.ao_ambient_only);
     assert_eq!(back.render.ao_strength, 0.75);
+    assert_eq!(
+        back.render.ao_offset, 0.0,
+        "the old read point survives a save"
+    );
 }
 
 const MODES: [volao::render::RenderMode; 5] = [

@@ -323,6 +323,8 @@ fn live_and_precomputed_agree_at_voxel_centres() {
             ambient: 1.0,
             step_voxels: 1.0,
             jitter: false,
+            // Read the AO at the samples themselves (voxel centres), not off the surface.
+            ao_offset: 0.0,
             ..Default::default()
         },
         width: n[0] as u32,

@@ -226,6 +226,19 @@ pub struct AoSettings {
     pub cone_preset: ConePreset,
 }
 
+impl AoSettings {
+    /// What this method gives an open flat surface, which the shading normalises by.
+    pub fn reference(&self) -> crate::render::AoReference {
+        match self.method {
+            AoMethod::Lao | AoMethod::Cao | AoMethod::LaoFull => crate::render::AoReference::Rays {
+                set: self.rays,
+                samples: self.samples,
+            },
+            _ => crate::render::AoReference::Half,
+        }
+    }
+}
+
 impl Default for AoSettings {
     fn default() -> Self {
         AoSettings {

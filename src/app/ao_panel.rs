@@ -58,11 +58,12 @@ pub fn show(
     settings: &mut AoSettings,
     ambient: &mut f32,
     strength: &mut f32,
+    offset: &mut f32,
     ao_only: &mut bool,
     stats: &AoStats,
 ) -> (bool, bool) {
     let before = *settings;
-    let view_before = (*ambient, *strength, *ao_only);
+    let view_before = (*ambient, *strength, *offset, *ao_only);
     method_combo(ui, &mut settings.method);
     ui.weak(settings.method.summary());
     ui.add_enabled_ui(settings.method != AoMethod::None, |ui| {
@@ -78,13 +79,18 @@ pub fn show(
     });
     ui.add(egui::Slider::new(strength, 0.0..=3.0).text("AO strength s"))
         .on_hover_text("How deep occlusion darkens: 0 no AO, 1 as computed, above 1 deeper");
+    ui.add(egui::Slider::new(offset, 0.0..=4.0).text("AO read offset (voxels)"))
+        .on_hover_text(
+            "Where a sample reads the AO: this far out of the material along the normal, \
+             where the occlusion a surface sees is (0: at the sample, which greys surfaces)",
+        );
     ui.add(egui::Slider::new(ambient, 0.0..=1.0).text("Ambient share k"))
         .on_hover_text("The share of ambient light; the rest is diffuse (both scaled by the AO)");
     ui.checkbox(ao_only, "AO only (white, ambient term alone)");
     egui::CollapsingHeader::new("Statistics").show(ui, |ui| statistics(ui, stats));
     (
         *settings != before,
-        (*ambient, *strength, *ao_only) != view_before,
+        (*ambient, *strength, *offset, *ao_only) != view_before,
     )
 }
 

@@ -160,6 +160,7 @@ impl Document {
     /// The render settings the viewport uses.
     pub fn view_settings(&self) -> RenderSettings {
         let mut s = self.render;
+        s.ao_reference = self.ao.reference();
         // As `volao render` does: a headlight's shadows fall from the eye's direction.
         s.light_direction = match self.light {
             Light::Directional { direction } => direction,

@@ -229,6 +229,7 @@ impl Viewer {
                     &mut doc.ao,
                     &mut doc.render.ambient,
                     &mut doc.render.ao_strength,
+                    &mut doc.render.ao_offset,
                     &mut doc.ao_only,
                     &ao_stats,
                 );

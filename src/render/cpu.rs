@@ -78,54 +78,62 @@ fn classify(p: &RaycastParams, lut: &Lut, norm: f32) -> Vec4 {
 }
 
 fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -> Vec3 {
-    let mut ao = vol
-        .ao
-        .as_ref()
-        .map_or(1.0, |ao| trilinear(ao, vol.dims, uvw));
-    if let Some(pao) = &vol.live_vao {
-        ao = 1.0 - pao.positional_ao(uvw);
-    }
     let lit_at = |cos_theta: f32| {
         vol.light.as_ref().map_or(1.0, |l| {
             super::shadow::shadow_factor(&l.values, vol.dims, p, uvw, view, l.direction, cos_theta)
         })
     };
-    if p.shading[3] == 0.0 {
-        return light(p, rgb, ao, 1.0, 0.0, lit_at(1.0));
-    }
-    let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
-    let s = |o: Vec3| trilinear(&vol.norm, vol.dims, uvw + o);
-    let g = Vec3::new(
-        s(Vec3::new(d.x, 0.0, 0.0)) - s(Vec3::new(-d.x, 0.0, 0.0)),
-        s(Vec3::new(0.0, d.y, 0.0)) - s(Vec3::new(0.0, -d.y, 0.0)),
-        s(Vec3::new(0.0, 0.0, d.z)) - s(Vec3::new(0.0, 0.0, -d.z)),
-    ) / (2.0 * p.voxel_uvw[3]);
-    let strength = g.length() * p.lut_map[0].abs() * p.voxel_uvw[3] * p.lut_map[3];
-    let mut edge = strength.clamp(0.0, 1.0);
-    if p.mode[0] as u32 == MODE_ISO && strength > 0.0 {
-        edge = 1.0; // an isosurface is a surface however soft its gradient
-    }
-    let (mut diffuse, mut specular, mut lit) = (1.0, 0.0, 1.0);
-    if let (true, Some(l)) = (strength > 0.0, &vol.light) {
-        let n = g.normalize();
-        diffuse = 1.0 + (n.dot(l.direction).abs() - 1.0) * edge;
-        lit = lit_at(diffuse);
-        let h = l.direction + view;
-        if h.dot(h) > 1e-12 {
-            specular = p.shading[1] * n.dot(h.normalize()).abs().powf(p.shading[2]) * edge;
+    let phong = p.shading[3] != 0.0;
+    let (mut diffuse, mut specular, mut lit) = (1.0, 0.0, None);
+    // Where the AO is read: p.ao[2] voxels out of the material along the normal
+    // (raycast.wgsl's `ao_at`).
+    let mut ao_at = uvw;
+    if phong || ((vol.ao.is_some() || vol.live_vao.is_some()) && p.ao[2] > 0.0) {
+        let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
+        let s = |o: Vec3| trilinear(&vol.norm, vol.dims, uvw + o);
+        let g = Vec3::new(
+            s(Vec3::new(d.x, 0.0, 0.0)) - s(Vec3::new(-d.x, 0.0, 0.0)),
+            s(Vec3::new(0.0, d.y, 0.0)) - s(Vec3::new(0.0, -d.y, 0.0)),
+            s(Vec3::new(0.0, 0.0, d.z)) - s(Vec3::new(0.0, 0.0, -d.z)),
+        ) / (2.0 * p.voxel_uvw[3]);
+        let strength = g.length() * p.lut_map[0].abs() * p.voxel_uvw[3] * p.lut_map[3];
+        let mut edge = strength.clamp(0.0, 1.0);
+        if p.mode[0] as u32 == MODE_ISO && strength > 0.0 {
+            edge = 1.0; // an isosurface is a surface however soft its gradient
         }
-    } else if vol.light.is_some() {
-        lit = lit_at(1.0);
-    } else if strength > 0.0 {
-        let n_dot_v = g.normalize().dot(view).abs();
-        diffuse = 1.0 + (n_dot_v - 1.0) * edge;
-        specular = p.shading[1] * n_dot_v.powf(p.shading[2]) * edge;
+        if strength > 0.0 {
+            let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
+            let out = p.ao[2] * (AO_EDGE_GAIN * edge).min(1.0) * p.voxel_uvw[3];
+            ao_at = uvw - g.normalize() * out / (2.0 * half);
+        }
+        if let (true, true, Some(l)) = (phong, strength > 0.0, &vol.light) {
+            let n = g.normalize();
+            diffuse = 1.0 + (n.dot(l.direction).abs() - 1.0) * edge;
+            lit = Some(lit_at(diffuse));
+            let h = l.direction + view;
+            if h.dot(h) > 1e-12 {
+                specular = p.shading[1] * n.dot(h.normalize()).abs().powf(p.shading[2]) * edge;
+            }
+        } else if phong && strength > 0.0 && vol.light.is_none() {
+            let n_dot_v = g.normalize().dot(view).abs();
+            diffuse = 1.0 + (n_dot_v - 1.0) * edge;
+            specular = p.shading[1] * n_dot_v.powf(p.shading[2]) * edge;
+        }
     }
+    let mut ao = vol
+        .ao
+        .as_ref()
+        .map_or(1.0, |ao| trilinear(ao, vol.dims, ao_at));
+    if let Some(pao) = &vol.live_vao {
+        ao = 1.0 - pao.positional_ao(ao_at);
+    }
+    let lit = lit.unwrap_or_else(|| lit_at(1.0));
     light(p, rgb, ao, diffuse, specular, lit)
 }
 
 /// The lit colour of a sample, as `light` in raycast.wgsl: by default the AO factor
-/// `A_s = clamp(1 − s(1 − min(2A, 1)), 0, 1)` on ambient and diffuse light,
+/// `A_s = clamp(1 − s(1 − min(A / A_open, 1)), 0, 1)` (`A_open` =
+/// [`super::AoReference::open_plane`]) on ambient and diffuse light,
 /// `C_TF · A_s · (k + (1 − k) · D · S) + spec · S`; with `ao_ambient_only`, on the ambient
 /// term only with `A_s = clamp(1 − s(1 − A), 0, 1)`, `C_TF · (k · A_s + (1 − k) · D · S) +
 /// spec · S`.
@@ -135,7 +143,7 @@ fn light(p: &RaycastParams, rgb: Vec3, ao: f32, diffuse: f32, specular: f32, lit
         let a = (1.0 - p.ao[0] * (1.0 - ao)).clamp(0.0, 1.0);
         rgb * (k * a + (1.0 - k) * diffuse * lit)
     } else {
-        let a = (1.0 - p.ao[0] * (1.0 - (2.0 * ao).min(1.0))).clamp(0.0, 1.0);
+        let a = (1.0 - p.ao[0] * (1.0 - (ao / p.ao[3]).min(1.0))).clamp(0.0, 1.0);
         rgb * a * (k + (1.0 - k) * diffuse * lit)
     };
     c + Vec3::splat(specular * lit)
@@ -167,6 +175,10 @@ fn past_block(
     let leave = intersect_box(origin, dir, lo, hi).1;
     ((leave - t_enter) / p.step[0] - offset).ceil().max(0.0) as u32
 }
+
+/// The AO is read the full offset out wherever the gradient is at least 1/8 of a full
+/// edge (raycast.wgsl's `AO_EDGE_GAIN`).
+const AO_EDGE_GAIN: f32 = 8.0;
 
 const MODE_COMPOSITE: u32 = 0;
 const MODE_MIP: u32 = 1;
@@ -237,6 +249,15 @@ impl Ray<'_> {
         // clamp(best, 0, 1), so once a sample is in, a block whose values all stay at or
         // below max(best, 0) (MIP), or at or above min(best, 1) (MinIP), changes nothing.
         let skip = mode == MODE_MIP || mode == MODE_MINIP;
+        let extreme = |best: f32, count: u32, u: f32| {
+            if count == 0 {
+                u
+            } else if mode == MODE_MIP {
+                best.max(u)
+            } else {
+                best.min(u)
+            }
+        };
         let mut k = 0u32;
         while k < self.p.step[2] as u32 {
             let (t, pos) = self.sample(k);
@@ -257,13 +278,7 @@ impl Ray<'_> {
                 continue;
             }
             let u = self.mode_value(pos);
-            best = if count == 0 {
-                u
-            } else if mode == MODE_MIP {
-                best.max(u)
-            } else {
-                best.min(u)
-            };
+            best = extreme(best, count, u);
             sum += u;
             count += 1;
             // The grey is clamped to [0, 1]: white MIP or black MinIP is final.

@@ -137,6 +137,55 @@ impl From<RenderMode> for String {
 /// The default AO strength of [`RenderSettings::ao_strength`].
 pub const DEFAULT_AO_STRENGTH: f32 = 1.0;
 
+/// The default [`RenderSettings::ao_offset`], in voxels.
+pub const DEFAULT_AO_OFFSET: f32 = 2.0;
+
+/// What the AO method gives a point in front of an open, flat, opaque surface, `A_open`:
+/// the shading reads `A' = min(A / A_open, 1)`, so a flat face in the open keeps its light
+/// and only what is occluded more than that darkens (docs/algorithms.md).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum AoReference {
+    /// Half the sphere, `A_open = 1/2` at any offset: positional AO, filter maps, cones,
+    /// and AO from elsewhere.
+    #[default]
+    Half,
+    /// LAO's rays (Eq. 2, also CAO's): `M` samples 1 mm apart along each direction.
+    Rays {
+        set: crate::ao::rays::RaySet,
+        samples: u32,
+    },
+}
+
+impl AoReference {
+    /// `A_open` at `offset_mm` in front of the surface. For LAO's rays, exactly what
+    /// Eq. 2 gives there with opaque material behind the plane: a ray into it counts its
+    /// samples up to the first one past the plane, `min(⌊h / cos θ⌋ + 1, M) / M`; every
+    /// other ray counts 1. The mean over the rays, as `lao_cpu` weighs them.
+    pub fn open_plane(&self, offset_mm: f32) -> f32 {
+        match *self {
+            AoReference::Half => 0.5,
+            AoReference::Rays { set, samples } => {
+                let m = samples.max(1) as f32;
+                let h = offset_mm.max(0.0);
+                let directions = set.directions();
+                let sum: f32 = directions
+                    .iter()
+                    .map(|d| {
+                        // The plane's normal is +z: a ray with d.z < 0 goes into it.
+                        let c = -d.normalize_or_zero().z;
+                        if c > 1e-6 {
+                            ((h / c).floor() + 1.0).min(m) / m
+                        } else {
+                            1.0
+                        }
+                    })
+                    .sum();
+                sum / directions.len().max(1) as f32
+            }
+        }
+    }
+}
+
 /// Render settings that are not the camera or the transfer function.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
@@ -156,8 +205,19 @@ pub struct RenderSettings {
     /// The AO factor scales the ambient term only, `C = C_TF · (k · A_s + (1 − k) · D · S)
     /// + spec · S` with `A' = A` (volao before issue #18); when false (the default) it
     /// scales ambient and diffuse light, `C = C_TF · A_s · (k + (1 − k) · D · S) + spec · S`
-    /// with `A' = min(2A, 1)` (a surface sees at most half the sphere AO is taken over).
+    /// with `A' = min(A / A_open, 1)` (`A_open`: what the method gives an open flat surface,
+    /// [`RenderSettings::ao_reference`]).
     pub ao_ambient_only: bool,
+    /// Where a sample reads the AO: this many voxels out of the material along the
+    /// normal, times how much of an edge the sample is (0: at the sample, volao before
+    /// issue #18). The AO just outside a surface is the occlusion the surface sees;
+    /// inside the material every voxel is occluded, so reading there greys the surface
+    /// (docs/algorithms.md).
+    pub ao_offset: f32,
+    /// What the AO method gives an open flat surface at `ao_offset` (set with the AO,
+    /// not saved: scenes keep the AO settings it comes from).
+    #[serde(skip)]
+    pub ao_reference: AoReference,
     pub specular: f32,
     pub shininess: f32,
     /// Per-pixel jittered ray start (removes wood-grain rings).
@@ -190,6 +250,8 @@ impl Default for RenderSettings {
             ambient: 0.4,
             ao_strength: DEFAULT_AO_STRENGTH,
             ao_ambient_only: false,
+            ao_offset: DEFAULT_AO_OFFSET,
+            ao_reference: AoReference::Half,
             specular: 0.3,
             shininess: 24.0,
             jitter: true,
@@ -228,7 +290,8 @@ pub struct RaycastParams {
     /// [`RenderMode::code`], then the map `u = norm · y + z` of the mode's value: the
     /// grey of the projections (the TF's window → [0, 1]), or value − iso for iso.
     pub mode: [f32; 4],
-    /// AO strength, AO on the ambient term only (0/1), unused, unused.
+    /// AO strength, AO on the ambient term only (0/1), AO read offset (voxels of the
+    /// smallest spacing), `A_open` ([`AoReference::open_plane`] at that offset).
     pub ao: [f32; 4],
 }
 
@@ -288,8 +351,8 @@ impl Frame {
             ao: [
                 s.ao_strength,
                 f32::from(u8::from(s.ao_ambient_only)),
-                0.0,
-                0.0,
+                s.ao_offset,
+                s.ao_reference.open_plane(s.ao_offset * min_spacing),
             ],
         }
     }

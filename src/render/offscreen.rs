@@ -107,7 +107,18 @@ pub fn render(
     let mut notes = Vec::new();
     let unlit_frame;
     let no_ao;
-    let mut job = *job;
+    // The shading normalises the AO by what the method gives an open flat surface.
+    let referenced = Frame {
+        settings: RenderSettings {
+            ao_reference: job.ao.reference(),
+            ..settings
+        },
+        ..*job.frame
+    };
+    let mut job = RenderJob {
+        frame: &referenced,
+        ..*job
+    };
     if !settings.mode.uses_ao()
         && (job.ao.method != AoMethod::None
             || settings.shadows
@@ -121,7 +132,7 @@ pub fn render(
             settings: RenderSettings {
                 shadows: false,
                 opacity_modulation: None,
-                ..settings
+                ..referenced.settings
             },
             ..*job.frame
         };

@@ -199,6 +199,12 @@ impl RenderArgs {
             "--ao-strength must be between 0 and 10",
         )?;
         settings.ao_ambient_only |= self.ao_ambient_only;
+        set_within(
+            &mut settings.ao_offset,
+            self.ao_offset,
+            0.0..=8.0,
+            "--ao-offset must be between 0 and 8 voxels",
+        )?;
         set(&mut settings.shading, self.shading);
         set(&mut settings.mode, self.mode);
         if let Some(step) = self.step {
