@@ -29,10 +29,11 @@
 //!    device it is given.
 //! 7. [`app`] is the eframe viewer: the same texels, stages and ray caster behind a UI
 //!    whose background jobs compute AO (shown first as an ambient-map preview),
-//!    modulation and light volumes; the demo opens carved, with AO. Its viewport image —
-//!    CAO's per-frame update, then the ray cast in strips — is submitted in slices
-//!    between UI frames ([`gpu::pacer::Pacer`]), so the UI thread never waits for the
-//!    GPU.
+//!    modulation and light volumes; the demo opens carved, with AO. Its viewport image
+//!    (the ray cast in strips) and CAO's per-frame update behind it are submitted in
+//!    slices between UI frames ([`gpu::pacer::Pacer`]), so the UI thread never waits for
+//!    the GPU; a dragged shape's images read `V_AO` as it stands, and at rest the image
+//!    waits for the exact one.
 //!
 //! The command-line interface and the benchmarks live in the binary (`src/bin/volao`);
 //! [`process`] holds the few process-wide settings it makes at start.

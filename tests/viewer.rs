@@ -1052,6 +1052,58 @@ fn a_slow_ao_shows_an_ambient_map_first_and_then_never_a_frame_without_ao() {
 /// the previous pose's complete image. Once it rests, the viewport equals `volao render`
 /// of the saved scene. On the blocking code every step ran the whole update, so no step
 /// ever saw one in flight.
+/// While CAO's update for one pose is on its way, the images of a shape being dragged
+/// re-pose the clip maps (the clipping follows the mouse, the AO catches up), and an
+/// image at rest waits for the update. Dragged away and back to the very pose while
+/// updates run, the viewer comes to rest on exactly `volao render`'s picture: the last
+/// image is made after an update whose clipping saw only the final pose (one whose
+/// clip maps moved meanwhile is run again).
+#[test]
+fn a_shape_dragged_away_and_back_while_cao_catches_up_comes_to_rest_exact() {
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(OpenRequest::Demo, dir.path());
+    settle(&mut h);
+    {
+        let doc = h.state_mut().document_mut().expect("doc");
+        doc.ao.method = volao::ao::AoMethod::Cao;
+        doc.ao.rays = volao::ao::rays::RaySet::FiftyFour;
+        doc.ao.samples = 20;
+    }
+    settle(&mut h);
+    assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
+    let x0 = h.state().document().expect("doc").clip_shapes[0].translation[0];
+    let move_to = |h: &mut Harness<'static, Viewer>, x: f32| {
+        h.state_mut().document_mut().expect("doc").clip_shapes[0].translation[0] = x;
+        let images = h.state().viewport_images();
+        let mut steps = 0;
+        // Until an image of this pose is drawn, with CAO's update still on its way.
+        while h.state().viewport_images() == images {
+            h.step();
+            steps += 1;
+            assert!(steps < 2000, "no image of the moved shape");
+        }
+    };
+    move_to(&mut h, x0 + 6.0);
+    assert!(
+        h.state().cao_update_in_flight(),
+        "the image came before CAO's update for the pose"
+    );
+    move_to(&mut h, x0 + 12.0);
+    let away_in_flight = h.state().cao_update_in_flight();
+    move_to(&mut h, x0 + 6.0);
+    eprintln!("CAO's update still on its way after the shape moved away: {away_in_flight}");
+    assert!(
+        away_in_flight,
+        "the test needs the shape moved while an update runs"
+    );
+    settle(&mut h);
+    h.state_mut().show_outlines = false;
+    h.run_steps(2);
+    settle(&mut h);
+    viewport_is_volao_render(&mut h, &dir.path().join("back.json"), "dragged_back_cao");
+}
+
 #[test]
 fn dragging_a_clip_shape_with_cao_keeps_the_ui_running() {
     let _gpu = one_at_a_time();

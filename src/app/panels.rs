@@ -429,9 +429,9 @@ impl Viewer {
     /// The viewport's image: how far a slow one is (on a CPU adapter an image with CAO's
     /// update takes seconds), and whether the one drawn is at interactive quality.
     fn view_status(&self, ui: &mut egui::Ui) {
-        let (work, scale) = self
-            .with_viewport(|v| (v.work_fraction(), v.shown_scale()))
-            .unwrap_or((None, 1));
+        let (work, scale, ao_exact) = self
+            .with_viewport(|v| (v.work_fraction(), v.shown_scale(), v.shown_ao_exact()))
+            .unwrap_or((None, 1, true));
         let waited = self
             .scripted
             .images
@@ -445,6 +445,8 @@ impl Viewer {
                 false => "View: ray casting",
             });
             progress_bar(ui, Some(fraction));
+        } else if !ao_exact {
+            ui.weak("View: the AO is catching up with the clip shapes");
         } else if scale > 1 {
             ui.weak(format!("View: interactive quality (1/{scale} resolution)"));
         }

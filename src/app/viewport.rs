@@ -52,8 +52,13 @@ pub struct ViewportGpu {
     pub(super) cao: Option<CaoGpu>,
     /// Bumped whenever [`Self::cao`] is replaced (a CAO frame belongs to one).
     pub(super) cao_generation: u64,
-    /// The shapes the clip maps (and CAO's `V_AO`) are posed for; `None`: out of date.
+    /// The shapes the clip maps are posed for; `None`: out of date.
     pub(super) synced_clip: Option<Vec<ClipShape>>,
+    /// CAO's update being submitted, behind the images while the view moves.
+    pub(super) cao_work: Option<CaoWork>,
+    /// The shapes CAO's `V_AO` is exact for: an update for them was submitted whole with
+    /// the clip maps posed for them throughout.
+    pub(super) ao_exact_for: Option<Vec<ClipShape>>,
     /// A submitted CAO frame whose figures have not come back yet.
     pub(super) stats_pending: Option<CaoFrame>,
     /// Bumped by every change to the volume, its transfer function or its AO, so an
@@ -73,13 +78,40 @@ pub(super) struct Target {
 }
 
 /// What an image shows: the frame it was cast for (at its own size), the volume
-/// revision, the clip shapes' poses and the interactive scale (1: full quality).
+/// revision, the clip shapes' poses, the interactive scale (1: full quality) and whether
+/// CAO's `V_AO` was exact for those shapes.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct ViewKey {
     pub(super) frame: Frame,
     pub(super) revision: u64,
     pub(super) clip: Vec<ClipShape>,
     pub(super) scale: u32,
+    /// False for an image made while CAO's update was still on its way: its AO lags
+    /// behind the shapes (the clipping does not).
+    pub(super) ao_exact: bool,
+}
+
+impl ViewKey {
+    /// The same view, whatever the state of the AO.
+    fn same_view(&self, other: &ViewKey) -> bool {
+        self.frame == other.frame
+            && self.revision == other.revision
+            && self.clip == other.clip
+            && self.scale == other.scale
+    }
+}
+
+/// CAO's update for a pose of the shapes, submitted piece by piece.
+#[derive(Debug)]
+pub(super) struct CaoWork {
+    /// The [`ViewportGpu::cao_generation`] it belongs to.
+    generation: u64,
+    clip: Vec<ClipShape>,
+    frame: CaoFrame,
+    /// The clip maps were posed for other shapes while it was being submitted (for an
+    /// image of a shape being dragged): its `V_AO` is not exact for `clip`, and the next
+    /// update makes it so.
+    tainted: bool,
 }
 
 /// A complete image.
@@ -162,6 +194,8 @@ impl ViewportGpu {
                 cao: None,
                 cao_generation: 0,
                 synced_clip: None,
+                cao_work: None,
+                ao_exact_for: None,
                 stats_pending: None,
                 revision: 0,
                 last_error: None,
@@ -187,6 +221,8 @@ impl ViewportGpu {
         self.cao = cao;
         self.cao_generation += 1;
         self.synced_clip = None;
+        self.cao_work = None;
+        self.ao_exact_for = None;
         self.stats_pending = None;
         self.revision += 1;
     }
@@ -370,9 +406,6 @@ pub(super) struct Want {
 #[derive(Debug)]
 pub(super) struct Work {
     key: ViewKey,
-    /// CAO's update for `key.clip` (with the CAO generation it belongs to), until all of
-    /// it is submitted.
-    cao: Option<(u64, CaoFrame)>,
     target: Target,
     /// Rows per strip.
     rows: u32,
@@ -381,21 +414,17 @@ pub(super) struct Work {
 }
 
 impl Work {
-    /// Whether it is still submitting CAO's update.
-    pub(super) fn in_cao(&self) -> bool {
-        self.cao.is_some()
-    }
-
-    /// Fraction submitted in [0, 1]: CAO's bricks, then the rows.
+    /// Fraction of the rows submitted, in [0, 1].
     pub(super) fn fraction(&self) -> f32 {
-        let rows = self.next_row as f32 / self.key.frame.height.max(1) as f32;
-        match &self.cao {
-            Some((_, f)) => {
-                let (done, all) = f.progress();
-                0.5 * done as f32 / all.max(1) as f32
-            }
-            None => 0.5 + 0.5 * rows.min(1.0),
-        }
+        (self.next_row as f32 / self.key.frame.height.max(1) as f32).min(1.0)
+    }
+}
+
+impl CaoWork {
+    /// Fraction of its bricks submitted, in [0, 1].
+    pub(super) fn fraction(&self) -> f32 {
+        let (done, all) = self.frame.progress();
+        done as f32 / all.max(1) as f32
     }
 }
 
@@ -425,12 +454,20 @@ impl ViewportGpu {
             revision: self.revision,
             clip: want.clip.clone(),
             scale: s,
+            ao_exact: true,
         }
+    }
+
+    /// Whether an image started now would read an exact `V_AO` for `clip`.
+    fn ao_exact(&self, clip: &[ClipShape]) -> bool {
+        self.cao.is_none()
+            || (self.cao_work.is_none() && self.ao_exact_for.as_deref() == Some(clip))
     }
 
     /// Whether the image drawn is the full-quality one of `want`.
     pub(super) fn is_current(&self, want: &Want) -> bool {
         self.work.is_none()
+            && self.cao_work.is_none()
             && want.scale <= 1
             && self
                 .shown
@@ -438,19 +475,29 @@ impl ViewportGpu {
                 .is_some_and(|s| s.key == self.key_of(want))
     }
 
-    /// Whether an image is being made.
+    /// Whether an image or CAO's update is being made.
     pub(super) fn working(&self) -> bool {
-        self.work.is_some()
+        self.work.is_some() || self.cao_work.is_some()
     }
 
-    /// How far the image being made is, if one is, and whether it is in CAO's update.
+    /// How far the image being made is, or else CAO's update (then true), if either is.
     pub(super) fn work_fraction(&self) -> Option<(f32, bool)> {
-        self.work.as_ref().map(|w| (w.fraction(), w.in_cao()))
+        match (&self.work, &self.cao_work) {
+            (Some(w), _) => Some((w.fraction(), false)),
+            (None, Some(c)) => Some((c.fraction(), true)),
+            (None, None) => None,
+        }
     }
 
     /// Whether a CAO update is being submitted or its figures have not come back.
     pub(super) fn cao_in_flight(&self) -> bool {
-        self.work.as_ref().is_some_and(Work::in_cao) || self.stats_pending.is_some()
+        self.cao_work.is_some() || self.stats_pending.is_some()
+    }
+
+    /// Whether the image drawn read an exact `V_AO` for its shapes (false while CAO's
+    /// update catches up with a shape being dragged).
+    pub fn shown_ao_exact(&self) -> bool {
+        self.shown.as_ref().is_none_or(|s| s.key.ao_exact)
     }
 
     /// The interactive scale of the image drawn (1: full quality).
@@ -473,32 +520,33 @@ impl ViewportGpu {
         }
         if self.volume.is_none() {
             self.work = None;
+            self.cao_work = None;
             return out;
         }
         let key = self.key_of(want);
+        if self
+            .cao_work
+            .as_ref()
+            .is_some_and(|c| c.generation != self.cao_generation)
+        {
+            self.cao_work = None;
+            self.synced_clip = None;
+        }
         if let Some(w) = &mut self.work {
-            let stale_cao = w
-                .cao
-                .as_ref()
-                .is_some_and(|(generation, _)| *generation != self.cao_generation);
-            let superseded = w.cao.is_none() && w.key.scale == 1 && key.scale > 1;
-            if stale_cao || superseded {
-                if stale_cao {
-                    self.synced_clip = None;
-                }
+            if w.key.scale == 1 && key.scale > 1 {
+                // The view moves again: an interactive image comes sooner.
                 self.work = None;
-            } else if w.cao.is_none() && w.key.revision != self.revision {
+            } else if w.key.revision != self.revision {
                 w.key.revision = self.revision;
                 w.next_row = 0;
             }
         }
-        if self.work.is_none() {
-            if self.shown.as_ref().is_some_and(|s| s.key == key) {
-                return out;
-            }
-            let pixel_rate = pacer.rate(STRIP).unwrap_or_else(|| first_pixel_rate(gpu));
-            let fit = (pixel_rate * pacer.slice.as_secs_f64()) as u64;
-            match self.start(gpu, key, want, fit) {
+        // CAO's update for the shapes wanted, unless its V_AO is exact for them already.
+        if self.cao.is_some()
+            && self.cao_work.is_none()
+            && self.ao_exact_for.as_ref() != Some(&key.clip)
+        {
+            match self.begin_cao(gpu, &key.clip, want.setup) {
                 Ok(errors) => out.clip_errors = errors,
                 Err(e) => {
                     out.error = Some(e);
@@ -506,6 +554,26 @@ impl ViewportGpu {
                 }
             }
         }
+        // An image being made while an update is on its way reads a V_AO that changes
+        // under it (after a new CAO, say): it is not exact, and one follows at rest.
+        if self.cao_work.is_some()
+            && let Some(w) = &mut self.work
+        {
+            w.key.ao_exact = false;
+        }
+        if self.work.is_none() && self.should_start(&key) {
+            let pixel_rate = pacer.rate(STRIP).unwrap_or_else(|| first_pixel_rate(gpu));
+            let fit = (pixel_rate * pacer.slice.as_secs_f64()) as u64;
+            match self.start(gpu, key, want, fit) {
+                Ok(errors) => out.clip_errors.extend(errors),
+                Err(e) => {
+                    out.error = Some(e);
+                    return out;
+                }
+            }
+        }
+        // The image first (the view follows the mouse), then CAO with what is left of
+        // the slice.
         match self.advance(gpu, pacer) {
             Ok(false) => {}
             Ok(true) => {
@@ -528,7 +596,77 @@ impl ViewportGpu {
                 out.error = Some(e.to_string());
             }
         }
+        if let Err(e) = self.advance_cao(gpu, pacer) {
+            self.cao_work = None;
+            self.synced_clip = None;
+            self.last_error = Some(e.to_string());
+            out.error = Some(e.to_string());
+        }
         out
+    }
+
+    /// Whether to start an image for `key` now. Not while CAO's update is on its way,
+    /// unless the view moves (an interactive image, `key.scale > 1`) and the image drawn
+    /// shows another view: dragging a shape, the clipping follows the mouse and the AO
+    /// catches up; at rest the image waits for the exact AO.
+    fn should_start(&self, key: &ViewKey) -> bool {
+        let shown = self.shown.as_ref().map(|s| &s.key);
+        if shown == Some(key) {
+            return false;
+        }
+        if self.cao_work.is_none() {
+            return true;
+        }
+        key.scale > 1 && !shown.is_some_and(|s| s.same_view(key))
+    }
+
+    /// Begins CAO's update for `clip` (posing the clip maps for it). Returns the shapes
+    /// left out, with why.
+    fn begin_cao(
+        &mut self,
+        gpu: &Gpu,
+        clip: &[ClipShape],
+        setup: ClipSetup,
+    ) -> Result<Vec<String>, String> {
+        let (Some(cao), Some(vol)) = (&mut self.cao, &self.volume) else {
+            return Ok(Vec::new());
+        };
+        self.synced_clip = Some(clip.to_vec());
+        let reach = cao.reach_mm(&vol.texels);
+        let frame = cao
+            .begin(
+                gpu,
+                &vol.texels,
+                clip,
+                setup.resolution,
+                reach,
+                setup.cao_mode,
+            )
+            .map_err(|e| e.to_string())?;
+        let errors = frame.clip_errors().to_vec();
+        self.cao_work = Some(CaoWork {
+            generation: self.cao_generation,
+            clip: clip.to_vec(),
+            frame,
+            tainted: false,
+        });
+        Ok(errors)
+    }
+
+    /// Submits what fits of CAO's update; once all of it is submitted, its `V_AO` is
+    /// exact for its shapes unless the clip maps moved meanwhile.
+    fn advance_cao(&mut self, gpu: &Gpu, pacer: &mut Pacer) -> Result<(), GpuError> {
+        let (Some(c), Some(cao)) = (&mut self.cao_work, &self.cao) else {
+            return Ok(());
+        };
+        if !cao.advance(gpu, &mut c.frame, pacer)? {
+            return Ok(());
+        }
+        if let Some(c) = self.cao_work.take() {
+            self.ao_exact_for = (!c.tainted).then_some(c.clip);
+            self.stats_pending = Some(c.frame);
+        }
+        Ok(())
     }
 
     /// Starts an image for `key`: poses CAO or the clip maps when the shapes moved,
@@ -542,7 +680,6 @@ impl ViewportGpu {
         pixels: u64,
     ) -> Result<Vec<String>, String> {
         let mut errors = Vec::new();
-        let mut cao_frame = None;
         if self.synced_clip.as_ref() != Some(&key.clip) {
             // Whatever happens, these shapes are done with (an error is not retried).
             self.synced_clip = Some(key.clip.clone());
@@ -551,19 +688,22 @@ impl ViewportGpu {
             };
             let setup = want.setup;
             if let Some(cao) = &mut self.cao {
+                // Posed for the image of a shape being dragged while CAO's update for
+                // an earlier pose is on its way: that update is no longer exact.
                 let reach = cao.reach_mm(&vol.texels);
-                let frame = cao
-                    .begin(
-                        gpu,
-                        &vol.texels,
-                        &key.clip,
-                        setup.resolution,
-                        reach,
-                        setup.cao_mode,
-                    )
+                let report = cao
+                    .clip
+                    .update(gpu, &key.clip, setup.radius, reach, setup.resolution)
                     .map_err(|e| e.to_string())?;
-                errors = frame.clip_errors().to_vec();
-                cao_frame = Some((self.cao_generation, frame));
+                errors = report.errors.iter().map(|e| e.to_string()).collect();
+                if let Some(c) = &mut self.cao_work
+                    && c.clip != key.clip
+                {
+                    c.tainted = true;
+                }
+                if self.ao_exact_for.as_ref() != Some(&key.clip) {
+                    self.ao_exact_for = None;
+                }
             } else if key.clip.is_empty() {
                 self.clip = None;
             } else {
@@ -579,6 +719,10 @@ impl ViewportGpu {
                 }
             }
         }
+        let key = ViewKey {
+            ao_exact: self.ao_exact(&key.clip),
+            ..key
+        };
         let (width, height) = (key.frame.width, key.frame.height);
         let target = self.target(&gpu.device, (width, height));
         // Strips as tall as fit in a slice, but of at least MIN_STRIP_PIXELS (a
@@ -589,7 +733,6 @@ impl ViewportGpu {
         let rows = (1u32 << fit.ilog2()).min(height.next_power_of_two());
         self.work = Some(Work {
             key,
-            cao: cao_frame,
             target,
             rows,
             next_row: 0,
@@ -606,7 +749,6 @@ impl ViewportGpu {
             volume,
             clip,
             ray_caster,
-            stats_pending,
             strip,
             compiling,
             ..
@@ -614,15 +756,6 @@ impl ViewportGpu {
         let (Some(w), Some(vol)) = (work.as_mut(), volume.as_ref()) else {
             return Ok(false);
         };
-        if let Some((_, frame)) = &mut w.cao {
-            let Some(cao) = cao.as_ref() else {
-                return Ok(false);
-            };
-            if !cao.advance(gpu, frame, pacer)? {
-                return Ok(false);
-            }
-            *stats_pending = w.cao.take().map(|(_, f)| f);
-        }
         let clip = cao.as_ref().map(|c| &c.clip).or(clip.as_ref());
         let (width, height) = (w.key.frame.width, w.key.frame.height);
         let rows = w.rows;
