@@ -76,6 +76,24 @@ impl Coverage {
     }
 }
 
+/// `flags` (x fastest over `grid`) or any of their 26 neighbours.
+fn dilate(flags: &[u8], grid: [usize; 3]) -> Vec<u8> {
+    let at = |x: usize, y: usize, z: usize| flags[x + grid[0] * (y + grid[1] * z)];
+    let mut out = vec![0u8; flags.len()];
+    for z in 0..grid[2] {
+        for y in 0..grid[1] {
+            for x in 0..grid[0] {
+                let near = |c: usize, n: usize| c.saturating_sub(1)..=(c + 1).min(n - 1);
+                let any = near(z, grid[2]).any(|zz| {
+                    near(y, grid[1]).any(|yy| near(x, grid[0]).any(|xx| at(xx, yy, zz) != 0))
+                });
+                out[x + grid[0] * (y + grid[1] * z)] = u8::from(any);
+            }
+        }
+    }
+    out
+}
+
 /// Brick edge in voxels: the ray caster's occupancy block.
 pub const BRICK: usize = BLOCK;
 
@@ -114,8 +132,10 @@ pub struct VoxelTest {
     pub map: [f32; 3],
     /// value = norm · value_scale + value_offset.
     pub value_map: [f64; 2],
-    /// Texels taken below the voxel on each axis (and 1 above): 1. Tests set 0 to show
-    /// that exactness rests on it.
+    /// Texels taken below the voxel on each axis, and as many above (at least 1):
+    /// `1 + AO_READ_REACH`, as the ray caster reads AO up to that far off a sample with
+    /// opacity (`render::AO_READ_REACH`). Tests take fewer to show that exactness rests
+    /// on it.
     pub below: usize,
 }
 
@@ -134,7 +154,7 @@ impl VoxelTest {
             prefix,
             map: [a, b, (lut.rgba.len().max(2) - 1) as f32],
             value_map: [texels.value_scale, texels.value_offset],
-            below: 1,
+            below: 1 + crate::render::AO_READ_REACH,
         }
     }
 
@@ -181,7 +201,9 @@ impl Bricks {
             "block ranges of another volume"
         );
         let readable = match render_lut {
-            Some(lut) => ranges.occupancy(texels, lut),
+            // The ray caster reads AO up to AO_READ_REACH (< BRICK) voxels off a sample
+            // with opacity: into the neighbouring bricks too.
+            Some(lut) => dilate(&ranges.occupancy(texels, lut), ranges.grid),
             None => vec![1; ranges.ranges.len()],
         };
         let occupied = ranges.occupancy(texels, lao_lut);
@@ -218,9 +240,10 @@ impl Bricks {
                     && self.voxels.as_ref().is_none_or(|t| {
                         let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
                         let b = t.below;
-                        for dz in 0..=1 + b {
-                            for dy in 0..=1 + b {
-                                for dx in 0..=1 + b {
+                        let span = b + b.max(1);
+                        for dz in 0..=span {
+                            for dy in 0..=span {
+                                for dx in 0..=span {
                                     let x = (v[0] + dx).saturating_sub(b).min(dims[0] - 1);
                                     let y = (v[1] + dy).saturating_sub(b).min(dims[1] - 1);
                                     let z = (v[2] + dz).saturating_sub(b).min(dims[2] - 1);

@@ -140,6 +140,11 @@ pub const DEFAULT_AO_STRENGTH: f32 = 1.0;
 /// The default [`RenderSettings::ao_offset`], in voxels.
 pub const DEFAULT_AO_OFFSET: f32 = 2.0;
 
+/// The largest [`RenderSettings::ao_offset`], in voxels: sparse AO computes the voxels
+/// within `1 + AO_READ_REACH` of a texel with opacity (`ao::sparse`), which is what keeps
+/// it exact; larger offsets are clamped to it.
+pub const AO_READ_REACH: usize = 2;
+
 /// What the AO method gives a point in front of an open, flat, opaque surface, `A_open`:
 /// the shading reads `A' = min(A / A_open, 1)`, so a flat face in the open keeps its light
 /// and only what is occluded more than that darkens (docs/algorithms.md).
@@ -321,6 +326,7 @@ impl Frame {
         let diag = 2.0 * radius;
         let s = &self.settings;
         let grid: [usize; 3] = std::array::from_fn(|i| texels.dims[i].div_ceil(BLOCK));
+        let ao_offset = s.ao_offset.clamp(0.0, AO_READ_REACH as f32);
         RaycastParams {
             inv_view_proj: inv.to_cols_array_2d(),
             box_half: [half.x, half.y, half.z, 0.0],
@@ -351,8 +357,8 @@ impl Frame {
             ao: [
                 s.ao_strength,
                 f32::from(u8::from(s.ao_ambient_only)),
-                s.ao_offset,
-                s.ao_reference.open_plane(s.ao_offset * min_spacing),
+                ao_offset,
+                s.ao_reference.open_plane(ao_offset * min_spacing),
             ],
         }
     }

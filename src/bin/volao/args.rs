@@ -124,8 +124,8 @@ pub struct RenderArgs {
     /// instead of ambient and diffuse light.
     #[arg(long)]
     pub ao_ambient_only: bool,
-    /// Read the AO this many voxels out of the material along the normal (default 2;
-    /// 0: at the sample itself, volao before issue #18).
+    /// Read the AO this many voxels out of the material along the normal, 0 to 2
+    /// (default 2; 0: at the sample itself, volao before issue #18).
     #[arg(long, value_name = "VOXELS")]
     pub ao_offset: Option<f32>,
     /// Ambient occlusion: none, lao, cao (exact under clipping), lao-full (LAO of every

@@ -202,8 +202,8 @@ impl RenderArgs {
         set_within(
             &mut settings.ao_offset,
             self.ao_offset,
-            0.0..=8.0,
-            "--ao-offset must be between 0 and 8 voxels",
+            0.0..=volao::render::AO_READ_REACH as f32,
+            "--ao-offset must be between 0 and 2 voxels",
         )?;
         set(&mut settings.shading, self.shading);
         set(&mut settings.mode, self.mode);
