@@ -454,6 +454,19 @@ fn gpu_matches_cpu_twin_with_lao() {
     assert!(a.iter().all(|&x| (0.0..=1.0).contains(&x)));
 }
 
+/// One grey of `level`, opacity ramping linearly between two (value, alpha) points.
+fn grey_tf(from: (f64, f32), to: (f64, f32), level: f32) -> TransferFunction {
+    let point = |(value, alpha)| volao::tf::OpacityPoint { value, alpha };
+    TransferFunction {
+        name: "grey".into(),
+        opacity: vec![point(from), point(to)],
+        color: vec![volao::tf::ColorStop {
+            value: 0.0,
+            rgb: [level; 3],
+        }],
+    }
+}
+
 #[test]
 fn ao_scales_ambient_and_diffuse_light_or_the_ambient_term_only_gpu_and_cpu() {
     // A homogeneous opaque cube with A(x) = 0.3 everywhere, unshaded (D = 1, no shadows):
@@ -471,23 +484,7 @@ fn ao_scales_ambient_and_diffuse_light_or_the_ambient_term_only_gpu_and_cpu() {
     let n = [24, 24, 24];
     let v = Volume::new(n, [1.0; 3], volume::VoxelData::U8(vec![200; 24 * 24 * 24]))
         .expect("valid volume");
-    let tf = TransferFunction {
-        name: "white".into(),
-        opacity: vec![
-            volao::tf::OpacityPoint {
-                value: 0.0,
-                alpha: 0.9,
-            },
-            volao::tf::OpacityPoint {
-                value: 255.0,
-                alpha: 0.9,
-            },
-        ],
-        color: vec![volao::tf::ColorStop {
-            value: 0.0,
-            rgb: [1.0; 3],
-        }],
-    };
+    let tf = grey_tf((0.0, 0.9), (255.0, 0.9), 1.0);
     let t = VolumeTexels::new(&v, UploadLimits::NONE);
     let ao = vec![0.3f32; n.iter().product()];
     let mut vol =
@@ -579,23 +576,7 @@ fn ao_read_off_the_surface_keeps_a_flat_face_bright_and_darkens_a_slot_gpu_and_c
         })
         .collect();
     let v = Volume::new([n; 3], [1.0; 3], volume::VoxelData::U8(data)).expect("valid volume");
-    let tf = TransferFunction {
-        name: "white".into(),
-        opacity: vec![
-            volao::tf::OpacityPoint {
-                value: 0.0,
-                alpha: 0.0,
-            },
-            volao::tf::OpacityPoint {
-                value: 200.0,
-                alpha: 0.9,
-            },
-        ],
-        color: vec![volao::tf::ColorStop {
-            value: 0.0,
-            rgb: [0.7; 3],
-        }],
-    };
+    let tf = grey_tf((0.0, 0.0), (200.0, 0.9), 0.7);
     let t = VolumeTexels::new(&v, UploadLimits::NONE);
     let mut vol =
         GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));

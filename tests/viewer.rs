@@ -1052,6 +1052,21 @@ fn a_slow_ao_shows_an_ambient_map_first_and_then_never_a_frame_without_ao() {
 /// the previous pose's complete image. Once it rests, the viewport equals `volao render`
 /// of the saved scene. On the blocking code every step ran the whole update, so no step
 /// ever saw one in flight.
+/// The demo (carved by one sphere) with 54-ray, 20-sample CAO, settled.
+fn demo_with_cao(dir: &Path) -> Harness<'static, Viewer> {
+    let mut h = harness(OpenRequest::Demo, dir);
+    settle(&mut h);
+    {
+        let doc = h.state_mut().document_mut().expect("doc");
+        doc.ao.method = volao::ao::AoMethod::Cao;
+        doc.ao.rays = volao::ao::rays::RaySet::FiftyFour;
+        doc.ao.samples = 20;
+        assert_eq!(doc.clip_shapes.len(), 1, "the demo opens carved");
+    }
+    settle(&mut h);
+    h
+}
+
 /// While CAO's update for one pose is on its way, the images of a shape being dragged
 /// re-pose the clip maps (the clipping follows the mouse, the AO catches up), and an
 /// image at rest waits for the update. Dragged away and back to the very pose while
@@ -1062,15 +1077,7 @@ fn a_slow_ao_shows_an_ambient_map_first_and_then_never_a_frame_without_ao() {
 fn a_shape_dragged_away_and_back_while_cao_catches_up_comes_to_rest_exact() {
     let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
-    let mut h = harness(OpenRequest::Demo, dir.path());
-    settle(&mut h);
-    {
-        let doc = h.state_mut().document_mut().expect("doc");
-        doc.ao.method = volao::ao::AoMethod::Cao;
-        doc.ao.rays = volao::ao::rays::RaySet::FiftyFour;
-        doc.ao.samples = 20;
-    }
-    settle(&mut h);
+    let mut h = demo_with_cao(dir.path());
     assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
     let x0 = h.state().document().expect("doc").clip_shapes[0].translation[0];
     let move_to = |h: &mut Harness<'static, Viewer>, x: f32| {
@@ -1108,16 +1115,7 @@ fn a_shape_dragged_away_and_back_while_cao_catches_up_comes_to_rest_exact() {
 fn dragging_a_clip_shape_with_cao_keeps_the_ui_running() {
     let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
-    let mut h = harness(OpenRequest::Demo, dir.path());
-    settle(&mut h);
-    {
-        let doc = h.state_mut().document_mut().expect("doc");
-        doc.ao.method = volao::ao::AoMethod::Cao;
-        doc.ao.rays = volao::ao::rays::RaySet::FiftyFour;
-        doc.ao.samples = 20;
-        assert_eq!(doc.clip_shapes.len(), 1, "the demo opens carved");
-    }
-    settle(&mut h);
+    let mut h = demo_with_cao(dir.path());
     assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
     let images_before = h.state().viewport_images();
 

@@ -687,15 +687,9 @@ impl ViewportGpu {
                 return Err("no volume".into());
             };
             let setup = want.setup;
-            if let Some(cao) = &mut self.cao {
+            let (maps, reach) = if let Some(cao) = &mut self.cao {
                 // Posed for the image of a shape being dragged while CAO's update for
                 // an earlier pose is on its way: that update is no longer exact.
-                let reach = cao.reach_mm(&vol.texels);
-                let report = cao
-                    .clip
-                    .update(gpu, &key.clip, setup.radius, reach, setup.resolution)
-                    .map_err(|e| e.to_string())?;
-                errors = report.errors.iter().map(|e| e.to_string()).collect();
                 if let Some(c) = &mut self.cao_work
                     && c.clip != key.clip
                 {
@@ -704,19 +698,23 @@ impl ViewportGpu {
                 if self.ao_exact_for.as_ref() != Some(&key.clip) {
                     self.ao_exact_for = None;
                 }
+                let reach = cao.reach_mm(&vol.texels);
+                (Some(&mut cao.clip), reach)
             } else if key.clip.is_empty() {
                 self.clip = None;
+                (None, 0.0)
             } else {
                 if self.clip.is_none() {
                     self.clip = Some(ClipMaps::new(gpu).map_err(|e| e.to_string())?);
                 }
                 let reach = crate::ao::cao::reach_mm(setup.samples, vol.texels.spacing);
-                if let Some(clip) = &mut self.clip {
-                    let report = clip
-                        .update(gpu, &key.clip, setup.radius, reach, setup.resolution)
-                        .map_err(|e| e.to_string())?;
-                    errors = report.errors.iter().map(|e| e.to_string()).collect();
-                }
+                (self.clip.as_mut(), reach)
+            };
+            if let Some(maps) = maps {
+                let report = maps
+                    .update(gpu, &key.clip, setup.radius, reach, setup.resolution)
+                    .map_err(|e| e.to_string())?;
+                errors = report.errors.iter().map(|e| e.to_string()).collect();
             }
         }
         let key = ViewKey {
