@@ -628,15 +628,27 @@ fn interactive_controls(ui: &mut egui::Ui, q: &mut super::viewport::Interactive)
     ui.checkbox(&mut q.on, "Interactive quality while moving")
         .on_hover_text(
             "While the camera or a clip shape moves, the volume is drawn at a lower \
-             resolution, chosen from the measured speed to keep the target rate; a \
-             quarter of a second after the last move the full-quality image follows \
-             (the same pixels as volao render).",
+             resolution, chosen from the measured speed to keep the target rate, and \
+             with a longer step; a quarter of a second after the last move the \
+             full-quality image follows (the same pixels as volao render).",
         );
     ui.add_enabled(
         q.on,
         egui::Slider::new(&mut q.target_fps, 1.0..=60.0)
             .logarithmic(true)
             .text("Target rate (images/s)"),
+    );
+    ui.add_enabled(
+        q.on,
+        egui::Slider::new(
+            &mut q.step_factor,
+            1.0..=super::viewport::MAX_INTERACTIVE_STEP,
+        )
+        .text("Step while moving (× full quality)"),
+    )
+    .on_hover_text(
+        "How much longer the ray-cast step is while the view moves. Opacity is \
+         corrected for it, so the picture keeps its look; thin structures may flicker.",
     );
 }
 

@@ -471,6 +471,7 @@ impl Viewer {
                 cao_mode,
             },
             scale: 1,
+            step_factor: 1.0,
         })
     }
 
@@ -495,6 +496,7 @@ impl Viewer {
         let moving = self.motion.changed_at.elapsed() < INTERACTIVE_REST;
         if moving && self.interactive.on {
             want.scale = self.interactive_scale(&want.frame);
+            want.step_factor = self.interactive.step_factor;
         }
         let gpu = Arc::clone(&self.gpu);
         let pacer = &mut self.pacer;

@@ -42,8 +42,15 @@ pub struct ViewportGpu {
     pub(super) work: Option<Work>,
     /// A texture to reuse for the next image.
     pub(super) spare: Option<Target>,
-    /// The strip the ray cast writes before it is copied into the image.
-    pub(super) strip: Option<wgpu::Texture>,
+    /// The strips the ray cast writes before they are copied into the image, one per
+    /// height in use.
+    pub(super) strips: Vec<wgpu::Texture>,
+    /// What the parts of recent images cost, to cut the next one into tiles that fit.
+    tile_costs: TileCosts,
+    /// Tiles submitted and not timed yet: tag, image size, step, tile.
+    tiles_in_flight: Vec<(u64, (u32, u32), f32, Tile)>,
+    /// The next strip's tag.
+    next_strip_tag: u64,
     /// The volume shown; `None` until the first one is uploaded.
     pub volume: Option<GpuVolume>,
     /// Clip shapes' maps when clipping without CAO.
@@ -188,7 +195,10 @@ impl ViewportGpu {
                 shown: None,
                 work: None,
                 spare: None,
-                strip: None,
+                strips: Vec::new(),
+                tile_costs: TileCosts::default(),
+                tiles_in_flight: Vec::new(),
+                next_strip_tag: 0,
                 volume: None,
                 clip: None,
                 cao: None,
@@ -207,6 +217,7 @@ impl ViewportGpu {
     /// Replaces the volume shown.
     pub fn set_volume(&mut self, volume: GpuVolume) {
         self.volume = Some(volume);
+        self.tile_costs.clear();
         self.set_cao(None);
         self.clip = None;
         self.revision += 1;
@@ -347,19 +358,27 @@ pub(super) const INTERACTIVE_REST: std::time::Duration = std::time::Duration::fr
 pub(super) const MAX_INTERACTIVE_SCALE: u32 = 4;
 
 /// Interactive quality: while the view moves, the image is ray-cast at a lower resolution
-/// chosen to keep the viewport at `target_fps` (like 3D Slicer's adaptive quality).
+/// chosen to keep the viewport at `target_fps` (like 3D Slicer's adaptive quality), with
+/// a longer step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Interactive {
     pub on: bool,
     /// Images per second wanted while the view moves.
     pub target_fps: f32,
+    /// The step of a reduced image, in steps of the full-quality image (1: the same);
+    /// its opacity is corrected for it, so the picture keeps its look.
+    pub step_factor: f32,
 }
+
+/// The longest step of a reduced image, in steps of the full-quality one.
+pub const MAX_INTERACTIVE_STEP: f32 = 4.0;
 
 impl Default for Interactive {
     fn default() -> Self {
         Interactive {
             on: true,
             target_fps: 10.0,
+            step_factor: 2.0,
         }
     }
 }
@@ -376,8 +395,116 @@ fn first_pixel_rate(gpu: &Gpu) -> f64 {
 /// Tallest strip, in rows.
 const MAX_STRIP_ROWS: u32 = 64;
 
-/// Smallest strip, in pixels, where the image has them.
-const MIN_STRIP_PIXELS: u64 = 16384;
+/// Lowest strip, in rows: the ray caster's workgroups are 8 rows high.
+const MIN_STRIP_ROWS: u32 = 8;
+
+/// Narrowest tile, in columns: a band of [`MIN_STRIP_ROWS`] that does not fit in a slice
+/// is cut into tiles of this many columns times a power of two.
+const MIN_TILE_COLUMNS: u32 = 16;
+
+/// A tile of the image: first column, first row, columns, rows.
+type Tile = (u32, u32, u32, u32);
+
+/// Cells across and down of [`TileCosts`].
+const COST_GRID: usize = 32;
+
+/// What a ray costs across the viewport, measured tile by tile: seconds per pixel times
+/// the step (a ray's samples go as 1 / step), on a grid of [`COST_GRID`]² cells over
+/// the image, whatever its size. On a picture that changes little from one image to the
+/// next (a drag, or the switch to and from interactive quality), the next tile over the
+/// same part costs about the same: rays through the volume cost many times those beside
+/// it, which the pacer's mean rate for the label cannot tell, so strips cut by that rate
+/// overran the slice, and the UI frame behind it, several times over. Each submission
+/// also costs a fixed time (about 4 ms on lavapipe), the least of the recent tiles'.
+#[derive(Debug)]
+struct TileCosts {
+    cells: Vec<Option<f64>>,
+    /// The last tiles' times (s), the least of which is the fixed cost.
+    recent: std::collections::VecDeque<f64>,
+}
+
+/// Tiles whose least time is the fixed cost of one.
+const RECENT_TILES: usize = 32;
+
+impl Default for TileCosts {
+    fn default() -> Self {
+        TileCosts {
+            cells: vec![None; COST_GRID * COST_GRID],
+            recent: Default::default(),
+        }
+    }
+}
+
+impl TileCosts {
+    /// The cells a tile of an image of `size` overlaps, each with the overlap in pixels
+    /// and as a fraction of the cell.
+    fn overlaps(size: (u32, u32), (x0, y0, w, h): Tile) -> Vec<(usize, f64, f64)> {
+        let g = COST_GRID as f64;
+        let axis = |from: u32, len: u32, n: u32| {
+            let n = n.max(1) as f64;
+            let (a, b) = (from as f64, (from + len).min(n as u32) as f64);
+            let cell = n / g;
+            let first = (a / cell).floor() as usize;
+            let last = ((b / cell).ceil() as usize).clamp(first + 1, COST_GRID);
+            (first..last)
+                .map(move |c| {
+                    let (lo, hi) = (c as f64 * cell, (c + 1) as f64 * cell);
+                    (c, (hi.min(b) - lo.max(a)).max(0.0), cell)
+                })
+                .filter(|o| o.1 > 0.0)
+        };
+        let mut out = Vec::new();
+        for (cy, py, ch) in axis(y0, h, size.1) {
+            for (cx, px, cw) in axis(x0, w, size.0) {
+                out.push((cy * COST_GRID + cx, px * py, (px * py) / (cw * ch)));
+            }
+        }
+        out
+    }
+
+    /// A tile of an image of `size` at `step` (voxels) took `took` seconds: the cells
+    /// it covers move halfway towards its cost per pixel, in proportion to how much of
+    /// each it covers (one timing is noisy).
+    fn record(&mut self, size: (u32, u32), step: f32, tile: Tile, took: f64) {
+        let overlaps = Self::overlaps(size, tile);
+        let pixels: f64 = overlaps.iter().map(|o| o.1).sum();
+        if pixels <= 0.0 {
+            return;
+        }
+        if self.recent.len() == RECENT_TILES {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(took);
+        let measured = (took - self.fixed()).max(0.0) * step as f64 / pixels;
+        for (i, _, fraction) in overlaps {
+            let c = &mut self.cells[i];
+            *c = Some(c.map_or(measured, |old| {
+                old + 0.5 * fraction.min(1.0) * (measured - old)
+            }));
+        }
+    }
+
+    /// What a tile of an image of `size` at `step` will cost, if every cell it covers
+    /// was measured.
+    fn estimate(&self, size: (u32, u32), step: f32, tile: Tile) -> Option<f64> {
+        let secs: Option<f64> = Self::overlaps(size, tile)
+            .into_iter()
+            .map(|(i, pixels, _)| self.cells[i].map(|c| c * pixels))
+            .sum();
+        secs.map(|s| self.fixed() + s / step.max(1e-3) as f64)
+    }
+
+    /// The fixed cost of a tile (s).
+    fn fixed(&self) -> f64 {
+        self.recent.iter().copied().reduce(f64::min).unwrap_or(0.0)
+    }
+
+    /// Forgets everything (a new volume).
+    fn clear(&mut self) {
+        self.cells.fill(None);
+        self.recent.clear();
+    }
+}
 
 /// How the clip maps and CAO are posed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -400,6 +527,8 @@ pub(super) struct Want {
     pub setup: ClipSetup,
     /// 1: full quality; n: the frame at 1/n of the size, scaled up when drawn.
     pub scale: u32,
+    /// The step of a reduced image (`scale` > 1), in steps of the full-quality one.
+    pub step_factor: f32,
 }
 
 /// An image being made.
@@ -407,9 +536,9 @@ pub(super) struct Want {
 pub(super) struct Work {
     key: ViewKey,
     target: Target,
-    /// Rows per strip.
-    rows: u32,
     next_row: u32,
+    /// The next column of a band of [`MIN_STRIP_ROWS`] being made in tiles (0: none).
+    next_column: u32,
     started: Instant,
 }
 
@@ -444,11 +573,14 @@ impl ViewportGpu {
     /// What an image made for `want` would show now.
     fn key_of(&self, want: &Want) -> ViewKey {
         let s = want.scale.max(1);
-        let frame = Frame {
+        let mut frame = Frame {
             width: want.frame.width.max(1).div_ceil(s),
             height: want.frame.height.max(1).div_ceil(s),
             ..want.frame
         };
+        if s > 1 {
+            frame.settings.step_voxels *= want.step_factor.clamp(1.0, MAX_INTERACTIVE_STEP);
+        }
         ViewKey {
             frame,
             revision: self.revision,
@@ -561,10 +693,14 @@ impl ViewportGpu {
         {
             w.key.ao_exact = false;
         }
+        for (tag, took) in pacer.timed(STRIP) {
+            if let Some(i) = self.tiles_in_flight.iter().position(|s| s.0 == tag) {
+                let (_, size, step, tile) = self.tiles_in_flight.swap_remove(i);
+                self.tile_costs.record(size, step, tile, took.as_secs_f64());
+            }
+        }
         if self.work.is_none() && self.should_start(&key) {
-            let pixel_rate = pacer.rate(STRIP).unwrap_or_else(|| first_pixel_rate(gpu));
-            let fit = (pixel_rate * pacer.slice.as_secs_f64()) as u64;
-            match self.start(gpu, key, want, fit) {
+            match self.start(gpu, key, want) {
                 Ok(errors) => out.clip_errors.extend(errors),
                 Err(e) => {
                     out.error = Some(e);
@@ -670,15 +806,11 @@ impl ViewportGpu {
     }
 
     /// Starts an image for `key`: poses CAO or the clip maps when the shapes moved,
-    /// allocates the back image with strips of about `pixels` each. Returns the shapes
-    /// left out, with why.
-    fn start(
-        &mut self,
-        gpu: &Gpu,
-        key: ViewKey,
-        want: &Want,
-        pixels: u64,
-    ) -> Result<Vec<String>, String> {
+    /// allocates the back image. Returns the shapes left out, with why.
+    fn start(&mut self, gpu: &Gpu, key: ViewKey, want: &Want) -> Result<Vec<String>, String> {
+        if let Some(vol) = &mut self.volume {
+            vol.prepare_step(gpu, key.frame.settings.step_voxels);
+        }
         let mut errors = Vec::new();
         if self.synced_clip.as_ref() != Some(&key.clip) {
             // Whatever happens, these shapes are done with (an error is not retried).
@@ -723,23 +855,24 @@ impl ViewportGpu {
         };
         let (width, height) = (key.frame.width, key.frame.height);
         let target = self.target(&gpu.device, (width, height));
-        // Strips as tall as fit in a slice, but of at least MIN_STRIP_PIXELS (a
-        // submission has a fixed cost), rounded down to a power of two (so that their
-        // texture is reused).
-        let fit = (pixels.max(MIN_STRIP_PIXELS) / width.max(1) as u64)
-            .clamp(1, MAX_STRIP_ROWS as u64) as u32;
-        let rows = (1u32 << fit.ilog2()).min(height.next_power_of_two());
         self.work = Some(Work {
             key,
             target,
-            rows,
             next_row: 0,
+            next_column: 0,
             started: Instant::now(),
         });
         Ok(errors)
     }
 
     /// Submits what fits of the image being made; true once all of it is submitted.
+    ///
+    /// The image is cut into strips as tall as fit in what is left of the slice (a power
+    /// of two of rows, from [`MIN_STRIP_ROWS`] to [`MAX_STRIP_ROWS`], so that their
+    /// textures are reused), and a band of the lowest strip that does not fit into tiles
+    /// of a power of two times [`MIN_TILE_COLUMNS`]. Each is costed by what its part of
+    /// the last images took ([`TileCosts`]), else by the pacer's mean rate. A smallest
+    /// tile is submitted alone when nothing is queued, so the image always moves on.
     fn advance(&mut self, gpu: &Gpu, pacer: &mut Pacer) -> Result<bool, crate::gpu::GpuError> {
         let ViewportGpu {
             work,
@@ -747,8 +880,11 @@ impl ViewportGpu {
             volume,
             clip,
             ray_caster,
-            strip,
+            strips,
             compiling,
+            tile_costs,
+            tiles_in_flight,
+            next_strip_tag,
             ..
         } = self;
         let (Some(w), Some(vol)) = (work.as_mut(), volume.as_ref()) else {
@@ -756,22 +892,6 @@ impl ViewportGpu {
         };
         let clip = cao.as_ref().map(|c| &c.clip).or(clip.as_ref());
         let (width, height) = (w.key.frame.width, w.key.frame.height);
-        let rows = w.rows;
-        let same = strip
-            .as_ref()
-            .is_some_and(|t| (t.width(), t.height()) == (width, rows));
-        if !same {
-            *strip = Some(crate::gpu::image_texture(
-                &gpu.device,
-                "Viewport::strip",
-                (width, rows),
-                IMAGE_FORMAT,
-                wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-            ));
-        }
-        let Some(strip) = strip.as_ref() else {
-            return Ok(false);
-        };
         // A pipeline variant not built yet compiles on a worker thread (~0.1 s on
         // lavapipe), not in the UI's frame; the image waits for it.
         let surfaces = !vol.extras.surfaces.is_empty();
@@ -810,51 +930,173 @@ impl ViewportGpu {
                 }
             }
         }
-        let first_rate = first_pixel_rate(gpu);
+        let pixel_rate = pacer.rate(STRIP).unwrap_or_else(|| first_pixel_rate(gpu));
+        let step = w.key.frame.settings.step_voxels;
+        let estimate = |t: Tile| {
+            tile_costs
+                .estimate((width, height), step, t)
+                .unwrap_or_else(|| {
+                    ((t.2.min(width - t.0) * t.3.min(height - t.1)) as f64) / pixel_rate
+                })
+        };
         while w.next_row < height {
-            let left = (height - w.next_row).div_ceil(rows) as u64;
-            let n = pacer.take(gpu, STRIP, ((width * rows) as u64, left), first_rate);
-            if n == 0 {
-                return Ok(false);
+            let (x0, y0) = (w.next_column, w.next_row);
+            let slice = pacer.slice.as_secs_f64();
+            let band = (0, y0, width, MIN_STRIP_ROWS);
+            let tile = if x0 == 0 && estimate(band) <= slice {
+                // Whole strips, tallest first; the next frame's slice takes what does
+                // not fit in this one's.
+                let fits = std::iter::successors(Some(MAX_STRIP_ROWS), |r| {
+                    (*r > MIN_STRIP_ROWS).then_some(r / 2)
+                })
+                .map(|rows| (0, y0, width, rows))
+                .find(|&t| estimate(t) <= pacer.left());
+                match fits {
+                    Some(t) => t,
+                    None if pacer.has_time() && !pacer.busy() => band,
+                    None => return Ok(false),
+                }
+            } else {
+                // A band that overruns a slice on its own: tiles, widest first.
+                let mut tiles = std::iter::successors(Some(width - x0), |c| {
+                    (*c > MIN_TILE_COLUMNS).then_some((c / 2).next_multiple_of(MIN_TILE_COLUMNS))
+                })
+                .map(|columns| (x0, y0, columns, MIN_STRIP_ROWS));
+                let smallest = (x0, y0, MIN_TILE_COLUMNS.min(width - x0), MIN_STRIP_ROWS);
+                match tiles.find(|&t| estimate(t) <= pacer.left()) {
+                    Some(t) => t,
+                    None if pacer.has_time() && !pacer.busy() => smallest,
+                    None => return Ok(false),
+                }
+            };
+            let (tx, ty, tw, th) = tile;
+            let strip = match strips
+                .iter()
+                .position(|t| (t.width(), t.height()) == (tw, th))
+            {
+                Some(i) => &strips[i],
+                None => {
+                    // A few sizes are in use at a time; the others go.
+                    if strips.len() >= 8 {
+                        strips.clear();
+                    }
+                    strips.push(crate::gpu::image_texture(
+                        &gpu.device,
+                        "Viewport::strip",
+                        (tw, th),
+                        IMAGE_FORMAT,
+                        wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+                    ));
+                    &strips[strips.len() - 1]
+                }
+            };
+            let tag = *next_strip_tag;
+            *next_strip_tag += 1;
+            let (cw, ch) = (tw.min(width - tx), th.min(height - ty));
+            pacer.submit_estimated(
+                gpu,
+                (STRIP, (cw * ch) as u64),
+                (estimate(tile), tag),
+                || -> Result<(), crate::gpu::GpuError> {
+                    let mut encoder = gpu.device.create_command_encoder(&Default::default());
+                    ray_caster.encode_tile(
+                        (&gpu.device, &gpu.queue),
+                        vol,
+                        &w.key.frame,
+                        clip,
+                        (strip, (tx, ty)),
+                        &mut encoder,
+                    )?;
+                    encoder.copy_texture_to_texture(
+                        strip.as_image_copy(),
+                        wgpu::TexelCopyTextureInfo {
+                            texture: &w.target.texture,
+                            mip_level: 0,
+                            origin: wgpu::Origin3d { x: tx, y: ty, z: 0 },
+                            aspect: wgpu::TextureAspect::All,
+                        },
+                        wgpu::Extent3d {
+                            width: cw,
+                            height: ch,
+                            depth_or_array_layers: 1,
+                        },
+                    );
+                    gpu.queue.submit([encoder.finish()]);
+                    Ok(())
+                },
+            )?;
+            tiles_in_flight.push((tag, (width, height), step, tile));
+            if tiles_in_flight.len() > 4 * RECENT_TILES {
+                // Never timed (the pacer was replaced): forgotten.
+                tiles_in_flight.remove(0);
             }
-            for _ in 0..n {
-                let y0 = w.next_row;
-                let piece = (STRIP, (width * rows) as u64);
-                pacer.submit(
-                    gpu,
-                    piece,
-                    first_rate,
-                    || -> Result<(), crate::gpu::GpuError> {
-                        let mut encoder = gpu.device.create_command_encoder(&Default::default());
-                        ray_caster.encode_tile(
-                            (&gpu.device, &gpu.queue),
-                            vol,
-                            &w.key.frame,
-                            clip,
-                            (strip, (0, y0)),
-                            &mut encoder,
-                        )?;
-                        encoder.copy_texture_to_texture(
-                            strip.as_image_copy(),
-                            wgpu::TexelCopyTextureInfo {
-                                texture: &w.target.texture,
-                                mip_level: 0,
-                                origin: wgpu::Origin3d { x: 0, y: y0, z: 0 },
-                                aspect: wgpu::TextureAspect::All,
-                            },
-                            wgpu::Extent3d {
-                                width,
-                                height: rows.min(height - y0),
-                                depth_or_array_layers: 1,
-                            },
-                        );
-                        gpu.queue.submit([encoder.finish()]);
-                        Ok(())
-                    },
-                )?;
-                w.next_row += rows;
+            if tx + tw >= width {
+                w.next_column = 0;
+                w.next_row += th;
+            } else {
+                w.next_column = tx + tw;
             }
         }
         Ok(true)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: f64 = 1e-3;
+
+    fn close(a: Option<f64>, b: f64) -> bool {
+        a.is_some_and(|a| (a - b).abs() < 1e-9)
+    }
+
+    #[test]
+    fn a_tile_is_costed_by_what_its_part_of_the_picture_took() {
+        let mut c = TileCosts::default();
+        let size = (128, 128);
+        assert_eq!(
+            c.estimate(size, 1.0, (0, 0, 128, 8)),
+            None,
+            "nothing measured"
+        );
+        // The fixed cost of a submission: a tile over nothing costs 4 ms.
+        c.record(size, 1.0, (0, 0, 128, 8), 4.0 * MS);
+        assert!(close(c.estimate(size, 1.0, (0, 0, 128, 8)), 4.0 * MS));
+        assert!(close(c.estimate(size, 1.0, (0, 0, 16, 8)), 4.0 * MS));
+        // A band through the volume: 24 ms, 20 of it rays.
+        c.record(size, 1.0, (0, 64, 128, 8), 24.0 * MS);
+        assert!(close(c.estimate(size, 1.0, (0, 64, 128, 8)), 24.0 * MS));
+        // Half of it is half its rays, plus the fixed cost.
+        assert!(close(c.estimate(size, 1.0, (0, 64, 64, 8)), 14.0 * MS));
+        // The rows beside it were measured empty, the rows below not at all.
+        assert!(close(c.estimate(size, 1.0, (0, 0, 128, 8)), 4.0 * MS));
+        assert_eq!(c.estimate(size, 1.0, (0, 72, 128, 8)), None);
+        // At twice the step the rays take half as long.
+        assert!(close(c.estimate(size, 2.0, (0, 64, 128, 8)), 14.0 * MS));
+    }
+
+    #[test]
+    fn tile_costs_carry_over_to_another_image_size() {
+        let mut c = TileCosts::default();
+        // The full-quality image's bottom half (512 × 256 pixels at step 0.5) took 260
+        // ms, 4 of them fixed.
+        c.record((512, 512), 0.5, (0, 0, 512, 256), 4.0 * MS);
+        c.record((512, 512), 0.5, (0, 256, 512, 256), 260.0 * MS);
+        // A quarter of the size on each axis at twice the step: 1/16 of the rays, each
+        // half as long.
+        let e = c.estimate((128, 128), 1.0, (0, 64, 128, 64));
+        assert!(close(e, 4.0 * MS + 256.0 * MS / 32.0), "{e:?}");
+    }
+
+    #[test]
+    fn a_new_timing_moves_a_tile_cost_halfway() {
+        let mut c = TileCosts::default();
+        let size = (64, 64);
+        c.record(size, 1.0, (0, 0, 64, 8), 2.0 * MS);
+        c.record(size, 1.0, (0, 8, 64, 8), 12.0 * MS);
+        c.record(size, 1.0, (0, 8, 64, 8), 22.0 * MS);
+        // Rays: 10 ms, then 20: the cost is 15 + 2.
+        assert!(close(c.estimate(size, 1.0, (0, 8, 64, 8)), 17.0 * MS));
     }
 }

@@ -59,6 +59,8 @@ struct Piece {
     /// Everything submitted before it is done.
     ahead_done: Stamp,
     done: Stamp,
+    /// The caller's name for it, when it wants its time back ([`Pacer::timed`]).
+    tag: Option<u64>,
 }
 
 /// Polls the device every millisecond while pieces are queued, so that their callbacks
@@ -113,6 +115,9 @@ pub struct Pacer {
     /// (so the rate is that of the recent work, weighted by the pieces' sizes).
     measured: HashMap<String, (f64, f64)>,
     queued: Vec<Piece>,
+    /// Tagged pieces that finished since [`Pacer::timed`] last took them: label, tag and
+    /// the time each took alone.
+    timed: Vec<(String, u64, Duration)>,
     poller: Poller,
 }
 
@@ -124,6 +129,7 @@ impl Pacer {
             rates: HashMap::new(),
             measured: HashMap::new(),
             queued: Vec::new(),
+            timed: Vec::new(),
             poller: Poller::start(gpu.device.clone()),
         }
     }
@@ -134,14 +140,15 @@ impl Pacer {
         let _ = gpu.device.poll(wgpu::PollType::Poll);
         let mut outstanding = 0.0;
         let mut finished: Vec<(String, u64, Duration)> = Vec::new();
+        let timed = &mut self.timed;
         self.queued.retain(|p| match read(&p.done) {
             Some(done) => {
                 let start = read(&p.ahead_done).map_or(p.submitted, |t| t.max(p.submitted));
-                finished.push((
-                    p.label.clone(),
-                    p.units,
-                    done.saturating_duration_since(start),
-                ));
+                let took = done.saturating_duration_since(start);
+                finished.push((p.label.clone(), p.units, took));
+                if let Some(tag) = p.tag {
+                    timed.push((p.label.clone(), tag, took));
+                }
                 false
             }
             None => {
@@ -176,6 +183,25 @@ impl Pacer {
     /// Whether any of this frame's slice is left.
     pub fn has_time(&self) -> bool {
         self.left > 0.0
+    }
+
+    /// Seconds left in this frame's slice (negative once overrun).
+    pub fn left(&self) -> f64 {
+        self.left
+    }
+
+    /// The pieces submitted with [`Self::submit_estimated`] under `label` that finished
+    /// since the last call: each one's tag and the time it took alone on the GPU.
+    pub fn timed(&mut self, label: &str) -> Vec<(u64, Duration)> {
+        let mut out = Vec::new();
+        self.timed.retain(|(l, tag, took)| {
+            let mine = l == label;
+            if mine {
+                out.push((*tag, *took));
+            }
+            !mine
+        });
+        out
     }
 
     /// How many of `wanted` pieces of `label`, each costing `unit` units of work, fit in
@@ -218,7 +244,31 @@ impl Pacer {
         submit: impl FnOnce() -> R,
     ) -> R {
         let rate = self.rate_or(gpu, label, first_rate);
-        let estimate = units as f64 / rate;
+        self.submit_piece(gpu, (label, units), units as f64 / rate, None, submit)
+    }
+
+    /// Submits one piece of `units` of `label` that the caller expects to take
+    /// `estimate` seconds (it knows better than the label's mean rate: the strips of an
+    /// image through the volume cost many times those beside it); its time comes back
+    /// from [`Self::timed`] under `tag`. The label's rate is learnt from it as usual.
+    pub fn submit_estimated<R>(
+        &mut self,
+        gpu: &Gpu,
+        (label, units): (&str, u64),
+        (estimate, tag): (f64, u64),
+        submit: impl FnOnce() -> R,
+    ) -> R {
+        self.submit_piece(gpu, (label, units), estimate, Some(tag), submit)
+    }
+
+    fn submit_piece<R>(
+        &mut self,
+        gpu: &Gpu,
+        (label, units): (&str, u64),
+        estimate: f64,
+        tag: Option<u64>,
+        submit: impl FnOnce() -> R,
+    ) -> R {
         self.left -= estimate;
         let ahead_done = stamp_when_done(gpu);
         let submitted = Instant::now();
@@ -230,6 +280,7 @@ impl Pacer {
             submitted,
             ahead_done,
             done: stamp_when_done(gpu),
+            tag,
         });
         self.poller.active.store(true, Ordering::Relaxed);
         r

@@ -128,8 +128,9 @@ impl Variant {
     }
 }
 
-/// Render targets whose bindings are kept (the viewport, a screenshot tile, a CLI tile).
-const BOUND_TARGETS: usize = 4;
+/// Render targets whose bindings are kept (the viewport's strips and tiles, a
+/// screenshot tile, a CLI tile).
+const BOUND_TARGETS: usize = 12;
 
 /// What one render target binds: its uniforms, written per frame, and bind groups 0 and
 /// 2, valid while the volume's generation and the surface layer stay the same.
@@ -139,6 +140,8 @@ struct Bound {
     params: wgpu::Buffer,
     extras: wgpu::Buffer,
     generation: u64,
+    /// Bound the LUT baked for the frame's own step ([`GpuVolume::prepare_step`]).
+    step_lut: bool,
     layer: Option<(wgpu::TextureView, wgpu::TextureView)>,
     group: wgpu::BindGroup,
     group_2: wgpu::BindGroup,
@@ -164,6 +167,9 @@ pub struct GpuVolume {
     /// The baked LUT currently on the GPU (alpha corrected for `lut_step`).
     pub lut: Lut,
     lut_step: f32,
+    /// The same transfer function baked for another step (the viewer's interactive
+    /// images, [`Self::prepare_step`]), and the generation it was baked in.
+    step_lut: Option<(f32, u64, wgpu::Buffer)>,
     tf: TransferFunction,
     /// Live positional AO, the light volume and surfaces (bind group 2), see
     /// `render::extras`.
@@ -305,6 +311,7 @@ impl GpuVolume {
                 lut_buffer,
                 lut,
                 lut_step: step_voxels,
+                step_lut: None,
                 tf: tf.clone(),
                 extras: Default::default(),
                 generation: next_generation(),
@@ -312,6 +319,45 @@ impl GpuVolume {
                 texels,
             }
         })
+    }
+
+    /// Bakes the transfer function for frames of `step_voxels` too, unless it is the
+    /// step of [`Self::set_transfer_function`] or was baked already: frames of either
+    /// step then composite with opacity corrected for their own step. The occupancy
+    /// grid stays valid (a step changes no opacity from zero to non-zero or back).
+    pub fn prepare_step(&mut self, gpu: &Gpu, step_voxels: f32) {
+        let baked = |l: &(f32, u64, wgpu::Buffer)| (l.0, l.1) == (step_voxels, self.generation);
+        if step_voxels == self.lut_step || self.step_lut.as_ref().is_some_and(baked) {
+            return;
+        }
+        let lut = bake_lut(&self.tf, &self.texels, step_voxels);
+        let buffer = match self.step_lut.take() {
+            Some((_, _, b)) if b.size() == (lut.rgba.len() * 16) as u64 => b,
+            _ => gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("GpuVolume::step_lut"),
+                size: (lut.rgba.len() * 16) as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        };
+        gpu.queue
+            .write_buffer(&buffer, 0, bytemuck::cast_slice(&lut.rgba));
+        self.step_lut = Some((step_voxels, self.generation, buffer));
+    }
+
+    /// The LUT buffer for frames of `step_voxels`: the one baked by
+    /// [`Self::prepare_step`] for it, else the transfer function's own.
+    fn lut_buffer_for(&self, step_voxels: f32) -> &wgpu::Buffer {
+        match &self.step_lut {
+            Some((step, generation, buffer))
+                if *step == step_voxels
+                    && *generation == self.generation
+                    && step_voxels != self.lut_step =>
+            {
+                buffer
+            }
+            _ => &self.lut_buffer,
+        }
     }
 
     /// Re-bakes the transfer function (and the skip grid) if it or the step changed.
@@ -607,6 +653,8 @@ impl RayCaster {
         let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
         let (tw, th) = (target.width(), target.height());
         let layer_views = layer.map(|l| (l.position.clone(), l.color.clone()));
+        let lut = vol.lut_buffer_for(frame.settings.step_voxels);
+        let step_lut = !std::ptr::eq(lut, &vol.lut_buffer);
         let mut bound = self.bound.lock().unwrap_or_else(|e| e.into_inner());
         validated(device, "RayCaster::encode_tile", || {
             let slot = match bound.iter().position(|b| b.target == *target) {
@@ -621,13 +669,20 @@ impl RayCaster {
                         "RayCaster::extras",
                         bytemuck::bytes_of(&vol.extras.params()),
                     );
-                    let (group, group_2) =
-                        self.bind_groups(device, vol, target, &params_buffer, &extras, layer);
+                    let (group, group_2) = self.bind_groups(
+                        device,
+                        (vol, lut),
+                        target,
+                        &params_buffer,
+                        &extras,
+                        layer,
+                    );
                     bound.push(Bound {
                         target: target.clone(),
                         params: params_buffer,
                         extras,
                         generation: vol.generation,
+                        step_lut,
                         layer: layer_views.clone(),
                         group,
                         group_2,
@@ -636,12 +691,13 @@ impl RayCaster {
                 }
             };
             let b = &mut bound[slot];
-            if b.generation != vol.generation || b.layer != layer_views {
+            if b.generation != vol.generation || b.layer != layer_views || b.step_lut != step_lut {
                 let (group, group_2) =
-                    self.bind_groups(device, vol, target, &b.params, &b.extras, layer);
+                    self.bind_groups(device, (vol, lut), target, &b.params, &b.extras, layer);
                 b.group = group;
                 b.group_2 = group_2;
                 b.generation = vol.generation;
+                b.step_lut = step_lut;
                 b.layer = layer_views.clone();
             }
             queue.write_buffer(&b.params, 0, bytemuck::bytes_of(&params));
@@ -663,7 +719,7 @@ impl RayCaster {
     fn bind_groups(
         &self,
         device: &wgpu::Device,
-        vol: &GpuVolume,
+        (vol, lut): (&GpuVolume, &wgpu::Buffer),
         target: &wgpu::Texture,
         params: &wgpu::Buffer,
         extras: &wgpu::Buffer,
@@ -678,7 +734,7 @@ impl RayCaster {
                 params.as_entire_binding(),
                 wgpu::BindingResource::TextureView(&vol.volume_view),
                 wgpu::BindingResource::Sampler(&self.sampler),
-                vol.lut_buffer.as_entire_binding(),
+                lut.as_entire_binding(),
                 wgpu::BindingResource::TextureView(&vol.ao_view),
                 wgpu::BindingResource::TextureView(&vol.occupancy_view),
                 wgpu::BindingResource::TextureView(&target_view),
