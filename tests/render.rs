@@ -784,3 +784,49 @@ fn every_variant_draws_the_general_pixels() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// The viewer's interactive images use a longer step than the volume's transfer function
+/// was baked for: `prepare_step` bakes a second table, so such a frame is the one a
+/// volume baked for that step draws (and not the more transparent one drawn with the
+/// first table).
+#[test]
+fn a_frame_at_another_step_reads_the_table_baked_for_it() {
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let volume = load("raw/engine.raw");
+    let tf = TransferFunction::preset(Preset::CtBone, &volume.stats());
+    let v = small(&volume);
+    let at = |step: f32| {
+        let mut f = frame(64, Shading::Phong);
+        f.settings.step_voxels = step;
+        f
+    };
+    let baked_for = |step: f32| {
+        GpuVolume::from_texels(&gpu, v.clone(), &tf, step).unwrap_or_else(|e| panic!("{e}"))
+    };
+    let draw = |vol: &GpuVolume, step: f32| {
+        rc.render(&gpu, vol, &at(step), None)
+            .unwrap_or_else(|e| panic!("{e}"))
+    };
+    let reference = draw(&baked_for(1.0), 1.0);
+    let mut vol = baked_for(0.5);
+    let unprepared = draw(&vol, 1.0);
+    vol.prepare_step(&gpu, 1.0);
+    let prepared = draw(&vol, 1.0);
+    assert!(
+        prepared.pixels == reference.pixels,
+        "the prepared table draws the step's own image"
+    );
+    let differing = unprepared
+        .pixels
+        .iter()
+        .zip(&reference.pixels)
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(
+        differing > reference.pixels.len() / 20,
+        "the step-0.5 table at step 1 should look different: {differing} pixels differ"
+    );
+    // Back at the baked step, the first table again.
+    assert!(draw(&vol, 0.5).pixels == draw(&baked_for(0.5), 0.5).pixels);
+}
