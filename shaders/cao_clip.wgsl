@@ -14,7 +14,7 @@ struct Params {
     spacing: vec4<f32>,   // mm per voxel, w: N extra MSAA samples
     half: vec4<f32>,      // half the volume's extent (mm)
     lut_map: vec4<f32>,   // a, b, entries − 1
-    mode: vec4<u32>,      // full (0/1), unused
+    mode: vec4<u32>,      // full (0/1), V_PAO marks unreadable voxels (0/1)
 }
 
 // Marks in V_AO between steps IV and V (an ambient factor is never negative).
@@ -77,12 +77,19 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
         opacity = f32(visible) / f32(n + 9u) * voxel_opacity(v);
     }
     var ao = RECOMPUTE;
+    // With p.mode.y, V_PAO holds UNREAD (cao_lao.wgsl) where the ray caster cannot read
+    // the voxel: V_AO = 1 there, what step V would write, and step V leaves it alone.
+    let pao = textureLoad(v_pao, v, 0).r;
+    let unread = p.mode.y != 0u && pao > 1.0;
     if dilated == 0u {
-        if p.mode.x == 0u {
-            ao = textureLoad(v_pao, v, 0).r;  // unaffected: copy
+        if p.mode.x == 0u || unread {
+            ao = min(pao, 1.0);  // unaffected: copy
         }
     } else if visible > 0u {
         atomicAdd(&counters[0], 1u);
+        if unread {
+            ao = 1.0;
+        }
     } else {
         ao = CLIPPED;
         atomicAdd(&counters[1], 1u);

@@ -382,13 +382,14 @@ pub fn dense_variant(code: String) -> String {
     )
 }
 
-/// CAO's per-frame step V: rays fetch every sample (the same bits, see `lao_ray.wgsl`)
-/// while the readable-voxel test stays.
+/// CAO's per-frame step V: rays fetch every sample (the same bits, see `lao_ray.wgsl`),
+/// and the readable-voxel test is step IV's (it reads what the `V_PAO` run marked).
 pub fn frame_variant(code: String) -> String {
     code.replace(
         "const RAY_SKIPPING: bool = true;",
         "const RAY_SKIPPING: bool = false;",
     )
+    .replace("const FRAME: bool = false;", "const FRAME: bool = true;")
 }
 
 /// Bricks per axis for a volume of `dims`.

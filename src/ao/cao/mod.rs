@@ -99,7 +99,10 @@ struct ClipParams {
     _pad1: f32,
     /// 1: the baseline (every unclipped voxel marked for a ray cast), 0: CAO.
     full: u32,
-    _pad2: [u32; 3],
+    /// 1: `V_PAO` marks the voxels the ray caster cannot read (a frame with skipping,
+    /// after the `V_PAO` run), 0: it does not (that run itself, or no skipping).
+    unread_marked: u32,
+    _pad2: [u32; 2],
 }
 
 const _: () = assert!(std::mem::size_of::<ClipParams>() == 96);
@@ -285,6 +288,9 @@ pub struct CaoGpu {
     last: (Lists, CaoMode),
     /// Seconds spent on `V_PAO`.
     pub precompute_seconds: f64,
+    /// `V_PAO` is made: with skipping it marks the voxels the ray caster cannot read
+    /// (`UNREAD` in `cao_lao.wgsl`), and each frame's step IV resolves them.
+    pao_ready: bool,
 }
 
 /// What one frame's steps IV and V visit.
@@ -349,7 +355,8 @@ impl CaoGpu {
             lut_last: (lut.rgba.len().max(2) - 1) as f32,
             _pad1: 0.0,
             full: 0,
-            _pad2: [0; 3],
+            unread_marked: 0,
+            _pad2: [0; 2],
         };
         let grid = bricks.grid.map(|g| g as u32);
         let lao_params = LaoParams {
@@ -451,6 +458,7 @@ impl CaoGpu {
                 last: (Lists::default(), CaoMode::Selective),
                 bricks,
                 precompute_seconds: 0.0,
+                pao_ready: false,
             }
         })?;
         let start = Instant::now();
@@ -474,6 +482,7 @@ impl CaoGpu {
             gpu.queue.submit([encoder.finish()]);
         })?;
         crate::gpu::wait(device, "Cao::v_pao", crate::gpu::WAIT)?;
+        cao.pao_ready = true;
         cao.precompute_seconds = start.elapsed().as_secs_f64();
         Ok(cao)
     }
@@ -638,6 +647,7 @@ impl CaoGpu {
         );
         let mut params = self.clip_params;
         params.full = u32::from(mode == CaoMode::Full);
+        params.unread_marked = u32::from(self.pao_ready);
         (chunks, params)
     }
 
@@ -672,6 +682,15 @@ impl CaoGpu {
     /// Step IV over `lists.clip`.
     fn step_iv(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<(), GpuError> {
         let (chunks, params) = self.iv_dispatch(lists, mode);
+        self.step_iv_with(gpu, chunks, params)
+    }
+
+    fn step_iv_with(
+        &self,
+        gpu: &Gpu,
+        chunks: BrickDispatch,
+        params: ClipParams,
+    ) -> Result<(), GpuError> {
         let clip_group = self.iv_clip_group(&gpu.device);
         let pass = Pass {
             label: "Cao::step_iv",
@@ -745,7 +764,10 @@ impl CaoGpu {
     fn read_mask(&self, gpu: &Gpu) -> Result<Vec<f32>, GpuError> {
         let (lists, _) = &self.last;
         self.write_lists(gpu, lists);
-        self.step_iv(gpu, lists, CaoMode::Selective)?;
+        // The paper's marks: unreadable voxels marked for recomputation too.
+        let (chunks, mut params) = self.iv_dispatch(lists, CaoMode::Selective);
+        params.unread_marked = 0;
+        self.step_iv_with(gpu, chunks, params)?;
         let marks = read_texture_f32(gpu, &self.v_ao, self.dims, "Cao::mask")?;
         let dims = self.dims.map(|d| d as usize);
         let mut mask = vec![1.0; marks.len()];
