@@ -33,6 +33,7 @@ pub mod screenshot;
 mod shots;
 mod sync;
 pub mod tf_editor;
+mod tiles;
 pub mod viewport;
 
 pub use derived::AoShown;

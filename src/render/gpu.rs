@@ -5,6 +5,7 @@
 use super::extras::GpuLight;
 use super::shadow::LightVolume;
 use super::texels::{BlockRanges, UploadLimits, VolumeTexels};
+pub use super::variant::Variant;
 use super::{Frame, Image};
 use crate::gpu::{
     Gpu, GpuError, bind_group, copy_texture_out, read_buffer, shaders, texture_readback,
@@ -43,91 +44,6 @@ pub struct RayCaster {
     tiles: std::sync::Mutex<Vec<wgpu::Texture>>,
 }
 
-/// What a frame's pipeline is specialised for: the `override` constants of
-/// `shaders/raycast.wgsl`. A feature that is off is left out of the shader (on lavapipe
-/// a branch not taken still costs its work); what is on is still decided per frame by
-/// the uniforms, so every variant draws the same pixels as the general shader.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct Variant {
-    /// [`super::RenderMode::code`].
-    pub mode: u32,
-    pub phong: bool,
-    /// An AO volume is bound (not the 1×1×1 texel of 1).
-    pub ao_volume: bool,
-    pub live_vao: bool,
-    pub shadows: bool,
-    pub surfaces: bool,
-    pub clip: bool,
-    /// An opacity-modulation volume is bound (not the 1×1×1 texel of 1).
-    pub modulation: bool,
-    pub skipping: bool,
-}
-
-impl Variant {
-    /// The variant that draws `frame` of `vol` with `clip` and the surface layer (or not).
-    pub fn of(
-        vol: &GpuVolume,
-        frame: &Frame,
-        clip: Option<&crate::clip::gpu::ClipMaps>,
-        surfaces: bool,
-    ) -> Variant {
-        let s = &frame.settings;
-        // Only composite and iso shade their samples (and only composite modulates):
-        // the projections get one pipeline whatever the lighting settings.
-        let lit = s.mode.uses_ao();
-        let shadows = lit && vol.extras.light.is_some();
-        Variant {
-            mode: s.mode.code(),
-            phong: lit && s.shading == super::Shading::Phong,
-            ao_volume: lit && vol.ao_bound,
-            live_vao: lit && vol.extras.live_vao.is_some(),
-            shadows,
-            // With shadows, the surface code stays in: lavapipe (Mesa 22.3.6) segfaults
-            // in a worker thread running Phong pipelines that read the light volume and
-            // neither the surfaces nor live AO in group 2 (composite and iso seen). The
-            // surfaces' uniform flag still decides, so the pixels are the same.
-            surfaces: surfaces || shadows,
-            clip: clip.is_some_and(|c| c.uniforms.counts[0] > 0),
-            modulation: s.mode.is_composite() && vol.modulation_bound,
-            skipping: s.empty_space_skipping,
-        }
-    }
-
-    /// Every feature compiled in, as the shader's defaults: the uniforms decide alone.
-    pub fn general(mode: super::RenderMode) -> Variant {
-        Variant {
-            mode: mode.code(),
-            phong: true,
-            ao_volume: true,
-            live_vao: true,
-            shadows: true,
-            surfaces: true,
-            clip: true,
-            modulation: true,
-            skipping: true,
-        }
-    }
-
-    /// The values of the shader's `override` constants.
-    fn constants(&self) -> [(&'static str, f64); 10] {
-        let b = |on: bool| f64::from(u8::from(on));
-        // Shading that fetches: worth finding a sample with opacity before shading.
-        let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
-        [
-            ("FIND", b(find)),
-            ("MODE", f64::from(self.mode)),
-            ("PHONG", b(self.phong)),
-            ("AO_VOLUME", b(self.ao_volume)),
-            ("LIVE_VAO", b(self.live_vao)),
-            ("SHADOWS", b(self.shadows)),
-            ("SURFACES", b(self.surfaces)),
-            ("CLIP", b(self.clip)),
-            ("MODULATION", b(self.modulation)),
-            ("SKIPPING", b(self.skipping)),
-        ]
-    }
-}
-
 /// Render targets whose bindings are kept (the viewport's strips and tiles, a
 /// screenshot tile, a CLI tile).
 const BOUND_TARGETS: usize = 12;
@@ -155,10 +71,10 @@ pub struct GpuVolume {
     volume_view: wgpu::TextureView,
     ao_view: wgpu::TextureView,
     /// `ao_view` is an AO volume, not the 1×1×1 texel of 1 (see [`Variant`]).
-    ao_bound: bool,
+    pub(super) ao_bound: bool,
     modulation_view: wgpu::TextureView,
     /// `modulation_view` is a modulation volume, not the 1×1×1 texel of 1.
-    modulation_bound: bool,
+    pub(super) modulation_bound: bool,
     occupancy: wgpu::Texture,
     occupancy_view: wgpu::TextureView,
     /// (min, max) of `norm` per occupancy block: the projection and iso modes' skip test.

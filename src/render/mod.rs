@@ -20,6 +20,7 @@ pub mod offscreen;
 pub mod shadow;
 pub mod surface;
 pub mod texels;
+mod variant;
 
 pub use camera::Camera;
 pub use image::Image;

@@ -1,0 +1,90 @@
+//! [`Variant`]: which ray-caster pipeline draws a frame (the `override` constants of
+//! `shaders/raycast.wgsl`); [`super::gpu::RayCaster`] builds one per variant in use.
+
+use super::Frame;
+use super::gpu::GpuVolume;
+
+/// What a frame's pipeline is specialised for: the `override` constants of
+/// `shaders/raycast.wgsl`. A feature that is off is left out of the shader (on lavapipe
+/// a branch not taken still costs its work); what is on is still decided per frame by
+/// the uniforms, so every variant draws the same pixels as the general shader.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Variant {
+    /// [`super::RenderMode::code`].
+    pub mode: u32,
+    pub phong: bool,
+    /// An AO volume is bound (not the 1×1×1 texel of 1).
+    pub ao_volume: bool,
+    pub live_vao: bool,
+    pub shadows: bool,
+    pub surfaces: bool,
+    pub clip: bool,
+    /// An opacity-modulation volume is bound (not the 1×1×1 texel of 1).
+    pub modulation: bool,
+    pub skipping: bool,
+}
+
+impl Variant {
+    /// The variant that draws `frame` of `vol` with `clip` and the surface layer (or not).
+    pub fn of(
+        vol: &GpuVolume,
+        frame: &Frame,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        surfaces: bool,
+    ) -> Variant {
+        let s = &frame.settings;
+        // Only composite and iso shade their samples (and only composite modulates):
+        // the projections get one pipeline whatever the lighting settings.
+        let lit = s.mode.uses_ao();
+        let shadows = lit && vol.extras.light.is_some();
+        Variant {
+            mode: s.mode.code(),
+            phong: lit && s.shading == super::Shading::Phong,
+            ao_volume: lit && vol.ao_bound,
+            live_vao: lit && vol.extras.live_vao.is_some(),
+            shadows,
+            // With shadows, the surface code stays in: lavapipe (Mesa 22.3.6) segfaults
+            // in a worker thread running Phong pipelines that read the light volume and
+            // neither the surfaces nor live AO in group 2 (composite and iso seen). The
+            // surfaces' uniform flag still decides, so the pixels are the same.
+            surfaces: surfaces || shadows,
+            clip: clip.is_some_and(|c| c.uniforms.counts[0] > 0),
+            modulation: s.mode.is_composite() && vol.modulation_bound,
+            skipping: s.empty_space_skipping,
+        }
+    }
+
+    /// Every feature compiled in, as the shader's defaults: the uniforms decide alone.
+    pub fn general(mode: super::RenderMode) -> Variant {
+        Variant {
+            mode: mode.code(),
+            phong: true,
+            ao_volume: true,
+            live_vao: true,
+            shadows: true,
+            surfaces: true,
+            clip: true,
+            modulation: true,
+            skipping: true,
+        }
+    }
+
+    /// The values of the shader's `override` constants.
+    pub(super) fn constants(&self) -> [(&'static str, f64); 10] {
+        let b = |on: bool| f64::from(u8::from(on));
+        // Shading that fetches: worth finding a sample with opacity before shading.
+        let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
+        [
+            ("FIND", b(find)),
+            ("MODE", f64::from(self.mode)),
+            ("PHONG", b(self.phong)),
+            ("AO_VOLUME", b(self.ao_volume)),
+            ("LIVE_VAO", b(self.live_vao)),
+            ("SHADOWS", b(self.shadows)),
+            ("SURFACES", b(self.surfaces)),
+            ("CLIP", b(self.clip)),
+            ("MODULATION", b(self.modulation)),
+            ("SKIPPING", b(self.skipping)),
+        ]
+    }
+}
