@@ -9,7 +9,7 @@ mod common;
 
 use common::{crop, device, texels};
 
-use common::{Rng, data};
+use common::{Rng, data, differing};
 use glam::Vec3;
 use volao::ao::cao::{CaoGpu, CaoMode, CaoVolume, clip_volume_cpu, lao_on_opacity_cpu, reach_mm};
 use volao::ao::lao::{Rays, lao_lut};
@@ -308,11 +308,6 @@ fn random_shape(rng: &mut Rng, shape: &Shape, half: Vec3, mode: ClipMode) -> Cli
         scale,
         mode,
     }
-}
-
-fn differing<T: PartialEq>(a: &[T], b: &[T]) -> usize {
-    assert_eq!(a.len(), b.len());
-    a.iter().zip(b).filter(|(x, y)| x != y).count()
 }
 
 /// CAO vs the baseline for `poses` random poses of every shape, in `mode`.

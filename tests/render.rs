@@ -817,12 +817,7 @@ fn a_frame_at_another_step_reads_the_table_baked_for_it() {
         prepared.pixels == reference.pixels,
         "the prepared table draws the step's own image"
     );
-    let differing = unprepared
-        .pixels
-        .iter()
-        .zip(&reference.pixels)
-        .filter(|(a, b)| a != b)
-        .count();
+    let differing = common::differing(&unprepared.pixels, &reference.pixels);
     assert!(
         differing > reference.pixels.len() / 20,
         "the step-0.5 table at step 1 should look different: {differing} pixels differ"

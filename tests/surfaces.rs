@@ -174,12 +174,7 @@ fn surfaces_in_real_data_gpu_matches_cpu_twin() {
         let plain = rc
             .render(&gpu, &vol, &f, None)
             .unwrap_or_else(|e| panic!("{e}"));
-        let changed = plain
-            .pixels
-            .iter()
-            .zip(&g.pixels)
-            .filter(|(a, b)| a != b)
-            .count();
+        let changed = common::differing(&plain.pixels, &g.pixels);
         assert!(changed * 10 > g.pixels.len(), "{changed} pixels changed");
     }
 }

@@ -541,12 +541,7 @@ fn filter_ao_and_opacity_modulation_from_the_panels_match_volao_render() {
         &out_dir(),
     )
     .unwrap_or_else(|e| panic!("{e}"));
-    let changed = off
-        .pixels
-        .iter()
-        .zip(&modulated.pixels)
-        .filter(|(a, b)| a != b)
-        .count();
+    let changed = common::differing(&off.pixels, &modulated.pixels);
     assert!(changed > 100, "modulation changed only {changed} pixels");
 }
 

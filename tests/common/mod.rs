@@ -6,6 +6,12 @@
 
 use std::path::PathBuf;
 
+/// How many elements differ between two slices of the same length (pixels, voxels).
+pub fn differing<T: PartialEq>(a: &[T], b: &[T]) -> usize {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).filter(|(x, y)| x != y).count()
+}
+
 /// The shared real volumes (`../shared/data` beside the checkout, or `$VOLAO_DATA`).
 /// Missing data is a failure with instructions, never a silent skip.
 pub fn data_dir() -> PathBuf {
