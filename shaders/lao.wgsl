@@ -1,7 +1,9 @@
-// Local Ambient Occlusion (Hernell et al.; CAO paper Eq. 2–3) over a brick list
-// (ao::sparse): one invocation per voxel, written to a compact buffer (512 values per
-// brick of the submission, x fastest within the brick). CPU twin: src/ao/lao.rs
-// (`lao_voxel`); keep the two in step.
+// Local Ambient Occlusion (Hernell et al.; CAO paper Eq. 2–3) over a list of voxels
+// (ao::sparse::Bricks::voxel_list: the readable ones, already tested): one invocation
+// per entry, written to a compact buffer in list order. The list comes in groups of 512
+// entries dispatched like bricks (gpu::dispatch::BrickDispatch); each submission's part
+// is in `voxels`, padded with NONE. CPU twin: src/ao/lao.rs (`lao_voxel`); keep the two
+// in step.
 //
 //   A_k(x) = 1/M · Σ_{m=1..M} Π_{i=1..m-1} (1 − a_i)        (Eq. 2)
 //   A(x)   = 1/K · Σ_k w_k A_k(x)                             (Eq. 3)
@@ -9,18 +11,17 @@
 // Sample i lies i mm from the voxel centre along ray k (spacing-aware); samples outside
 // the volume are empty. a_i comes from the transfer function's opacity, corrected for a
 // 1 mm step. Rays step over empty bricks (lao_ray.wgsl).
-//!include bricks.wgsl
 //!include lao_ray.wgsl
-//!include readable.wgsl
+
+const NONE: u32 = 0xffffffffu;
 
 struct Params {
     dims: vec4<u32>,       // x, y, z, unused
-    chunk: vec4<u32>,      // first brick, bricks, workgroups per row, unused
+    chunk: vec4<u32>,      // first group, groups, workgroups per row, unused
     mm_to_uvw: vec4<f32>,  // 1 / extent in mm per axis
     lut_map: vec4<f32>,    // a, b, entries - 1
     counts: vec4<u32>,     // rays K, samples M, unused, unused
     grid: vec4<u32>,       // bricks per axis, skipping (0/1)
-    readable: vec4<f32>,   // voxel readability: LUT index scale, offset, last, on
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
@@ -29,9 +30,8 @@ struct Params {
 @group(0) @binding(3) var<storage, read> lut_alpha: array<f32>;
 @group(0) @binding(4) var<storage, read> rays: array<vec4<f32>>;  // xyz direction, w weight
 @group(0) @binding(5) var<storage, read_write> v_pao: array<f32>;
-@group(0) @binding(6) var<storage, read> bricks: array<u32>;
+@group(0) @binding(6) var<storage, read> voxels: array<u32>;  // this submission's, x fastest
 @group(0) @binding(7) var<storage, read> occupied: array<u32>;
-@group(0) @binding(8) var<storage, read> readable_prefix: array<u32>;
 
 fn opacity_at(uvw: vec3<f32>) -> f32 {
     if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) {
@@ -46,16 +46,17 @@ fn opacity_at(uvw: vec3<f32>) -> f32 {
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let at_voxel = brick_voxel(wid, lid);
-    if at_voxel.w == 0u {
+    let group = wid.y + wid.z * p.chunk.z;
+    if group >= p.chunk.y {
         return;
     }
-    let voxel = at_voxel.xyz;
-    let out = brick_slot(wid) * 512u + lid.x + 8u * lid.y + 64u * wid.x;
-    if !voxel_readable(voxel) {
-        v_pao[out] = 1.0;  // no sample of non-zero opacity weights it
+    let out = group * 512u + lid.x + 8u * lid.y + 64u * wid.x;
+    let index = voxels[out];
+    if index == NONE {
         return;
     }
+    let plane = p.dims.x * p.dims.y;
+    let voxel = vec3<u32>(index % p.dims.x, (index % plane) / p.dims.x, index / plane);
     let centre = (vec3<f32>(voxel) + 0.5) / vec3<f32>(p.dims.xyz);
     let samples = p.counts.y;
     var total = 0.0;

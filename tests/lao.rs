@@ -269,3 +269,77 @@ fn gpu_matches_cpu_twin_for_every_ray_set() {
         }
     }
 }
+
+/// Sparse LAO as rendering computes it (the voxel list: readable voxels only, rays
+/// stepping over empty bricks) gives the image of the dense computation, pixel for
+/// pixel; with the per-voxel readability test one voxel too tight, readable voxels lose
+/// their AO.
+#[test]
+fn sparse_lao_renders_the_dense_image_and_one_voxel_tighter_loses_readable_voxels() {
+    use volao::render::gpu::RayCaster;
+    use volao::render::{Camera, Frame, RenderSettings};
+    let gpu = device();
+    let lao = gpu.stage::<LaoGpu>().unwrap_or_else(|e| panic!("{e}"));
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let full = volume::load(&data("raw/cranium-ct.raw"), &LoadOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"))
+        .volume;
+    let v = crop(&full, [30, 100, 30], [48, 48, 40]);
+    let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
+    let t = texels(&v);
+    let mut vol =
+        GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let lut = lao_lut(&tf, &t);
+    let rays = Rays::uniform(RaySet::Fourteen.directions());
+    let frame = Frame {
+        camera: Camera {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            ..Default::default()
+        },
+        settings: RenderSettings::default(),
+        width: 96,
+        height: 96,
+    };
+    let sparse = Coverage::Readable.bricks(&t, vol.ranges(), &tf);
+    let dense_bricks = Coverage::Dense.bricks(&t, vol.ranges(), &tf);
+    let mut render = |bricks: &volao::ao::sparse::Bricks| {
+        let a = lao
+            .compute(&gpu, &vol, &lut, &rays, 12, bricks, &|_, _| {})
+            .unwrap_or_else(|e| panic!("{e}"));
+        vol.set_ambient_occlusion(&gpu, &a);
+        let img = rc
+            .render(&gpu, &vol, &frame, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        (a, img.pixels)
+    };
+    let listed = sparse.voxel_list(&t).len();
+    assert!(
+        listed > 0 && listed < t.dims.iter().product::<usize>() / 2,
+        "the crop must hold readable and unreadable voxels ({listed} listed)"
+    );
+    let (dense_ao, dense) = render(&dense_bricks);
+    let (_, skipped) = render(&sparse);
+    assert_eq!(
+        common::differing(&skipped, &dense),
+        0,
+        "sparse LAO changed pixels"
+    );
+    let mut tight = sparse.clone();
+    if let Some(test) = &mut tight.voxels {
+        test.below -= 1;
+    }
+    let (tight_ao, tight_img) = render(&tight);
+    let readable = sparse.readable_mask(&t);
+    let lost = (0..readable.len())
+        .filter(|&i| readable[i] && tight_ao[i] != dense_ao[i])
+        .count();
+    eprintln!(
+        "one voxel too tight: {lost} readable voxels and {} pixels differ",
+        common::differing(&tight_img, &dense)
+    );
+    assert!(
+        lost > 0,
+        "a test one voxel too tight must miss readable voxels"
+    );
+}

@@ -7,7 +7,7 @@
 //! Opacities `a_i` come from the transfer function, corrected for a 1 mm step; samples
 //! outside the volume are empty.
 
-use super::sparse::{BRICK, Bricks, VoxelTest, brick_voxels, empty_run, unpack};
+use super::sparse::{Bricks, brick_voxels, empty_run};
 use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
 use crate::gpu::{
     Gpu, GpuError, output_buffer, read_buffer, readback_buffer, storage_buffer, validated,
@@ -69,11 +69,9 @@ pub struct LaoParams {
     pub _pad2: [u32; 2],
     /// Bricks per axis and whether rays step over empty ones (0/1).
     pub grid: [u32; 4],
-    /// The per-voxel readability test ([`VoxelTest::uniform`]).
-    pub readable: [f32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<LaoParams>() == 112);
+const _: () = assert!(std::mem::size_of::<LaoParams>() == 96);
 
 chunk_fields!(LaoParams);
 
@@ -108,7 +106,6 @@ fn params(
         samples: samples.max(1),
         _pad2: [0; 2],
         grid: [g[0], g[1], g[2], u32::from(bricks.skipping)],
-        readable: VoxelTest::uniform(bricks.voxels.as_ref()),
     }
 }
 
@@ -224,6 +221,12 @@ pub struct LaoGpu {
     dense: crate::gpu::ComputeStage,
 }
 
+/// List entries per dispatched group (dispatched like a brick of 8³ voxels).
+const GROUP: usize = 512;
+
+/// A list entry no invocation computes (`NONE` in `lao.wgsl`).
+const NONE: u32 = u32::MAX;
+
 impl crate::gpu::Stage for LaoGpu {
     fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
         use crate::gpu::ComputeStage;
@@ -240,9 +243,9 @@ impl crate::gpu::Stage for LaoGpu {
 }
 
 impl LaoGpu {
-    /// `V_PAO` of an uploaded volume over the readable bricks of `bricks` (1 elsewhere),
-    /// in submissions of whole bricks, each read back. `progress(done, total)` counts
-    /// bricks.
+    /// `V_PAO` of an uploaded volume over the voxels of `bricks` the ray caster can
+    /// read ([`Bricks::voxel_list`]; 1 elsewhere), in submissions of whole groups of 512
+    /// of them, each read back. `progress(done, total)` counts groups.
     #[allow(clippy::too_many_arguments)]
     pub fn compute(
         &self,
@@ -263,17 +266,18 @@ impl LaoGpu {
             &self.dense
         };
         let base = params(texels, lut, rays, samples, bricks);
-        let list = bricks.list(|i| bricks.readable[i] != 0);
+        let list = bricks.voxel_list(texels);
+        let groups = list.len().div_ceil(GROUP);
         let per_voxel = rays.directions.len() as u64 * samples.max(1) as u64;
-        let max_bricks = device.limits().max_storage_buffer_binding_size / (4 * 512);
-        let chunks = BrickDispatch::new(0, list.len(), per_voxel, budget::LAO_SAMPLES, max_bricks);
+        let max_groups = device.limits().max_storage_buffer_binding_size / (4 * GROUP as u64);
+        let chunks = BrickDispatch::new(0, groups, per_voxel, budget::LAO_SAMPLES, max_groups);
         let mut out_values = vec![1.0f32; dims.iter().product()];
         if list.is_empty() {
             return Ok(out_values);
         }
         let occupied: Vec<u32> = bricks.occupied.iter().map(|&o| o as u32).collect();
         let alpha = alpha_column(lut);
-        let (uniforms, out, readback, group) = validated(device, "Lao::buffers", || {
+        let (uniforms, out, readback, group, list_buf) = validated(device, "Lao::buffers", || {
             let lut_buf = storage_buffer(
                 gpu,
                 "Lao::lut_alpha",
@@ -286,42 +290,36 @@ impl LaoGpu {
                 bytemuck::cast_slice(&rays.packed()),
                 wgpu::BufferUsages::empty(),
             );
-            let list_buf = storage_buffer(
-                gpu,
-                "Lao::bricks",
-                bytemuck::cast_slice(&list),
-                wgpu::BufferUsages::empty(),
-            );
+            let size = chunks.max_chunk() as u64 * GROUP as u64 * 4;
+            let list_buf = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("Lao::voxels"),
+                size,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
             let occupied_buf = storage_buffer(
                 gpu,
                 "Lao::occupied",
                 bytemuck::cast_slice(&occupied),
                 wgpu::BufferUsages::empty(),
             );
-            let prefix_buf = storage_buffer(
-                gpu,
-                "Lao::readable_prefix",
-                bytemuck::cast_slice(&VoxelTest::prefix_of(bricks.voxels.as_ref())),
-                wgpu::BufferUsages::empty(),
-            );
-            let size = chunks.max_chunk() as u64 * 512 * 4;
             let out = output_buffer(device, "Lao::v_pao", size);
             let readback = readback_buffer(device, "Lao::readback", size);
-            let bound = [
-                &lut_buf,
-                &ray_buf,
-                &out,
-                &list_buf,
-                &occupied_buf,
-                &prefix_buf,
-            ]
-            .map(|b| b.as_entire_binding());
+            let bound =
+                [&lut_buf, &ray_buf, &out, &list_buf, &occupied_buf].map(|b| b.as_entire_binding());
             let (uniforms, group) =
                 stage.sampling_group(gpu, "Lao", &base, vol.volume_view(), &bound);
-            (uniforms, out, readback, group)
+            (uniforms, out, readback, group, list_buf)
         })?;
+        // Submission `first`'s part of the list, padded to whole groups with NONE.
+        let part = |first: u32, count: u32| {
+            let start = first as usize * GROUP;
+            let mut part = list[start..(start + count as usize * GROUP).min(list.len())].to_vec();
+            part.resize(count as usize * GROUP, NONE);
+            part
+        };
         let pass = Pass {
-            label: "Lao::bricks",
+            label: "Lao::voxels",
             pipeline: &stage.pipeline,
             bind_groups: &[&group],
             uniforms: &uniforms,
@@ -334,23 +332,26 @@ impl LaoGpu {
             |first, count| {
                 let back = read_buffer(device, &readback, pass.label)?;
                 let values: &[f32] = bytemuck::cast_slice(&back);
-                for (slot, &b) in list[first as usize..(first + count) as usize]
-                    .iter()
-                    .enumerate()
-                {
-                    let o = unpack(b).map(|c| c * BRICK);
-                    for (i, &a) in values[slot * 512..(slot + 1) * 512].iter().enumerate() {
-                        let v = [o[0] + i % BRICK, o[1] + (i / BRICK) % BRICK, o[2] + i / 64];
-                        if (0..3).all(|k| v[k] < dims[k]) {
-                            out_values[v[0] + dims[0] * (v[1] + dims[1] * v[2])] = a;
-                        }
-                    }
+                let start = first as usize * GROUP;
+                let end = (start + count as usize * GROUP).min(list.len());
+                for (&i, &a) in list[start..end].iter().zip(values) {
+                    out_values[i as usize] = a;
                 }
-                progress((first + count) as usize, list.len());
+                progress((first + count) as usize, groups);
                 Ok(())
             },
-            |encoder, _, count| {
-                encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, count as u64 * 512 * 4);
+            |encoder, first, count| {
+                // Written before this submission's commands run (queue order), after
+                // the previous submission's.
+                gpu.queue
+                    .write_buffer(&list_buf, 0, bytemuck::cast_slice(&part(first, count)));
+                encoder.copy_buffer_to_buffer(
+                    &out,
+                    0,
+                    &readback,
+                    0,
+                    count as u64 * GROUP as u64 * 4,
+                );
             },
         )?;
         Ok(out_values)

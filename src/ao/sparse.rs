@@ -226,39 +226,98 @@ impl Bricks {
     }
 
     /// Per voxel (x fastest): readable by its brick and, with a per-voxel test, by the
-    /// range of the 3³ texels around it (the CPU twin of `voxel_readable` in
-    /// `shaders/bricks.wgsl`, whose margin is one LUT entry wider: every voxel readable
+    /// range of the texels around it (the CPU twin of `voxel_readable` in
+    /// `shaders/readable.wgsl`, whose margin is one LUT entry wider: every voxel readable
     /// here is computed there).
     pub fn readable_mask(&self, texels: &VolumeTexels) -> Vec<bool> {
+        self.mask_by_range(texels, |t, lo, hi| {
+            let [s, o] = t.value_map;
+            let (a, b) = (lo as f64 * s + o, hi as f64 * s + o);
+            !t.lut.is_transparent_over(a.min(b), a.max(b))
+        })
+    }
+
+    /// The voxels the GPU's LAO computes, as linear indices (x fastest) in brick order
+    /// (x fastest within a brick): those of readable bricks that pass `voxel_readable`
+    /// of `shaders/readable.wgsl` (its wider margin, in f32 as there), evaluated here
+    /// once so that the dispatch holds only them and no invocation repeats the test.
+    pub fn voxel_list(&self, texels: &VolumeTexels) -> Vec<u32> {
+        let dims = texels.dims;
+        assert!(
+            dims.iter().product::<usize>() <= u32::MAX as usize,
+            "voxel indices beyond u32"
+        );
+        let mask = self.mask_by_range(texels, |t, lo, hi| {
+            let last = t.map[2];
+            let a = lo * t.map[0] + t.map[1];
+            let b = hi * t.map[0] + t.map[1];
+            let first = (a.min(b).floor() - 2.0).clamp(0.0, last) as usize;
+            let end = (a.max(b).floor() + 3.0).clamp(0.0, last) as usize;
+            t.prefix[end + 1] > t.prefix[first]
+        });
+        let mut list = Vec::new();
+        for b in self.list(|i| self.readable[i] != 0) {
+            list.extend(
+                brick_voxels(b, dims)
+                    .map(|v| v[0] + dims[0] * (v[1] + dims[1] * v[2]))
+                    .filter(|&i| mask[i])
+                    .map(|i| i as u32),
+            );
+        }
+        list
+    }
+
+    /// Per voxel (x fastest): its brick is readable and, with a per-voxel test,
+    /// `keep(test, lo, hi)` holds for the range of the texels from `below` under it to
+    /// `max(below, 1)` over it on every axis (clamped to the volume). The range is taken
+    /// separably (a window minimum and maximum along x, then y, then z: the same numbers
+    /// as over the cube), in slabs of z-slices.
+    fn mask_by_range(
+        &self,
+        texels: &VolumeTexels,
+        keep: impl Fn(&VoxelTest, f32, f32) -> bool + Sync,
+    ) -> Vec<bool> {
         use rayon::prelude::*;
         let dims = texels.dims;
-        (0..dims.iter().product::<usize>())
-            .into_par_iter()
-            .map(|i| {
-                let v = crate::volume::voxel_of(i, dims);
-                self.voxel_readable(v)
-                    && self.voxels.as_ref().is_none_or(|t| {
-                        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-                        let b = t.below;
-                        let span = b + b.max(1);
-                        for dz in 0..=span {
-                            for dy in 0..=span {
-                                for dx in 0..=span {
-                                    let x = (v[0] + dx).saturating_sub(b).min(dims[0] - 1);
-                                    let y = (v[1] + dy).saturating_sub(b).min(dims[1] - 1);
-                                    let z = (v[2] + dz).saturating_sub(b).min(dims[2] - 1);
-                                    let n = texels.norm_at(x + dims[0] * (y + dims[1] * z));
-                                    lo = lo.min(n);
-                                    hi = hi.max(n);
-                                }
-                            }
+        let slice = dims[0] * dims[1];
+        let mut mask = vec![false; slice * dims[2]];
+        let Some(test) = self.voxels.as_ref() else {
+            mask.par_iter_mut()
+                .enumerate()
+                .for_each(|(i, m)| *m = self.voxel_readable(crate::volume::voxel_of(i, dims)));
+            return mask;
+        };
+        let (below, above) = (test.below, test.below.max(1));
+        let window = |c: usize, n: usize| c.saturating_sub(below)..=(c + above).min(n - 1);
+        mask.par_chunks_mut(slice * BRICK)
+            .enumerate()
+            .for_each(|(slab, out)| {
+                let z0 = slab * BRICK;
+                let z1 = (z0 + BRICK).min(dims[2]);
+                let zs = window(z0, dims[2]).start().to_owned()..=*window(z1 - 1, dims[2]).end();
+                // The in-plane window range of each slice the slab's windows reach.
+                let planes: Vec<(Vec<f32>, Vec<f32>)> = zs
+                    .clone()
+                    .map(|z| plane_ranges(texels, z, &window))
+                    .collect();
+                for z in z0..z1 {
+                    for i in 0..slice {
+                        let v = [i % dims[0], i / dims[0], z];
+                        let at = &mut out[(z - z0) * slice + i];
+                        if !self.voxel_readable(v) {
+                            continue;
                         }
-                        let [s, o] = t.value_map;
-                        let (a, b) = (lo as f64 * s + o, hi as f64 * s + o);
-                        !t.lut.is_transparent_over(a.min(b), a.max(b))
-                    })
-            })
-            .collect()
+                        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                        for zz in window(z, dims[2]) {
+                            let (l, h) = &planes[zz - zs.start()];
+                            lo = lo.min(l[i]);
+                            hi = hi.max(h[i]);
+                        }
+                        *at = keep(test, lo, hi);
+                    }
+                }
+            });
+        mask
     }
 
     fn index(&self, b: [usize; 3]) -> usize {
@@ -370,6 +429,41 @@ impl Bricks {
         }
         near
     }
+}
+
+/// The smallest and largest texel of slice `z` over `window` along x, then y, per texel
+/// of the slice (x fastest).
+fn plane_ranges(
+    texels: &VolumeTexels,
+    z: usize,
+    window: &impl Fn(usize, usize) -> std::ops::RangeInclusive<usize>,
+) -> (Vec<f32>, Vec<f32>) {
+    let [nx, ny, _] = texels.dims;
+    let base = z * nx * ny;
+    let mut row_lo = vec![0.0; nx * ny];
+    let mut row_hi = vec![0.0; nx * ny];
+    for y in 0..ny {
+        let row: Vec<f32> = (0..nx).map(|x| texels.norm_at(base + y * nx + x)).collect();
+        for x in 0..nx {
+            let w = &row[window(x, nx)];
+            row_lo[y * nx + x] = w.iter().copied().fold(f32::INFINITY, f32::min);
+            row_hi[y * nx + x] = w.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        }
+    }
+    let mut lo = vec![0.0; nx * ny];
+    let mut hi = vec![0.0; nx * ny];
+    for y in 0..ny {
+        for x in 0..nx {
+            let (mut l, mut h) = (f32::INFINITY, f32::NEG_INFINITY);
+            for yy in window(y, ny) {
+                l = l.min(row_lo[yy * nx + x]);
+                h = h.max(row_hi[yy * nx + x]);
+            }
+            lo[y * nx + x] = l;
+            hi[y * nx + x] = h;
+        }
+    }
+    (lo, hi)
 }
 
 /// A skipping shader's source (one including `lao_ray.wgsl`) made into its dense
