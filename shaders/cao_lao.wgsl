@@ -5,7 +5,7 @@
 // made (no clipping). A list entry without the NEAR bit is a brick no shape is near
 // (listed by the baseline only): nothing clipped, step IV left no mark.
 // Both paths run the very same `lao` function, which is what makes CAO bit-exact.
-// Runs over a brick list (ao::sparse); LAO rays step over empty bricks (lao_ray.wgsl).
+// Runs over a brick list (ao::sparse); LAO rays step over empty cells (lao_ray.wgsl).
 // CPU twin: src/ao/cao.rs (`lao_on_opacity_cpu`).
 //!include bricks.wgsl
 
@@ -26,7 +26,7 @@ struct Params {
     chunk: vec4<u32>,      // first brick, bricks, workgroups per row, unused
     mm_to_uvw: vec4<f32>,  // 1 / extent in mm per axis
     counts: vec4<u32>,     // rays K, samples M, unused, unused
-    grid: vec4<u32>,       // bricks per axis, skipping (0/1)
+    grid: vec4<u32>,       // ray cells per axis, skipping (0/1)
     readable: vec4<f32>,   // voxel readability: LUT index scale, offset, last, on
 }
 

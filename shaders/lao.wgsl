@@ -10,7 +10,7 @@
 //
 // Sample i lies i mm from the voxel centre along ray k (spacing-aware); samples outside
 // the volume are empty. a_i comes from the transfer function's opacity, corrected for a
-// 1 mm step. Rays step over empty bricks (lao_ray.wgsl).
+// 1 mm step. Rays step over empty cells (lao_ray.wgsl).
 //!include lao_ray.wgsl
 
 const NONE: u32 = 0xffffffffu;
@@ -21,7 +21,7 @@ struct Params {
     mm_to_uvw: vec4<f32>,  // 1 / extent in mm per axis
     lut_map: vec4<f32>,    // a, b, entries - 1
     counts: vec4<u32>,     // rays K, samples M, unused, unused
-    grid: vec4<u32>,       // bricks per axis, skipping (0/1)
+    grid: vec4<u32>,       // ray cells per axis, skipping (0/1)
 }
 
 @group(0) @binding(0) var<uniform> p: Params;

@@ -3,11 +3,11 @@
 // voxel centre. Shared by lao.wgsl and cao_lao.wgsl; CPU twin: ao::lao::ray_sum.
 //
 // With skipping (ao::sparse), runs of samples known to have opacity exactly 0 (outside
-// the volume, or inside a brick the LAO LUT leaves empty) are not fetched: their factor
+// the volume, or inside a cell of RAY_CELL³ voxels the LAO LUT leaves empty) are not fetched: their factor
 // is 1, and the transmittance is still added once per sample, in order, so the sum is
 // the dense one bit for bit. The including shader declares `opacity_at(uvw) -> f32`,
-// `p.dims: vec4<u32>`, `p.grid: vec4<u32>` (bricks per axis, skipping 0/1) and
-// `occupied: array<u32>` (1 per brick where a sample may be opaque).
+// `p.dims: vec4<u32>`, `p.grid: vec4<u32>` (cells per axis, skipping 0/1) and
+// `occupied: array<u32>` (1 per cell where a sample may be opaque).
 
 // Whether this pipeline skips at all: `false` in the dense pipelines (`--no-skipping`),
 // which a CPU driver then compiles without the skipping code (ao::sparse::dense_variant).
@@ -16,6 +16,8 @@ const SKIPPING: bool = true;
 // (ao::sparse::frame_variant), whose rays start at surfaces the clip shapes bare and
 // cross occupied bricks, where the per-sample check costs more than it saves.
 const RAY_SKIPPING: bool = true;
+// Edge of the cells rays step over, in voxels (ao::sparse::RAY_CELL).
+const RAY_CELL: u32 = 4u;
 
 // Samples from m on (all before the last) whose opacity is exactly 0; 0: fetch m.
 fn empty_run(centre: vec3<f32>, step: vec3<f32>, m: u32, samples: u32) -> u32 {
@@ -24,12 +26,12 @@ fn empty_run(centre: vec3<f32>, step: vec3<f32>, m: u32, samples: u32) -> u32 {
         return samples - m;  // a straight ray that left the box never comes back
     }
     let size = vec3<f32>(p.dims.xyz);
-    let b = min(vec3<u32>(floor(uvw * size / 8.0)), p.grid.xyz - vec3<u32>(1u));
+    let b = min(vec3<u32>(floor(uvw * size / f32(RAY_CELL))), p.grid.xyz - vec3<u32>(1u));
     if occupied[b.x + p.grid.x * (b.y + p.grid.y * b.z)] != 0u {
         return 0u;
     }
-    let lo = vec3<f32>(b * 8u) / size;
-    let hi = vec3<f32>((b + vec3<u32>(1u)) * 8u) / size;
+    let lo = vec3<f32>(b * RAY_CELL) / size;
+    let hi = vec3<f32>((b + vec3<u32>(1u)) * RAY_CELL) / size;
     var exit = 3.0e38;
     for (var a = 0u; a < 3u; a = a + 1u) {
         if step[a] > 0.0 {

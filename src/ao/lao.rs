@@ -67,7 +67,7 @@ pub struct LaoParams {
     pub rays: u32,
     pub samples: u32,
     pub _pad2: [u32; 2],
-    /// Bricks per axis and whether rays step over empty ones (0/1).
+    /// Cells per axis and whether rays step over empty ones (0/1; `RayCells::uniform`).
     pub grid: [u32; 4],
 }
 
@@ -93,7 +93,6 @@ fn params(
     bricks: &Bricks,
 ) -> LaoParams {
     let (a, b) = texels.lut_map(lut);
-    let g = bricks.grid.map(|g| g as u32);
     LaoParams {
         bricks: BrickChunk::of(texels.dims.map(|d| d as u32)),
         mm_to_uvw: mm_to_uvw(texels),
@@ -105,7 +104,7 @@ fn params(
         rays: rays.directions.len() as u32,
         samples: samples.max(1),
         _pad2: [0; 2],
-        grid: [g[0], g[1], g[2], u32::from(bricks.skipping)],
+        grid: bricks.rays.uniform(bricks.skipping),
     }
 }
 
@@ -275,7 +274,7 @@ impl LaoGpu {
         if list.is_empty() {
             return Ok(out_values);
         }
-        let occupied: Vec<u32> = bricks.occupied.iter().map(|&o| o as u32).collect();
+        let occupied = bricks.rays.words();
         let alpha = alpha_column(lut);
         let (uniforms, out, readback, group, list_buf) = validated(device, "Lao::buffers", || {
             let lut_buf = storage_buffer(

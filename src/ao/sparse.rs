@@ -10,9 +10,10 @@
 //!   the ray caster's occupancy block `b` holds ([`BlockRanges`]). A brick whose block
 //!   is transparent under the rendering LUT can have any AO. Clipping only lowers
 //!   opacity, so the unclipped test stays valid while shapes move.
-//! - **Empty bricks along LAO rays.** An LAO sample inside brick `b`'s box reads only the
-//!   same widened texel range; where the LAO LUT gives those texels zero opacity, the
-//!   sample's factor `1 − a` is exactly 1. The ray still adds its transmittance once per
+//! - **Empty cells along LAO rays.** An LAO sample inside a cell's box (a cube of
+//!   [`RAY_CELL`] voxels, finer than a brick) reads only the cell's texels widened by one
+//!   voxel; where the LAO LUT gives those texels zero opacity, the sample's factor
+//!   `1 − a` is exactly 1. The ray still adds its transmittance once per
 //!   skipped sample, in order, so the sum is the dense one bit for bit.
 //! - **Bricks near a shape.** Outside every shape's clipping-camera box (which holds the
 //!   shape and its dilation, [`crate::clip::camera::ClipCamera::frame`]) step IV gives
@@ -113,10 +114,58 @@ pub struct Bricks {
     pub readable: Vec<u8>,
     /// 1 where an LAO sample in the brick may have non-zero opacity, x fastest.
     pub occupied: Vec<u8>,
+    /// The same for the finer cells LAO rays step over ([`RAY_CELL`] voxels a side).
+    pub rays: RayCells,
     /// Whether anything is skipped (false: every brick, every sample).
     pub skipping: bool,
     /// Within readable bricks, the per-voxel test (`None`: every voxel of them).
     pub voxels: Option<VoxelTest>,
+}
+
+/// Edge of the cells an LAO ray steps over, in voxels: finer than a brick, so a ray
+/// leaving a surface reaches empty space sooner (the cranium CT's 54-ray `V_PAO` under
+/// `ct-bone`: 20 % of 4³ cells occupied against 29 % of 8³ bricks).
+pub const RAY_CELL: usize = 4;
+
+/// Which [`RAY_CELL`]-cells an LAO sample may find opacity in.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RayCells {
+    /// Cells per axis.
+    pub grid: [usize; 3],
+    /// 1 where a sample inside the cell may have non-zero opacity, x fastest.
+    pub occupied: Vec<u8>,
+}
+
+impl RayCells {
+    /// Every cell occupied: no sample skipped.
+    fn all(dims: [usize; 3]) -> Self {
+        let grid = dims.map(|d| d.div_ceil(RAY_CELL).max(1));
+        RayCells {
+            grid,
+            occupied: vec![1; grid.iter().product()],
+        }
+    }
+
+    /// Cells of `texels` occupied under the LAO LUT `lut`: their texels widened by one
+    /// voxel (what a trilinear sample inside reads) may give non-zero opacity.
+    fn of(texels: &VolumeTexels, lut: &Lut) -> Self {
+        let ranges = BlockRanges::of_cells(texels, RAY_CELL, 1);
+        RayCells {
+            grid: ranges.grid,
+            occupied: ranges.occupancy(texels, lut),
+        }
+    }
+
+    /// As the shaders read them: one u32 per cell.
+    pub fn words(&self) -> Vec<u32> {
+        self.occupied.iter().map(|&o| u32::from(o)).collect()
+    }
+
+    /// The shaders' `grid` uniform: cells per axis, and whether rays skip (0/1).
+    pub fn uniform(&self, skipping: bool) -> [u32; 4] {
+        let g = self.grid.map(|g| g as u32);
+        [g[0], g[1], g[2], u32::from(skipping)]
+    }
 }
 
 /// The per-voxel readability test: voxel `v` is readable if the range of the 3³ texels
@@ -181,6 +230,7 @@ impl Bricks {
             grid,
             readable: vec![1; n],
             occupied: vec![1; n],
+            rays: RayCells::all(dims),
             skipping: false,
             voxels: None,
         }
@@ -211,6 +261,7 @@ impl Bricks {
             grid: ranges.grid,
             readable,
             occupied,
+            rays: RayCells::of(texels, lao_lut),
             skipping: true,
             voxels: render_lut.map(|lut| VoxelTest::new(texels, lut)),
         }
@@ -518,7 +569,7 @@ pub fn unpack(p: u32) -> [usize; 3] {
 
 /// The LAO rays' empty-space test on the CPU (twin of `empty_run` in `lao_ray.wgsl`):
 /// how many samples from `m` on (all before the last, `samples`) have opacity exactly 0
-/// because they lie outside the volume or in an unoccupied brick; 0 when sample `m`
+/// because they lie outside the volume or in an unoccupied cell ([`RAY_CELL`]); 0 when sample `m`
 /// must be fetched.
 pub fn empty_run(
     bricks: &Bricks,
@@ -536,19 +587,21 @@ pub fn empty_run(
         // A straight ray that has left the box never comes back.
         return samples - m;
     }
+    let cells = &bricks.rays;
     let size = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32);
     let last = Vec3::new(
-        (bricks.grid[0] - 1) as f32,
-        (bricks.grid[1] - 1) as f32,
-        (bricks.grid[2] - 1) as f32,
+        (cells.grid[0] - 1) as f32,
+        (cells.grid[1] - 1) as f32,
+        (cells.grid[2] - 1) as f32,
     );
-    let b = (uvw * size / BRICK as f32).floor().min(last);
-    let i = b.x as usize + bricks.grid[0] * (b.y as usize + bricks.grid[1] * b.z as usize);
-    if bricks.occupied[i] != 0 {
+    let edge = RAY_CELL as f32;
+    let b = (uvw * size / edge).floor().min(last);
+    let i = b.x as usize + cells.grid[0] * (b.y as usize + cells.grid[1] * b.z as usize);
+    if cells.occupied[i] != 0 {
         return 0;
     }
-    let lo = b * BRICK as f32 / size;
-    let hi = (b + Vec3::ONE) * BRICK as f32 / size;
+    let lo = b * edge / size;
+    let hi = (b + Vec3::ONE) * edge / size;
     let mut exit = f32::INFINITY;
     for a in 0..3 {
         if step[a] > 0.0 {
@@ -557,7 +610,7 @@ pub fn empty_run(
             exit = exit.min((lo[a] - centre[a]) / step[a]);
         }
     }
-    // Samples m ..= floor(exit) lie in the box (m itself does); the texels they read
+    // Samples m ..= floor(exit) lie in the cell (m itself does); the texels they read
     // extend half a voxel past it, far more than rounding.
     let inside = (exit.floor().max(m as f32) as u32).min(samples - 1);
     inside - m + 1

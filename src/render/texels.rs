@@ -321,16 +321,22 @@ impl BlockRanges {
     /// Ranges over each block widened by `apron` voxels: 1 is what a trilinear sample
     /// needs ([`Self::new`]); tests use 0 to show that exactness rests on it.
     pub fn with_apron(texels: &VolumeTexels, apron: usize) -> Self {
+        Self::of_cells(texels, BLOCK, apron)
+    }
+
+    /// Ranges over cubes of `edge` voxels (not the ray caster's blocks: LAO rays skip
+    /// over finer cells, `ao::sparse::RAY_CELL`), each widened by `apron` voxels.
+    pub fn of_cells(texels: &VolumeTexels, edge: usize, apron: usize) -> Self {
         use rayon::prelude::*;
         let dims = texels.dims;
-        let grid: [usize; 3] = std::array::from_fn(|i| dims[i].div_ceil(BLOCK));
+        let grid: [usize; 3] = std::array::from_fn(|i| dims[i].div_ceil(edge));
         let ranges = (0..grid[0] * grid[1] * grid[2])
             .into_par_iter()
             .map(|b| {
                 let bi = crate::volume::voxel_of(b, grid);
-                let lo: [usize; 3] = std::array::from_fn(|i| (bi[i] * BLOCK).saturating_sub(apron));
+                let lo: [usize; 3] = std::array::from_fn(|i| (bi[i] * edge).saturating_sub(apron));
                 let hi: [usize; 3] =
-                    std::array::from_fn(|i| ((bi[i] + 1) * BLOCK + apron).min(dims[i]));
+                    std::array::from_fn(|i| ((bi[i] + 1) * edge + apron).min(dims[i]));
                 let (mut mn, mut mx) = (f32::INFINITY, f32::NEG_INFINITY);
                 for z in lo[2]..hi[2] {
                     for y in lo[1]..hi[1] {

@@ -78,7 +78,7 @@ pub fn clip_volume_cpu(
 }
 
 /// Step V on the CPU: `V_AO` from `V_o`, `V_m` and `V_PAO` (twin of `cao_lao.wgsl`),
-/// for every voxel, with rays stepping over the empty bricks of `bricks`.
+/// for every voxel, with rays stepping over the empty cells of `bricks`.
 #[allow(clippy::too_many_arguments)]
 pub fn lao_on_opacity_cpu(
     texels: &VolumeTexels,

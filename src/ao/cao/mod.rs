@@ -22,7 +22,7 @@
 //! Both steps run over brick lists ([`super::sparse`]): step IV over the bricks near a
 //! shape now or in the previous frame (their `V_o` and `V_m` change), step V over those
 //! of them the ray caster can read (every readable brick in the baseline), and LAO rays
-//! step over empty bricks. Outside the lists `V_o = α`, `V_m = 1` and `V_AO = V_PAO`
+//! step over empty cells. Outside the lists `V_o = α`, `V_m = 1` and `V_AO = V_PAO`
 //! hold from the previous frames; unreadable voxels keep whatever they hold, which no
 //! pixel uses. [`Bricks::dense`] turns all of it off.
 
@@ -340,7 +340,7 @@ impl CaoGpu {
             .zip(&rays.weights)
             .map(|(d, w)| [d.x, d.y, d.z, *w])
             .collect();
-        let occupied: Vec<u32> = bricks.occupied.iter().map(|&o| o as u32).collect();
+        let occupied = bricks.rays.words();
         let clip = ClipMaps::new(gpu)?;
         let extent = texels.extent();
         let (a, b) = texels.lut_map(&lut);
@@ -358,7 +358,6 @@ impl CaoGpu {
             unread_marked: 0,
             _pad2: [0; 2],
         };
-        let grid = bricks.grid.map(|g| g as u32);
         let lao_params = LaoParams {
             bricks: BrickChunk::of(dims),
             mm_to_uvw: super::lao::mm_to_uvw(texels),
@@ -366,7 +365,7 @@ impl CaoGpu {
             rays: rays.directions.len() as u32,
             samples: samples.max(1),
             _pad1: [0; 2],
-            grid: [grid[0], grid[1], grid[2], u32::from(bricks.skipping)],
+            grid: bricks.rays.uniform(bricks.skipping),
             readable: VoxelTest::uniform(bricks.voxels.as_ref()),
         };
         let mut cao = validated(device, "CaoGpu::new", || {
