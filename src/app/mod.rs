@@ -155,6 +155,10 @@ const VIEWPORT_SLICE: std::time::Duration = std::time::Duration::from_millis(25)
 /// frozen for seconds at a time), while a UI frame waits at most one slice behind it.
 const JOB_SLICE: std::time::Duration = std::time::Duration::from_millis(60);
 
+/// CAO updates `--bench-clip-drag` waits for while dragging (besides its images), so that
+/// it can say how far apart they came.
+const MIN_CAO_UPDATES: usize = 3;
+
 /// Where a scripted run stands: `--exit-after-frames` and `--bench-clip-drag`.
 #[derive(Debug, Default)]
 struct Scripted {
@@ -168,6 +172,8 @@ struct Scripted {
     bench_start: Option<(Instant, u64)>,
     /// Images completed: when, and seconds each took from its start.
     images: Vec<(Instant, f64)>,
+    /// When each CAO update's counters came back (one per update completed).
+    cao_updates: Vec<Instant>,
 }
 
 impl std::fmt::Debug for Viewer {
@@ -671,6 +677,7 @@ impl Viewer {
         let now = Instant::now();
         let ready = self.load_job.is_none() && self.derived_ready() && self.viewport_current;
         let share = self.cao_percent_recomputed().unwrap_or(0.0);
+        let cao = self.cao_percent_recomputed().is_some();
         let b = &mut self.scripted;
         if b.bench_start.is_none() {
             // Start once the first full-quality image with AO is on screen.
@@ -694,7 +701,16 @@ impl Viewer {
             .skip(images_before as usize + 2)
             .map(|i| i.0)
             .collect();
-        if images.len() as u64 > n {
+        // CAO's updates (each for the newest pose when it began) completed while dragging;
+        // the first was begun before.
+        let updates: Vec<Instant> = b
+            .cao_updates
+            .iter()
+            .filter(|&&t| t > since)
+            .skip(1)
+            .copied()
+            .collect();
+        if images.len() as u64 > n && (!cao || updates.len() >= MIN_CAO_UPDATES) {
             let mut between: Vec<f64> = images
                 .windows(2)
                 .map(|w| (w[1] - w[0]).as_secs_f64())
@@ -729,6 +745,17 @@ impl Viewer {
                 between.len() as f64 / elapsed,
                 since.elapsed().as_secs_f64()
             );
+            if cao {
+                let apart: Vec<f64> = updates
+                    .windows(2)
+                    .map(|w| (w[1] - w[0]).as_secs_f64() * 1e3)
+                    .collect();
+                println!(
+                    "CAO updates while dragging: {}, mean {:.0} ms apart",
+                    updates.len(),
+                    apart.iter().sum::<f64>() / apart.len().max(1) as f64
+                );
+            }
             self.scripted.exit_requested = true;
             return;
         }

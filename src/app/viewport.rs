@@ -78,6 +78,9 @@ pub struct ViewportGpu {
     pub frames_rendered: u64,
 }
 
+/// The share of a frame's slice kept for CAO's update while it is on its way.
+const CAO_SHARE: f64 = 0.5;
+
 /// A texture the ray cast's strips are copied into, and its bind group for drawing.
 #[derive(Debug)]
 pub(super) struct Target {
@@ -596,8 +599,17 @@ impl ViewportGpu {
             }
         }
         // The image first (the view follows the mouse), then CAO with what is left of
-        // the slice.
-        match self.advance(gpu, pacer) {
+        // the slice, and at least CAO_SHARE of it: interactive images come every frame
+        // while a shape is dragged, and would otherwise leave CAO nothing until the
+        // drag stops.
+        let held = if self.cao_work.is_some() {
+            pacer.hold(CAO_SHARE)
+        } else {
+            0.0
+        };
+        let advanced = self.advance(gpu, pacer);
+        pacer.release(held);
+        match advanced {
             Ok(false) => {}
             Ok(true) => {
                 if let Some(w) = self.work.take() {

@@ -190,6 +190,20 @@ impl Pacer {
         self.left
     }
 
+    /// Sets `share` of what is left of this frame's slice aside (no piece takes it)
+    /// and returns it, for [`Self::release`] to give back: so that work submitted later
+    /// in the frame is not starved by work submitted before it.
+    pub fn hold(&mut self, share: f64) -> f64 {
+        let held = (self.left * share.clamp(0.0, 1.0)).max(0.0);
+        self.left -= held;
+        held
+    }
+
+    /// Gives back what [`Self::hold`] set aside.
+    pub fn release(&mut self, held: f64) {
+        self.left += held;
+    }
+
     /// The pieces submitted with [`Self::submit_estimated`] under `label` that finished
     /// since the last call: each one's tag and the time it took alone on the GPU.
     pub fn timed(&mut self, label: &str) -> Vec<(u64, Duration)> {
