@@ -12,15 +12,15 @@
 //!    f16 mip chains) exactly as the shaders do.
 //! 4. [`gpu`] owns the device (one path for viewer, CLI and tests), the shaders, the
 //!    resource helpers, [`gpu::dispatch::SlabDispatch`] (the z-slab loop of the dense
-//!    per-voxel compute stages) and [`gpu::dispatch::BrickDispatch`] (LAO's and CAO's
-//!    lists of 8³ bricks), which in the viewer cut long work into short submissions
+//!    per-voxel compute stages) and [`gpu::dispatch::BrickDispatch`] (CAO's lists of
+//!    8³ bricks, LAO's of readable voxels), which in the viewer cut long work into short submissions
 //!    ([`gpu::dispatch::Slicing`]). Each stage's pipelines are built once per device
 //!    ([`gpu::Gpu::stage`]).
 //! 5. [`ao`] computes the ambient factor `A(x)`: [`ao::AoEngine`] picks the method's stage
 //!    (LAO, CAO, positional AO, filter maps, cone tracing; each a GPU pass with its CPU
-//!    twin beside it) and the GPU or the twin; [`ao::sparse`] says which bricks LAO and
-//!    CAO visit (those the ray caster can read, near a shape) and which their rays step
-//!    over. [`clip`] turns clip shapes into the depth and dilation maps CAO and the ray
+//!    twin beside it) and the GPU or the twin; [`ao::sparse`] says which bricks and voxels LAO
+//!    and CAO visit (those the ray caster can read, near a shape) and which 4³ cells
+//!    their rays step over. [`clip`] turns clip shapes into the depth and dilation maps CAO and the ray
 //!    caster clip with.
 //! 6. [`render`] ray-casts the volume into an image in one of its [`render::RenderMode`]s
 //!    (compositing with the AO factor on ambient and diffuse light, shadows from

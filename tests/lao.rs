@@ -343,3 +343,40 @@ fn sparse_lao_renders_the_dense_image_and_one_voxel_tighter_loses_readable_voxel
         "a test one voxel too tight must miss readable voxels"
     );
 }
+
+/// LAO rays skip only cells whose texels, widened by the one voxel a trilinear sample
+/// reads beyond them, are all transparent: without that apron the sums change.
+#[test]
+fn ray_cells_without_their_apron_change_the_sums() {
+    use volao::ao::sparse::RAY_CELL;
+    let gpu = device();
+    let lao = gpu.stage::<LaoGpu>().unwrap_or_else(|e| panic!("{e}"));
+    let full = volume::load(&data("raw/cranium-ct.raw"), &LoadOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"))
+        .volume;
+    let v = crop(&full, [30, 100, 30], [48, 48, 40]);
+    let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
+    let t = texels(&v);
+    let vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let lut = lao_lut(&tf, &t);
+    let rays = Rays::uniform(RaySet::Fourteen.directions());
+    let every = Coverage::Every.bricks(&t, vol.ranges(), &tf);
+    let dense = Coverage::Dense.bricks(&t, vol.ranges(), &tf);
+    let mut tight = every.clone();
+    tight.rays.occupied = BlockRanges::of_cells(&t, RAY_CELL, 0).occupancy(&t, &lut);
+    assert_ne!(tight.rays.occupied, every.rays.occupied);
+    let run = |b: &volao::ao::sparse::Bricks| {
+        lao.compute(&gpu, &vol, &lut, &rays, 12, b, &|_, _| {})
+            .unwrap_or_else(|e| panic!("{e}"))
+    };
+    let want = run(&dense);
+    let bits = |a: &[f32]| a.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(common::differing(&bits(&run(&every)), &bits(&want)), 0);
+    let wrong = common::differing(&bits(&run(&tight)), &bits(&want));
+    eprintln!("cells without their apron: {wrong} voxels differ");
+    assert!(wrong > 0, "cells without their apron must change some sums");
+    // And the CPU twin with the proper cells gives the same bits as the GPU's.
+    let cpu = lao_cpu(&t, &lut, &rays, 12, &every, &|_, _| {});
+    let cpu_dense = lao_cpu(&t, &lut, &rays, 12, &dense, &|_, _| {});
+    assert_eq!(common::differing(&bits(&cpu), &bits(&cpu_dense)), 0);
+}

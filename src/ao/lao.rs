@@ -213,10 +213,14 @@ pub fn lao_cpu(
     out
 }
 
-/// Long-lived LAO compute state: the skipping pipeline and the dense one.
+/// Long-lived LAO compute state: its pipelines, by what they skip.
 #[derive(Debug)]
 pub struct LaoGpu {
+    /// Rays step over empty cells (every voxel: `volao ao`).
     sparse: crate::gpu::ComputeStage,
+    /// Readable voxels only, rays fetch every sample ([`super::sparse::readable_variant`]).
+    readable: crate::gpu::ComputeStage,
+    /// Nothing skipped (`--no-skipping`).
     dense: crate::gpu::ComputeStage,
 }
 
@@ -231,6 +235,12 @@ impl crate::gpu::Stage for LaoGpu {
         use crate::gpu::ComputeStage;
         Ok(LaoGpu {
             sparse: ComputeStage::new(device, "Lao", "lao.wgsl")?,
+            readable: ComputeStage::edited(
+                device,
+                "Lao::readable",
+                "lao.wgsl",
+                super::sparse::readable_variant,
+            )?,
             dense: ComputeStage::edited(
                 device,
                 "Lao::dense",
@@ -259,10 +269,12 @@ impl LaoGpu {
         let device = &gpu.device;
         let texels = &vol.texels;
         let dims = texels.dims;
-        let stage = if bricks.skipping {
-            &self.sparse
-        } else {
+        let stage = if !bricks.skipping {
             &self.dense
+        } else if super::sparse::readable_only(bricks) {
+            &self.readable
+        } else {
+            &self.sparse
         };
         let base = params(texels, lut, rays, samples, bricks);
         let list = bricks.voxel_list(texels);

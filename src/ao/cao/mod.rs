@@ -151,6 +151,8 @@ pub struct CaoPipelines {
     /// Step V with skipping, and its dense variant (`--no-skipping`).
     lao: wgpu::ComputePipeline,
     lao_dense: wgpu::ComputePipeline,
+    /// `V_PAO` of readable voxels only: every ray sample fetched.
+    lao_readable: wgpu::ComputePipeline,
     /// Step V of a frame with skipping: readable voxels, every ray sample fetched.
     lao_frame: wgpu::ComputePipeline,
     sampler: wgpu::Sampler,
@@ -173,6 +175,9 @@ impl crate::gpu::Stage for CaoPipelines {
             let dense_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
                 super::sparse::dense_variant(format_of(code))
             })?;
+            let readable_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
+                super::sparse::readable_variant(format_of(code))
+            })?;
             let frame_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
                 super::sparse::frame_variant(format_of(code))
             })?;
@@ -180,6 +185,13 @@ impl crate::gpu::Stage for CaoPipelines {
                 clip: compute_pipeline(device, "Cao::clip", &clip_module, "main", None),
                 lao: compute_pipeline(device, "Cao::lao", &lao_module, "main", None),
                 lao_dense: compute_pipeline(device, "Cao::lao_dense", &dense_module, "main", None),
+                lao_readable: compute_pipeline(
+                    device,
+                    "Cao::lao_readable",
+                    &readable_module,
+                    "main",
+                    None,
+                ),
                 lao_frame: compute_pipeline(device, "Cao::lao_frame", &frame_module, "main", None),
                 sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
                 format,
@@ -201,8 +213,9 @@ impl CaoPipelines {
     fn lao_for(&self, bricks: &Bricks, frame: bool) -> &wgpu::ComputePipeline {
         match (bricks.skipping, frame) {
             (false, _) => &self.lao_dense,
-            (true, false) => &self.lao,
             (true, true) => &self.lao_frame,
+            (true, false) if super::sparse::readable_only(bricks) => &self.lao_readable,
+            (true, false) => &self.lao,
         }
     }
 }
