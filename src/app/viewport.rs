@@ -78,8 +78,10 @@ pub struct ViewportGpu {
     pub frames_rendered: u64,
 }
 
-/// The share of a frame's slice kept for CAO's update while it is on its way.
+/// The share of a frame's slice kept for CAO's update once it has waited [`CAO_PATIENCE`]
+/// behind the images, which come first until then.
 const CAO_SHARE: f64 = 0.5;
+const CAO_PATIENCE: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// A texture the ray cast's strips are copied into, and its bind group for drawing.
 #[derive(Debug)]
@@ -123,6 +125,8 @@ pub(super) struct CaoWork {
     /// image of a shape being dragged): its `V_AO` is not exact for `clip`, and the next
     /// update makes it so.
     tainted: bool,
+    /// When it began.
+    began: Instant,
 }
 
 /// A complete image.
@@ -599,13 +603,13 @@ impl ViewportGpu {
             }
         }
         // The image first (the view follows the mouse), then CAO with what is left of
-        // the slice, and at least CAO_SHARE of it: interactive images come every frame
-        // while a shape is dragged, and would otherwise leave CAO nothing until the
-        // drag stops.
-        let held = if self.cao_work.is_some() {
-            pacer.hold(CAO_SHARE)
-        } else {
-            0.0
+        // the slice, and at least CAO_SHARE of it once the update has waited
+        // CAO_PATIENCE: interactive images come every frame while a shape is dragged,
+        // and would otherwise leave CAO nothing until the drag stops.
+        let waited = |c: &CaoWork| c.began.elapsed() > CAO_PATIENCE;
+        let held = match self.cao_work.as_ref().is_some_and(waited) {
+            true => pacer.hold(CAO_SHARE),
+            false => 0.0,
         };
         let advanced = self.advance(gpu, pacer);
         pacer.release(held);
@@ -684,6 +688,7 @@ impl ViewportGpu {
             clip: clip.to_vec(),
             frame,
             tainted: false,
+            began: Instant::now(),
         });
         Ok(errors)
     }
