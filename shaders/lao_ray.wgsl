@@ -3,8 +3,8 @@
 // voxel centre. Shared by lao.wgsl and cao_lao.wgsl; CPU twin: ao::lao::ray_sum.
 //
 // With skipping (ao::sparse), runs of samples known to have opacity exactly 0 (outside
-// the volume, or inside a cell of RAY_CELL³ voxels the LAO LUT leaves empty) are not fetched: their factor
-// is 1, and the transmittance is still added once per sample, in order, so the sum is
+// the volume, or inside a cell of RAY_CELL³ voxels the LAO LUT leaves empty) are not
+// fetched: their factor is 1, and the transmittance is still added once per sample, in order, so the sum is
 // the dense one bit for bit. The including shader declares `opacity_at(uvw) -> f32`,
 // `p.dims: vec4<u32>`, `p.grid: vec4<u32>` (cells per axis, skipping 0/1) and
 // `occupied: array<u32>` (1 per cell where a sample may be opaque).
@@ -12,9 +12,9 @@
 // Whether this pipeline skips at all: `false` in the dense pipelines (`--no-skipping`),
 // which a CPU driver then compiles without the skipping code (ao::sparse::dense_variant).
 const SKIPPING: bool = true;
-// Whether rays step over empty blocks: `false` in CAO's per-frame step V
-// (ao::sparse::frame_variant), whose rays start at surfaces the clip shapes bare and
-// cross occupied bricks, where the per-sample check costs more than it saves.
+// Whether rays step over empty cells: `false` for rays from readable voxels only (LAO
+// for rendering, CAO's V_PAO and frames: ao::sparse::readable_variant), which start at
+// surfaces and cross occupied cells, where the per-sample check costs more than it saves.
 const RAY_SKIPPING: bool = true;
 // Edge of the cells rays step over, in voxels (ao::sparse::RAY_CELL).
 const RAY_CELL: u32 = 4u;

@@ -270,6 +270,17 @@ fn gpu_matches_cpu_twin_for_every_ray_set() {
     }
 }
 
+/// A 48×48×40 piece of the cranium CT with bone and air, under `ct-bone`, as texels.
+fn cranium_bone_crop() -> (TransferFunction, volao::render::texels::VolumeTexels) {
+    let full = volume::load(&data("raw/cranium-ct.raw"), &LoadOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"))
+        .volume;
+    let v = crop(&full, [30, 100, 30], [48, 48, 40]);
+    let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
+    let t = texels(&v);
+    (tf, t)
+}
+
 /// Sparse LAO as rendering computes it (the voxel list: readable voxels only, rays
 /// stepping over empty bricks) gives the image of the dense computation, pixel for
 /// pixel; with the per-voxel readability test one voxel too tight, readable voxels lose
@@ -281,12 +292,7 @@ fn sparse_lao_renders_the_dense_image_and_one_voxel_tighter_loses_readable_voxel
     let gpu = device();
     let lao = gpu.stage::<LaoGpu>().unwrap_or_else(|e| panic!("{e}"));
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
-    let full = volume::load(&data("raw/cranium-ct.raw"), &LoadOptions::default())
-        .unwrap_or_else(|e| panic!("{e}"))
-        .volume;
-    let v = crop(&full, [30, 100, 30], [48, 48, 40]);
-    let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
-    let t = texels(&v);
+    let (tf, t) = cranium_bone_crop();
     let mut vol =
         GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     let lut = lao_lut(&tf, &t);
@@ -351,12 +357,7 @@ fn ray_cells_without_their_apron_change_the_sums() {
     use volao::ao::sparse::RAY_CELL;
     let gpu = device();
     let lao = gpu.stage::<LaoGpu>().unwrap_or_else(|e| panic!("{e}"));
-    let full = volume::load(&data("raw/cranium-ct.raw"), &LoadOptions::default())
-        .unwrap_or_else(|e| panic!("{e}"))
-        .volume;
-    let v = crop(&full, [30, 100, 30], [48, 48, 40]);
-    let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
-    let t = texels(&v);
+    let (tf, t) = cranium_bone_crop();
     let vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     let lut = lao_lut(&tf, &t);
     let rays = Rays::uniform(RaySet::Fourteen.directions());

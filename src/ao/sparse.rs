@@ -345,7 +345,7 @@ impl Bricks {
             .for_each(|(slab, out)| {
                 let z0 = slab * BRICK;
                 let z1 = (z0 + BRICK).min(dims[2]);
-                let zs = window(z0, dims[2]).start().to_owned()..=*window(z1 - 1, dims[2]).end();
+                let zs = *window(z0, dims[2]).start()..=*window(z1 - 1, dims[2]).end();
                 // The in-plane window range of each slice the slab's windows reach.
                 let planes: Vec<(Vec<f32>, Vec<f32>)> = zs
                     .clone()
@@ -584,8 +584,8 @@ pub fn unpack(p: u32) -> [usize; 3] {
 
 /// The LAO rays' empty-space test on the CPU (twin of `empty_run` in `lao_ray.wgsl`):
 /// how many samples from `m` on (all before the last, `samples`) have opacity exactly 0
-/// because they lie outside the volume or in an unoccupied cell ([`RAY_CELL`]); 0 when sample `m`
-/// must be fetched.
+/// because they lie outside the volume or in an unoccupied cell ([`RAY_CELL`]); 0 when
+/// sample `m` must be fetched.
 pub fn empty_run(
     bricks: &Bricks,
     dims: [usize; 3],

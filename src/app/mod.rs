@@ -676,8 +676,8 @@ impl Viewer {
         }
         let now = Instant::now();
         let ready = self.load_job.is_none() && self.derived_ready() && self.viewport_current;
-        let share = self.cao_percent_recomputed().unwrap_or(0.0);
-        let cao = self.cao_percent_recomputed().is_some();
+        let share = self.cao_percent_recomputed();
+        let cao = share.is_some();
         let b = &mut self.scripted;
         if b.bench_start.is_none() {
             // Start once the first full-quality image with AO is on screen.
@@ -733,7 +733,7 @@ impl Viewer {
                 mean * 1e3,
                 between[between.len() / 2] * 1e3,
                 between[0] * 1e3,
-                share,
+                share.unwrap_or(0.0),
                 self.gpu.describe()
             );
             println!(

@@ -525,7 +525,9 @@ impl Viewer {
         self.viewport_current = !busy && !moving && !tf_waiting;
         if let Some(stats) = pumped.stats {
             self.derived.cao_stats = Some(stats);
-            self.scripted.cao_updates.push(Instant::now());
+            if self.options.bench_clip_drag.is_some() {
+                self.scripted.cao_updates.push(Instant::now());
+            }
         }
         for e in pumped.clip_errors {
             self.toast(format!("Clip shape left out: {e}"), true);
