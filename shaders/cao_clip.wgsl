@@ -14,7 +14,7 @@ struct Params {
     spacing: vec4<f32>,   // mm per voxel, w: N extra MSAA samples
     half: vec4<f32>,      // half the volume's extent (mm)
     lut_map: vec4<f32>,   // a, b, entries − 1
-    mode: vec4<u32>,      // full (0/1), V_PAO marks unreadable voxels (0/1)
+    mode: vec4<u32>,      // full (0/1), V_PAO marks unreadable voxels (0/1), clipped → 1 (0/1)
 }
 
 // Marks in V_AO between steps IV and V (an ambient factor is never negative).
@@ -44,25 +44,77 @@ fn position_mm(v: vec3<u32>, offset: vec3<f32>) -> vec3<f32> {
     return (vec3<f32>(v) + 0.5 + offset) * p.spacing.xyz - p.half.xyz;
 }
 
+// Whether voxels share their corners' clip tests (below): `false` in the dense pipeline
+// (`--no-skipping`, ao::sparse::dense_variant), which tests the 8 corners of every
+// voxel as Algorithm 2 is written. The same classifications either way.
+const SHARED_CORNERS: bool = true;
+
+// The classification (bit 0 visible, bit 1 affected) of the corners of this workgroup's
+// voxels: the 9 × 9 × 2 lattice points of one layer of a brick, shared by up to 8 voxels
+// each (3.5 clip tests per voxel instead of 9). Lattice point L is voxel L's corner
+// (−½, −½, −½): the same position, computed the same way, as every voxel it is a corner
+// of would compute it.
+var<workgroup> corners: array<u32, 162>;
+// Voxels of this workgroup in category b and clipped: one global atomic each per
+// workgroup (millions on one counter serialise on a CPU driver).
+var<workgroup> affected: atomic<u32>;
+var<workgroup> clipped: atomic<u32>;
+
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let at_voxel = brick_voxel(wid, lid);
-    if at_voxel.w == 0u {
+    let slot = brick_slot(wid);
+    if slot >= p.chunk.y {
+        return;  // the whole workgroup
+    }
+    let packed = bricks[p.chunk.x + slot];
+    let brick = vec3<u32>(packed & 0x3ffu, (packed >> 10u) & 0x3ffu, (packed >> 20u) & 0x3ffu);
+    let origin = brick * 8u + vec3<u32>(0u, 0u, wid.x);
+    if SHARED_CORNERS {
+        for (var i = lid.x + 8u * lid.y; i < 162u; i = i + 64u) {
+            let l = origin + vec3<u32>(i % 9u, (i / 9u) % 9u, i / 81u);
+            corners[i] = classify_bits(position_mm(l, vec3<f32>(-0.5)));
+        }
+    }
+    workgroupBarrier();
+    classify_voxel(origin + vec3<u32>(lid.x, lid.y, 0u), lid.x + 9u * lid.y);
+    workgroupBarrier();
+    if lid.x == 0u && lid.y == 0u {
+        atomicAdd(&counters[0], atomicLoad(&affected));
+        atomicAdd(&counters[1], atomicLoad(&clipped));
+    }
+}
+
+// clip_classify's (visible, affected) as bits 0 and 1.
+fn classify_bits(pos: vec3<f32>) -> u32 {
+    let t = clip_classify(pos);
+    return u32(t.x) | (u32(t.y) << 1u);
+}
+
+// Corner k (bit a of k: +½ on axis a, else −½) of voxel v, whose corner (−½, −½, −½) is
+// `corners[c]` when they are shared.
+fn corner_bits(v: vec3<u32>, c: u32, k: u32) -> u32 {
+    if SHARED_CORNERS {
+        return corners[c + (k & 1u) + 9u * ((k >> 1u) & 1u) + 81u * ((k >> 2u) & 1u)];
+    }
+    let offset = vec3<f32>(f32(k & 1u), f32((k >> 1u) & 1u), f32((k >> 2u) & 1u)) - 0.5;
+    return classify_bits(position_mm(v, offset));
+}
+
+// Step IV for voxel v, whose corner (−½, −½, −½) is `corners[c]` when they are shared.
+fn classify_voxel(v: vec3<u32>, c: u32) {
+    if any(v >= p.dims.xyz) {
         return;
     }
-    let v = at_voxel.xyz;
     var visible = 0u;
     var dilated = 0u;
-    // Centre and the 8 corners of the voxel.
-    for (var k = 0u; k < 9u; k = k + 1u) {
-        var offset = vec3<f32>(0.0);
-        if k > 0u {
-            let c = k - 1u;
-            offset = vec3<f32>(f32(c & 1u), f32((c >> 1u) & 1u), f32((c >> 2u) & 1u)) - 0.5;
-        }
-        let t = clip_classify(position_mm(v, offset));
-        visible = visible + u32(t.x);
-        dilated = dilated + u32(t.y);
+    // The centre and the 8 corners of the voxel.
+    let t = clip_classify(position_mm(v, vec3<f32>(0.0)));
+    visible = visible + u32(t.x);
+    dilated = dilated + u32(t.y);
+    for (var k = 0u; k < 8u; k = k + 1u) {
+        let bits = corner_bits(v, c, k);
+        visible = visible + (bits & 1u);
+        dilated = dilated + (bits >> 1u);
     }
     let n = u32(p.spacing.w);
     var opacity = 0.0;
@@ -86,13 +138,15 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
             ao = min(pao, 1.0);  // unaffected: copy
         }
     } else if visible > 0u {
-        atomicAdd(&counters[0], 1u);
+        atomicAdd(&affected, 1u);
         if unread {
             ao = 1.0;
         }
     } else {
-        ao = CLIPPED;
-        atomicAdd(&counters[1], 1u);
+        // With p.mode.z step V runs over a list of the voxels to ray cast only
+        // (cao_gather.wgsl): V_AO = 1 here, what step V over bricks would write.
+        ao = select(CLIPPED, 1.0, p.mode.z != 0u);
+        atomicAdd(&clipped, 1u);
     }
     let at = vec3<i32>(v);
     textureStore(v_o, at, vec4<f32>(opacity, 0.0, 0.0, 1.0));

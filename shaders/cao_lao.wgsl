@@ -4,7 +4,8 @@
 // unclipped voxel is ray cast: the "LAO every frame" baseline, and how V_PAO itself is
 // made (no clipping). A list entry without the NEAR bit is a brick no shape is near
 // (listed by the baseline only): nothing clipped, step IV left no mark.
-// Both paths run the very same `lao` function, which is what makes CAO bit-exact.
+// Both paths run the very same `lao` function (cao_ray.wgsl, which a frame's listed ray
+// cast, cao_listed.wgsl, runs too), which is what makes CAO bit-exact.
 // Runs over a brick list (ao::sparse); LAO rays step over empty cells (lao_ray.wgsl).
 // CPU twin: src/ao/cao.rs (`lao_on_opacity_cpu`).
 //!include bricks.wgsl
@@ -18,7 +19,7 @@ const UNREAD: f32 = 2.0;
 // Whether this is the per-frame pipeline (ao::sparse::frame_variant): step IV has
 // resolved every unreadable voxel already.
 const FRAME: bool = false;
-//!include lao_ray.wgsl
+//!include cao_ray.wgsl
 //!include readable.wgsl
 
 struct Params {
@@ -40,25 +41,6 @@ struct Params {
 @group(0) @binding(7) var<storage, read_write> counters: array<atomic<u32>, 4>; // [2]: ray cast
 @group(0) @binding(8) var volume: texture_3d<f32>;
 @group(0) @binding(9) var<storage, read> readable_prefix: array<u32>;
-
-fn opacity_at(uvw: vec3<f32>) -> f32 {
-    if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) {
-        return 0.0;
-    }
-    return textureSampleLevel(v_o, linear_clamp, uvw, 0.0).r;
-}
-
-fn lao(v: vec3<u32>) -> f32 {
-    let centre = (vec3<f32>(v) + 0.5) / vec3<f32>(p.dims.xyz);
-    let samples = p.counts.y;
-    var total = 0.0;
-    for (var k = 0u; k < p.counts.x; k = k + 1u) {
-        let ray = rays[k];
-        let step = ray.xyz * p.mm_to_uvw.xyz;
-        total = total + ray.w * lao_ray(centre, step, samples) / f32(samples);
-    }
-    return total / f32(p.counts.x);
-}
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {

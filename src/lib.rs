@@ -20,7 +20,8 @@
 //!    (LAO, CAO, positional AO, filter maps, cone tracing; each a GPU pass with its CPU
 //!    twin beside it) and the GPU or the twin; [`ao::sparse`] says which bricks and voxels LAO
 //!    and CAO visit (those the ray caster can read, near a shape) and which 4³ cells
-//!    their rays step over. [`clip`] turns clip shapes into the depth and dilation maps CAO and the ray
+//!    their rays step over; a CAO frame lists the voxels its step IV marked and ray
+//!    casts only those ([`ao::cao`]'s voxel list). [`clip`] turns clip shapes into the depth and dilation maps CAO and the ray
 //!    caster clip with.
 //! 6. [`render`] ray-casts the volume into an image in one of its [`render::RenderMode`]s
 //!    (compositing with the AO factor on ambient and diffuse light, shadows from

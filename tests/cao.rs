@@ -71,6 +71,8 @@ struct Scene {
     tf: TransferFunction,
     rays: Rays,
     frame: Frame,
+    /// Frames whose step V ran over the list of the voxels to ray cast.
+    listed: usize,
 }
 
 fn scene(v: &Volume, preset: Preset, set: RaySet) -> Scene {
@@ -116,6 +118,7 @@ fn scene(v: &Volume, preset: Preset, set: RaySet) -> Scene {
         tf,
         rays,
         frame,
+        listed: 0,
     }
 }
 
@@ -140,7 +143,9 @@ impl Scene {
             frame,
             ..
         } = self;
-        run(gpu, vol, rc, frame, cao, shapes, mode, reach)
+        let (ao, pixels, category_b, listed) = run(gpu, vol, rc, frame, cao, shapes, mode, reach);
+        self.listed += usize::from(listed);
+        (ao, pixels, category_b)
     }
 
     /// The same with the dense CAO.
@@ -158,7 +163,8 @@ impl Scene {
             frame,
             ..
         } = self;
-        run(gpu, vol, rc, frame, dense, shapes, mode, reach)
+        let (ao, pixels, category_b, _) = run(gpu, vol, rc, frame, dense, shapes, mode, reach);
+        (ao, pixels, category_b)
     }
 }
 
@@ -172,7 +178,7 @@ fn run(
     shapes: &[ClipShape],
     mode: CaoMode,
     reach: f32,
-) -> (Vec<f32>, Vec<[u8; 4]>, f64) {
+) -> (Vec<f32>, Vec<[u8; 4]>, f64, bool) {
     let stats = cao
         .update(gpu, &vol.texels, shapes, MAP, reach, mode)
         .unwrap_or_else(|e| panic!("{e}"));
@@ -186,7 +192,7 @@ fn run(
         .unwrap_or_else(|e| panic!("{e}"));
     // Category b (Algorithm 2's "recompute") among the voxels step IV visited.
     let category_b = 100.0 * stats.category_b as f64 / stats.voxels.max(1) as f64;
-    (ao, image.pixels, category_b)
+    (ao, image.pixels, category_b, stats.listed)
 }
 
 /// Per voxel: whether the ray caster can read its AO, found here without the library's
@@ -342,6 +348,9 @@ fn exactness(v: &Volume, preset: Preset, set: RaySet, mode: ClipMode, seed: u64,
         busy * 4 >= recomputed.len(),
         "poses should recompute some but not all voxels: {recomputed:?}"
     );
+    // Sparse CAO's frames ray cast over a list of their voxels where it holds them all
+    // (ao::cao::listed): some frames here must have, or the list went untested.
+    assert!(s.listed > 0, "no frame ray cast over the voxel list");
 }
 
 #[test]
@@ -499,7 +508,7 @@ fn readable_bricks_one_voxel_too_tight_break_exactness() {
         ..
     } = &mut s;
     for (what, cao) in [("bricks", &mut wrong), ("voxels", &mut wrong_voxels)] {
-        let (broken_ao, broken, _) =
+        let (broken_ao, broken, _, _) =
             run(gpu, vol, rc, frame, cao, shapes, CaoMode::Selective, reach);
         let wrong_pixels = differing(&broken, &exact_img);
         let wrong_voxels = differing_readable(&broken_ao, &exact_ao, &readable);

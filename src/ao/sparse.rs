@@ -517,13 +517,18 @@ fn plane_ranges(
     (lo, hi)
 }
 
-/// A skipping shader's source (one including `lao_ray.wgsl`) made into its dense
-/// variant: the skipping code is compiled out, so that `--no-skipping` runs as fast as
-/// the plain loops did.
+/// A skipping shader's source (one including `lao_ray.wgsl`, or CAO's step IV) made into
+/// its dense variant, the computation as the papers write it: the skipping code is
+/// compiled out, so that `--no-skipping` runs as fast as the plain loops did, and step
+/// IV tests the corners of every voxel itself (`cao_clip.wgsl`; the same bits).
 pub fn dense_variant(code: String) -> String {
     code.replace(
         "const SKIPPING: bool = true;",
         "const SKIPPING: bool = false;",
+    )
+    .replace(
+        "const SHARED_CORNERS: bool = true;",
+        "const SHARED_CORNERS: bool = false;",
     )
 }
 

@@ -2,9 +2,10 @@
 //!
 //! [`CaoGpu::begin`] re-poses the clip maps and writes the brick lists; each
 //! [`CaoGpu::advance`] submits the chunks of step IV, then of step V, that fit in the
-//! [`Pacer`]'s slice of one UI frame; once all are submitted, the counters are copied and
-//! mapped asynchronously, and [`CaoGpu::poll_stats`] returns the frame's figures when the
-//! map has completed. The work and its order are those of [`CaoGpu::update`] (the same
+//! [`Pacer`]'s slice of one UI frame (step V over the voxel list: gathering, then, once
+//! the list's length has come back through an asynchronous map, the listed ray cast);
+//! once all are submitted, the counters are copied and mapped asynchronously, and
+//! [`CaoGpu::poll_stats`] returns the frame's figures when the map has completed. The work and its order are those of [`CaoGpu::update`] (the same
 //! chunks of the same lists through the same pipelines; only where submissions are cut
 //! differs, which changes no voxel), so the viewer's `V_AO` is bit for bit the one
 //! `volao render` computes.
@@ -42,10 +43,32 @@ pub struct CaoFrame {
     all_submitted: bool,
     /// The counters' copy and its map, until the figures are taken.
     counters: Option<(wgpu::Buffer, Mapped)>,
+    /// Step V over the voxel list ([`super::listed`]), when the frame lists them.
+    listing: Option<Listing>,
+}
+
+/// How far step V over the voxel list has come.
+#[derive(Debug, Default)]
+struct Listing {
+    /// Bricks gathered.
+    gathered: u32,
+    /// The counters' copy after gathering and its map, until the list's length is read.
+    count_map: Option<(wgpu::Buffer, Mapped)>,
+    /// The list's length.
+    count: Option<u64>,
+    /// Groups of entries ray cast.
+    traced: u32,
+    /// The list did not hold them all: step V runs over bricks.
+    over_bricks: bool,
 }
 
 impl CaoFrame {
-    pub(super) fn new(lists: Lists, mode: CaoMode, clip_errors: Vec<String>) -> Self {
+    /// A frame over `lists`; `listing`: step V over the voxel list.
+    pub(super) fn new(
+        lists: Lists,
+        (mode, listing): (CaoMode, bool),
+        clip_errors: Vec<String>,
+    ) -> Self {
         CaoFrame {
             lists,
             mode,
@@ -55,6 +78,7 @@ impl CaoFrame {
             done: [None, None],
             all_submitted: false,
             counters: None,
+            listing: listing.then(Listing::default),
         }
     }
 
@@ -69,13 +93,61 @@ impl CaoFrame {
         &self.clip_errors
     }
 
-    /// Bricks submitted and bricks in all, over both steps (for progress).
+    /// Bricks submitted and bricks in all, over both steps (for progress; gathering the
+    /// voxel list counts as a brick's worth of work per brick).
     pub fn progress(&self) -> (u32, u32) {
+        let gathered = self.listing.as_ref().map_or(0, |l| l.gathered);
         (
-            self.next[0] + self.next[1],
-            (self.lists.clip.len() + self.lists.lao.len()) as u32,
+            self.next[0] + self.next[1] + gathered,
+            (self.lists.clip.len() + self.lists.lao.len()) as u32 + gathered,
         )
     }
+}
+
+/// Copies the counters into a buffer of their own and maps it asynchronously.
+fn map_counters(
+    gpu: &Gpu,
+    counters: &wgpu::Buffer,
+    label: &str,
+) -> Result<(wgpu::Buffer, Mapped), GpuError> {
+    let device = &gpu.device;
+    let readback = readback_buffer(device, label, 16);
+    validated(device, label, || {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(counters, 0, &readback, 0, 16);
+        gpu.queue.submit([encoder.finish()]);
+    })?;
+    let mapped: Mapped = Arc::default();
+    let m = Arc::clone(&mapped);
+    readback
+        .slice(..)
+        .map_async(wgpu::MapMode::Read, move |result| {
+            if let Ok(mut state) = m.lock() {
+                *state = Some(result.map_err(|e| e.to_string()));
+            }
+        });
+    Ok((readback, mapped))
+}
+
+/// The bytes of a mapped counters' copy once its map has completed (`None` before).
+fn mapped_bytes(
+    (buffer, mapped): &(wgpu::Buffer, Mapped),
+    label: &str,
+) -> Option<Result<Vec<u8>, GpuError>> {
+    let state = mapped.lock().ok()?.clone()?;
+    let failed = |message: String| GpuError::Readback {
+        stage: label.into(),
+        message,
+    };
+    if let Err(message) = state {
+        return Some(Err(failed(message)));
+    }
+    let bytes = match buffer.slice(..).get_mapped_range() {
+        Ok(view) => view.to_vec(),
+        Err(e) => return Some(Err(failed(e.to_string()))),
+    };
+    buffer.unmap();
+    Some(Ok(bytes))
 }
 
 /// A callback stamping when the work submitted so far is done.
@@ -108,7 +180,7 @@ impl CaoGpu {
             let clip_group = self.iv_clip_group(device);
             let pass = Pass {
                 label: "Cao::step_iv",
-                pipeline: &self.pipelines.clip,
+                pipeline: self.clip_pipeline(),
                 bind_groups: &[&self.clip_group, &clip_group],
                 uniforms: &self.clip_uniforms,
             };
@@ -128,49 +200,40 @@ impl CaoGpu {
         if frame.done[0].is_none() {
             frame.done[0] = Some(stamp_when_done(gpu));
         }
-        let v = self.v_dispatch(&frame.lists);
-        let (pipeline, group, uniforms) = self.v_parts(true);
-        let pass = Pass {
-            label: "Cao::step_v",
-            pipeline,
-            bind_groups: &[group],
-            uniforms,
-        };
-        while frame.next[1] < v.len() {
-            let left = (v.len() - frame.next[1]) as u64;
-            let n = pacer.take(gpu, pass.label, (v.brick_work(), left), FIRST_RATE);
-            if n == 0 {
-                return Ok(false);
+        if !self.advance_listed(gpu, frame, pacer)? {
+            return Ok(false);
+        }
+        if frame.listing.as_ref().is_none_or(|l| l.over_bricks) {
+            let v = self.v_dispatch(&frame.lists);
+            let (pipeline, group, uniforms) = self.v_parts(true);
+            let pass = Pass {
+                label: "Cao::step_v",
+                pipeline,
+                bind_groups: &[group],
+                uniforms,
+            };
+            while frame.next[1] < v.len() {
+                let left = (v.len() - frame.next[1]) as u64;
+                let n = pacer.take(gpu, pass.label, (v.brick_work(), left), FIRST_RATE);
+                if n == 0 {
+                    return Ok(false);
+                }
+                let n = n.min(v.max_chunk() as u64);
+                let piece = (pass.label, n * v.brick_work());
+                frame.next[1] += pacer.submit(gpu, piece, FIRST_RATE, || {
+                    v.submit_chunk(
+                        gpu,
+                        &pass,
+                        self.lao_params,
+                        (frame.next[1], n as u32),
+                        |_| {},
+                    )
+                })?;
             }
-            let n = n.min(v.max_chunk() as u64);
-            let piece = (pass.label, n * v.brick_work());
-            frame.next[1] += pacer.submit(gpu, piece, FIRST_RATE, || {
-                v.submit_chunk(
-                    gpu,
-                    &pass,
-                    self.lao_params,
-                    (frame.next[1], n as u32),
-                    |_| {},
-                )
-            })?;
         }
         frame.done[1] = Some(stamp_when_done(gpu));
         // The counters, read back asynchronously into a buffer of this frame's own.
-        let readback = readback_buffer(device, "Cao::counters_readback", 16);
-        validated(device, "Cao::counters", || {
-            let mut encoder = device.create_command_encoder(&Default::default());
-            encoder.copy_buffer_to_buffer(&self.counters, 0, &readback, 0, 16);
-            gpu.queue.submit([encoder.finish()]);
-        })?;
-        let mapped: Mapped = Arc::default();
-        let m = Arc::clone(&mapped);
-        readback
-            .slice(..)
-            .map_async(wgpu::MapMode::Read, move |result| {
-                if let Ok(mut state) = m.lock() {
-                    *state = Some(result.map_err(|e| e.to_string()));
-                }
-            });
+        let (readback, mapped) = map_counters(gpu, &self.counters, "Cao::counters")?;
         frame.counters = Some((readback, mapped));
         frame.all_submitted = true;
         Ok(true)
@@ -180,27 +243,14 @@ impl CaoGpu {
     /// stage times as seen from the UI thread: from `begin` to step IV done, and from
     /// there to step V done. Returns them once.
     pub fn poll_stats(&self, frame: &mut CaoFrame) -> Option<Result<CaoStats, GpuError>> {
-        let state = {
-            let (_, mapped) = frame.counters.as_ref()?;
-            mapped.lock().ok()?.clone()?
-        };
-        let (buffer, _) = frame.counters.take()?;
-        if let Err(message) = state {
-            return Some(Err(GpuError::Readback {
-                stage: "Cao::counters".into(),
-                message,
-            }));
-        }
-        let bytes = match buffer.slice(..).get_mapped_range() {
-            Ok(view) => view.to_vec(),
+        let bytes = match mapped_bytes(frame.counters.as_ref()?, "Cao::counters")? {
+            Ok(bytes) => bytes,
             Err(e) => {
-                return Some(Err(GpuError::Readback {
-                    stage: "Cao::counters".into(),
-                    message: e.to_string(),
-                }));
+                frame.counters = None;
+                return Some(Err(e));
             }
         };
-        buffer.unmap();
+        frame.counters = None;
         let c: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
         let when = |i: usize| {
             frame.done[i]
@@ -213,8 +263,87 @@ impl CaoGpu {
             (iv - frame.started).as_secs_f64(),
             v.saturating_duration_since(iv).as_secs_f64(),
         ];
-        let mut stats = self.stats_of(&frame.lists, [c[0], c[1], c[2]].map(u64::from), seconds);
+        let listed = frame.listing.as_ref().is_some_and(|l| !l.over_bricks);
+        let c = [c[0], c[1], c[2], c[3]].map(u64::from);
+        let mut stats = self.stats_of(&frame.lists, (c, listed), seconds);
         stats.clip_errors = frame.clip_errors.clone();
         Some(Ok(stats))
+    }
+}
+
+impl CaoGpu {
+    /// Step V over the voxel list, as far as the pacer's slice goes: gathering, then
+    /// (once the list's length is back, read without waiting) the ray cast. True once it
+    /// is all submitted, or when the frame does not list its voxels or they did not fit.
+    fn advance_listed(
+        &self,
+        gpu: &Gpu,
+        frame: &mut CaoFrame,
+        pacer: &mut Pacer,
+    ) -> Result<bool, GpuError> {
+        let Some(listing) = frame.listing.as_mut() else {
+            return Ok(true);
+        };
+        if listing.over_bricks {
+            return Ok(true);
+        }
+        let Some((parts, chunks)) = self.gather_parts(&frame.lists) else {
+            listing.over_bricks = true;
+            return Ok(true);
+        };
+        let group = [parts.2];
+        let pass = super::listed::pass(&parts, &group);
+        while listing.gathered < chunks.len() {
+            let left = (chunks.len() - listing.gathered) as u64;
+            let n = pacer.take(gpu, pass.label, (chunks.brick_work(), left), FIRST_RATE);
+            if n == 0 {
+                return Ok(false);
+            }
+            let n = n.min(chunks.max_chunk() as u64);
+            let piece = (pass.label, n * chunks.brick_work());
+            let first = listing.gathered;
+            listing.gathered += pacer.submit(gpu, piece, FIRST_RATE, || {
+                chunks.submit_chunk(gpu, &pass, self.lao_params, (first, n as u32), |_| {})
+            })?;
+        }
+        let count = match listing.count {
+            Some(count) => count,
+            None => {
+                if listing.count_map.is_none() {
+                    listing.count_map = Some(map_counters(gpu, &self.counters, "Cao::listed")?);
+                }
+                let Some(bytes) = listing
+                    .count_map
+                    .as_ref()
+                    .and_then(|m| mapped_bytes(m, "Cao::listed"))
+                else {
+                    return Ok(false);
+                };
+                listing.count_map = None;
+                let count = CaoGpu::listed_of(&bytes?);
+                listing.count = Some(count);
+                count
+            }
+        };
+        let Some((parts, chunks, params)) = self.trace_parts(count) else {
+            listing.over_bricks = true;
+            return Ok(true);
+        };
+        let group = [parts.2];
+        let pass = super::listed::pass(&parts, &group);
+        while listing.traced < chunks.len() {
+            let left = (chunks.len() - listing.traced) as u64;
+            let n = pacer.take(gpu, pass.label, (chunks.brick_work(), left), FIRST_RATE);
+            if n == 0 {
+                return Ok(false);
+            }
+            let n = n.min(chunks.max_chunk() as u64);
+            let piece = (pass.label, n * chunks.brick_work());
+            let first = listing.traced;
+            listing.traced += pacer.submit(gpu, piece, FIRST_RATE, || {
+                chunks.submit_chunk(gpu, &pass, params, (first, n as u32), |_| {})
+            })?;
+        }
+        Ok(true)
     }
 }

@@ -21,8 +21,8 @@
 //!
 //! Both steps run over brick lists ([`super::sparse`]): step IV over the bricks near a
 //! shape now or in the previous frame (their `V_o` and `V_m` change), step V over those
-//! of them the ray caster can read (every readable brick in the baseline), and LAO rays
-//! step over empty cells. Outside the lists `V_o = α`, `V_m = 1` and `V_AO = V_PAO`
+//! of them the ray caster can read (every readable brick in the baseline); a CAO frame
+//! then ray casts only the voxels step IV marked, from a list ([`listed`]). Outside the lists `V_o = α`, `V_m = 1` and `V_AO = V_PAO`
 //! hold from the previous frames; unreadable voxels keep whatever they hold, which no
 //! pixel uses. [`Bricks::dense`] turns all of it off.
 
@@ -44,9 +44,11 @@ use std::time::Instant;
 pub use super::settings::DEFAULT_MSAA;
 pub use cpu::{clip_volume_cpu, lao_on_opacity_cpu};
 pub use frame::CaoFrame;
+pub use listed::MAX_LIST_BYTES_PER_VOXEL;
 
 mod cpu;
 mod frame;
+mod listed;
 
 /// Selective recomputation (CAO) or the baseline that ray casts every voxel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -102,7 +104,11 @@ struct ClipParams {
     /// 1: `V_PAO` marks the voxels the ray caster cannot read (a frame with skipping,
     /// after the `V_PAO` run), 0: it does not (that run itself, or no skipping).
     unread_marked: u32,
-    _pad2: [u32; 2],
+    /// 1: clipped voxels get `V_AO` = 1 here, what step V over bricks would write (a
+    /// frame whose step V runs over the voxel list, which holds only voxels to ray
+    /// cast), 0: they are marked CLIPPED.
+    clipped_one: u32,
+    _pad2: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<ClipParams>() == 96);
@@ -119,7 +125,9 @@ struct LaoParams {
     _pad0: f32,
     rays: u32,
     samples: u32,
-    _pad1: [u32; 2],
+    /// Entries of the voxel list (its ray cast, `cao_listed.wgsl`).
+    listed: u32,
+    _pad1: u32,
     /// Bricks per axis and whether rays step over empty ones (0/1).
     grid: [u32; 4],
     /// The per-voxel readability test ([`VoxelTest::uniform`]).
@@ -147,7 +155,9 @@ pub enum CaoVolume {
 /// CAO's pipelines and sampler, built once per device.
 #[derive(Debug)]
 pub struct CaoPipelines {
+    /// Step IV, and its dense variant (`--no-skipping`: every voxel tests its corners).
     clip: wgpu::ComputePipeline,
+    clip_dense: wgpu::ComputePipeline,
     /// Step V with skipping, and its dense variant (`--no-skipping`).
     lao: wgpu::ComputePipeline,
     lao_dense: wgpu::ComputePipeline,
@@ -155,6 +165,8 @@ pub struct CaoPipelines {
     lao_readable: wgpu::ComputePipeline,
     /// Step V of a frame with skipping: readable voxels, every ray sample fetched.
     lao_frame: wgpu::ComputePipeline,
+    /// A frame's step V over a list of its voxels.
+    listed: listed::ListedPipelines,
     sampler: wgpu::Sampler,
     /// The format of `V_o`, `V_PAO` and `V_AO`: R16Float (2 bytes per voxel each) where
     /// the adapter can write it from a shader, else R32Float.
@@ -171,6 +183,9 @@ impl crate::gpu::Stage for CaoPipelines {
             };
             let format_of = |code: String| code.replace("r16float", name);
             let clip_module = shaders::module_with(device, "cao_clip.wgsl", format_of)?;
+            let clip_dense_module = shaders::module_with(device, "cao_clip.wgsl", |code| {
+                super::sparse::dense_variant(format_of(code))
+            })?;
             let lao_module = shaders::module_with(device, "cao_lao.wgsl", format_of)?;
             let dense_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
                 super::sparse::dense_variant(format_of(code))
@@ -181,8 +196,16 @@ impl crate::gpu::Stage for CaoPipelines {
             let frame_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
                 super::sparse::frame_variant(format_of(code))
             })?;
+            let listed = listed::ListedPipelines::create(device, format_of)?;
             validated(device, "CaoPipelines::create", || CaoPipelines {
                 clip: compute_pipeline(device, "Cao::clip", &clip_module, "main", None),
+                clip_dense: compute_pipeline(
+                    device,
+                    "Cao::clip_dense",
+                    &clip_dense_module,
+                    "main",
+                    None,
+                ),
                 lao: compute_pipeline(device, "Cao::lao", &lao_module, "main", None),
                 lao_dense: compute_pipeline(device, "Cao::lao_dense", &dense_module, "main", None),
                 lao_readable: compute_pipeline(
@@ -193,6 +216,7 @@ impl crate::gpu::Stage for CaoPipelines {
                     None,
                 ),
                 lao_frame: compute_pipeline(device, "Cao::lao_frame", &frame_module, "main", None),
+                listed,
                 sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
                 format,
             })
@@ -209,6 +233,14 @@ impl crate::gpu::Stage for CaoPipelines {
 }
 
 impl CaoPipelines {
+    /// Step IV's pipeline for `bricks`.
+    fn clip_for(&self, bricks: &Bricks) -> &wgpu::ComputePipeline {
+        match bricks.skipping {
+            true => &self.clip,
+            false => &self.clip_dense,
+        }
+    }
+
     /// Step V's pipeline for `bricks`, for `V_PAO` or (`frame`) for a frame.
     fn lao_for(&self, bricks: &Bricks, frame: bool) -> &wgpu::ComputePipeline {
         match (bricks.skipping, frame) {
@@ -242,6 +274,9 @@ pub struct CaoStats {
     pub lao_seconds: f64,
     /// Shapes left out, with why.
     pub clip_errors: Vec<String>,
+    /// Step V ray cast over a list of the voxels to ray cast ([`listed`]) rather than
+    /// over bricks.
+    pub listed: bool,
 }
 
 impl CaoStats {
@@ -279,6 +314,11 @@ pub struct CaoGpu {
     views: [wgpu::TextureView; 3],
     counters: wgpu::Buffer,
     counters_readback: wgpu::Buffer,
+    /// The LAO rays and the ray cells, for the listed ray cast's bind group.
+    rays_buffer: wgpu::Buffer,
+    occupied_buffer: wgpu::Buffer,
+    /// A frame's voxels to ray cast ([`listed`]), made on the first frame that lists.
+    list: Option<listed::VoxelList>,
     /// This frame's brick lists: step IV's, then step V's (room for two of every brick).
     lists: wgpu::Buffer,
     /// Uniforms of steps IV and V, rewritten per submission, and the bind groups reading them.
@@ -369,7 +409,8 @@ impl CaoGpu {
             _pad1: 0.0,
             full: 0,
             unread_marked: 0,
-            _pad2: [0; 2],
+            clipped_one: 0,
+            _pad2: 0,
         };
         let lao_params = LaoParams {
             bricks: BrickChunk::of(dims),
@@ -377,7 +418,8 @@ impl CaoGpu {
             _pad0: 0.0,
             rays: rays.directions.len() as u32,
             samples: samples.max(1),
-            _pad1: [0; 2],
+            listed: 0,
+            _pad1: 0,
             grid: bricks.rays.uniform(bricks.skipping),
             readable: VoxelTest::uniform(bricks.voxels.as_ref()),
         };
@@ -412,7 +454,7 @@ impl CaoGpu {
             let (clip_uniforms, clip_group) = uniform_group(
                 gpu,
                 "Cao::clip",
-                &pipelines.clip,
+                pipelines.clip_for(&bricks),
                 &clip_params,
                 &[
                     wgpu::BindingResource::TextureView(volume_view),
@@ -455,6 +497,9 @@ impl CaoGpu {
                 views,
                 counters,
                 counters_readback: readback_buffer(device, "Cao::counters_readback", 16),
+                rays_buffer: ray_buffer,
+                occupied_buffer,
+                list: None,
                 lists,
                 clip_uniforms,
                 lao_uniforms: [lao_groups[0].0.clone(), lao_groups[1].0.clone()],
@@ -567,11 +612,15 @@ impl CaoGpu {
             },
         };
         self.was_near = near;
+        if self.lists_voxels(mode) {
+            self.reserve_list(gpu, &lists)?;
+        }
         self.write_lists(gpu, &lists);
         self.last = (lists.clone(), mode);
+        let listing = self.lists_voxels(mode);
         Ok(CaoFrame::new(
             lists,
-            mode,
+            (mode, listing),
             errors.iter().map(|e| e.to_string()).collect(),
         ))
     }
@@ -582,18 +631,31 @@ impl CaoGpu {
         self.step_iv(gpu, lists, mode)?;
         crate::gpu::wait(device, "Cao::clip", crate::gpu::WAIT)?;
         let t2 = Instant::now();
-        self.step_v(gpu, lists, true, &|_, _| {})?;
+        let listed = if self.lists_voxels(mode) {
+            self.step_v_listed(gpu, lists)?.is_some()
+        } else {
+            self.step_v(gpu, lists, true, &|_, _| {})?;
+            false
+        };
         let c = self.read_counters(gpu)?;
         let t3 = Instant::now();
-        Ok(self.stats_of(lists, c, [(t2 - t1).as_secs_f64(), (t3 - t2).as_secs_f64()]))
+        let seconds = [(t2 - t1).as_secs_f64(), (t3 - t2).as_secs_f64()];
+        Ok(self.stats_of(lists, (c, listed), seconds))
     }
 
-    /// A frame's figures from its lists, counters and stage times (step IV, step V).
-    fn stats_of(&self, lists: &Lists, c: [u64; 3], seconds: [f64; 2]) -> CaoStats {
+    /// A frame's figures from its lists, counters, whether step V ran over the voxel list
+    /// (whose length is the voxels ray cast) and stage times (step IV, step V).
+    fn stats_of(
+        &self,
+        lists: &Lists,
+        (c, listed): ([u64; 4], bool),
+        seconds: [f64; 2],
+    ) -> CaoStats {
         let dims = self.dims.map(|d| d as usize);
         CaoStats {
             voxels: dims.iter().map(|&d| d as u64).product(),
-            recomputed: c[2],
+            recomputed: if listed { c[3] } else { c[2] },
+            listed,
             category_b: c[0],
             clipped: c[1],
             clip_voxels: Bricks::voxels_in(&lists.clip, dims),
@@ -633,8 +695,8 @@ impl CaoGpu {
         }
     }
 
-    /// (category b, clipped, ray cast) of the steps just submitted.
-    fn read_counters(&self, gpu: &Gpu) -> Result<[u64; 3], GpuError> {
+    /// (category b, clipped, ray cast over bricks, listed) of the steps just submitted.
+    fn read_counters(&self, gpu: &Gpu) -> Result<[u64; 4], GpuError> {
         let device = &gpu.device;
         validated(device, "Cao::counters", || {
             let mut encoder = device.create_command_encoder(&Default::default());
@@ -643,7 +705,10 @@ impl CaoGpu {
         })?;
         let bytes = read_buffer(device, &self.counters_readback, "Cao::counters")?;
         let c: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
-        Ok([c[0] as u64, c[1] as u64, c[2] as u64])
+        Ok(c[..4]
+            .try_into()
+            .map(|c: [u32; 4]| c.map(u64::from))
+            .unwrap_or_default())
     }
 
     /// Step IV's bricks over `lists.clip` and its uniforms.
@@ -660,13 +725,19 @@ impl CaoGpu {
         let mut params = self.clip_params;
         params.full = u32::from(mode == CaoMode::Full);
         params.unread_marked = u32::from(self.pao_ready);
+        params.clipped_one = u32::from(self.lists_voxels(mode));
         (chunks, params)
+    }
+
+    /// Step IV's pipeline.
+    fn clip_pipeline(&self) -> &wgpu::ComputePipeline {
+        self.pipelines.clip_for(&self.bricks)
     }
 
     /// Step IV's bind group of the clip maps (group 1).
     fn iv_clip_group(&self, device: &wgpu::Device) -> wgpu::BindGroup {
         self.clip
-            .bind_group(device, &self.pipelines.clip.get_bind_group_layout(1))
+            .bind_group(device, &self.clip_pipeline().get_bind_group_layout(1))
     }
 
     /// Step V's bricks over `lists.lao` (after step IV's in the list buffer).
@@ -706,7 +777,7 @@ impl CaoGpu {
         let clip_group = self.iv_clip_group(&gpu.device);
         let pass = Pass {
             label: "Cao::step_iv",
-            pipeline: &self.pipelines.clip,
+            pipeline: self.clip_pipeline(),
             bind_groups: &[&self.clip_group, &clip_group],
             uniforms: &self.clip_uniforms,
         };
@@ -779,6 +850,7 @@ impl CaoGpu {
         // The paper's marks: unreadable voxels marked for recomputation too.
         let (chunks, mut params) = self.iv_dispatch(lists, CaoMode::Selective);
         params.unread_marked = 0;
+        params.clipped_one = 0;
         self.step_iv_with(gpu, chunks, params)?;
         let marks = read_texture_f32(gpu, &self.v_ao, self.dims, "Cao::mask")?;
         let dims = self.dims.map(|d| d as usize);

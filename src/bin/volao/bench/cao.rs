@@ -182,6 +182,8 @@ struct Bench {
 /// A frame's figures: CAO stats, the render time and the image.
 struct Timed {
     stats: CaoStats,
+    /// Bytes of CAO's voxel list after the frame.
+    list_bytes: u64,
     render_seconds: f64,
     pixels: Vec<[u8; 4]>,
 }
@@ -256,6 +258,7 @@ impl Bench {
             .render(&self.gpu, &self.vol, &self.frame, Some(&cao.clip))?;
         Ok(Timed {
             stats,
+            list_bytes: cao.list_bytes(),
             render_seconds: start.elapsed().as_secs_f64(),
             pixels: image.pixels,
         })
@@ -460,6 +463,7 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
     // Table 3: the three methods per ray count, with Fig. 10's stages.
     let mut memory = Vec::new();
     for s in &chosen {
+        let mut list_bytes = 0;
         let volume = load(s)?;
         let mut b = Bench::new(
             volao::gpu::request_device()?,
@@ -493,6 +497,11 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
             })?;
             let reference = runs[0].mean_ms();
             for run in &runs {
+                list_bytes = run
+                    .frames
+                    .iter()
+                    .map(|t| t.list_bytes)
+                    .fold(list_bytes, u64::max);
                 let stages = serde_json::json!({
                     "clip_mask": run.stage_ms(|t| t.stats.clip_seconds),
                     "ray_cast": run.stage_ms(|t| t.stats.lao_seconds),
@@ -530,9 +539,11 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
                 }
             }
         }
+        let voxels = b.dims().iter().product::<usize>() as f64;
         memory.push((
             s.key,
             b.cao(RaySet::Six, 1, Coverage::Readable)?.bytes_per_voxel(),
+            list_bytes as f64 / voxels,
         ));
 
         // Table 4: one vs two meshes (Engine, 26 rays).
@@ -599,10 +610,12 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
     if !json {
         let maps =
             volao::clip::gpu::LAYERS_PER_SHAPE as u64 * 4 * (args.clip_resolution as u64).pow(2);
-        for (scene, bytes) in memory {
+        for (scene, bytes, list) in memory {
             println!(
                 "\nGPU memory ({scene}): {bytes} B per voxel for CAO (V_o, V_m, V_PAO, V_AO) plus the density V \
-                 (the paper keeps 5 full-size volumes); clip maps {:.0} MiB per shape ({} layers of {}² f32).",
+                 (the paper keeps 5 full-size volumes), and sparse CAO's voxel list, {list:.2} B per voxel here \
+                 (4 B per voxel of the frame's step-V bricks, at most {}); clip maps {:.0} MiB per shape ({} layers of {}² f32).",
+                volao::ao::cao::MAX_LIST_BYTES_PER_VOXEL,
                 maps as f64 / (1 << 20) as f64,
                 volao::clip::gpu::LAYERS_PER_SHAPE,
                 args.clip_resolution
