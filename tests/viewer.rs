@@ -1047,15 +1047,15 @@ fn a_slow_ao_shows_an_ambient_map_first_and_then_never_a_frame_without_ao() {
 /// the previous pose's complete image. Once it rests, the viewport equals `volao render`
 /// of the saved scene. On the blocking code every step ran the whole update, so no step
 /// ever saw one in flight.
-/// The demo (carved by one sphere) with 54-ray, 20-sample CAO, settled.
-fn demo_with_cao(dir: &Path) -> Harness<'static, Viewer> {
+/// The demo (carved by one sphere) with 54-ray CAO of `samples` per ray, settled.
+fn demo_with_cao(dir: &Path, samples: u32) -> Harness<'static, Viewer> {
     let mut h = harness(OpenRequest::Demo, dir);
     settle(&mut h);
     {
         let doc = h.state_mut().document_mut().expect("doc");
         doc.ao.method = volao::ao::AoMethod::Cao;
         doc.ao.rays = volao::ao::rays::RaySet::FiftyFour;
-        doc.ao.samples = 20;
+        doc.ao.samples = samples;
         assert_eq!(doc.clip_shapes.len(), 1, "the demo opens carved");
     }
     settle(&mut h);
@@ -1072,7 +1072,10 @@ fn demo_with_cao(dir: &Path) -> Harness<'static, Viewer> {
 fn a_shape_dragged_away_and_back_while_cao_catches_up_comes_to_rest_exact() {
     let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
-    let mut h = demo_with_cao(dir.path());
+    // 40 samples: an update long enough (twice the reach, more voxels, longer rays)
+    // that the images of a moved shape come while it runs, in a debug build too, where
+    // the UI's own work is slower and sparse CAO's update (a list of its voxels) fast.
+    let mut h = demo_with_cao(dir.path(), 40);
     assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
     let x0 = h.state().document().expect("doc").clip_shapes[0].translation[0];
     let move_to = |h: &mut Harness<'static, Viewer>, x: f32| {
@@ -1110,7 +1113,7 @@ fn a_shape_dragged_away_and_back_while_cao_catches_up_comes_to_rest_exact() {
 fn dragging_a_clip_shape_with_cao_keeps_the_ui_running() {
     let _gpu = one_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
-    let mut h = demo_with_cao(dir.path());
+    let mut h = demo_with_cao(dir.path(), 20);
     assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
     let images_before = h.state().viewport_images();
 

@@ -15,6 +15,7 @@
 
 use super::{CaoGpu, CaoMode, LaoParams, Lists};
 use crate::gpu::dispatch::{BrickDispatch, Pass, budget};
+use crate::gpu::{Gpu, GpuError, compute_pipeline, shaders, uniform_group, validated};
 
 /// A pass's pipeline, bind group and uniforms (the caller makes the [`Pass`]).
 pub(super) type Parts<'a> = (
@@ -33,7 +34,6 @@ pub(super) fn pass<'a>(parts: &Parts<'a>, group: &'a [&'a wgpu::BindGroup]) -> P
         uniforms: parts.3,
     }
 }
-use crate::gpu::{Gpu, GpuError, compute_pipeline, shaders, uniform_group, validated};
 
 /// The most the list may take, in bytes per voxel of the volume (on top of the 6 of the
 /// CAO volumes): room for a quarter of the voxels.
