@@ -62,13 +62,11 @@ var<workgroup> clipped: atomic<u32>;
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let slot = brick_slot(wid);
-    if slot >= p.chunk.y {
+    if brick_slot(wid) >= p.chunk.y {
         return;  // the whole workgroup
     }
-    let packed = bricks[p.chunk.x + slot];
-    let brick = vec3<u32>(packed & 0x3ffu, (packed >> 10u) & 0x3ffu, (packed >> 20u) & 0x3ffu);
-    let origin = brick * 8u + vec3<u32>(0u, 0u, wid.x);
+    // This layer's voxel (0, 0): the lattice's first point.
+    let origin = brick_voxel(wid, vec3<u32>(0u)).xyz;
     if SHARED_CORNERS {
         for (var i = lid.x + 8u * lid.y; i < 162u; i = i + 64u) {
             let l = origin + vec3<u32>(i % 9u, (i / 9u) % 9u, i / 81u);

@@ -8,14 +8,7 @@
 
 const RECOMPUTE: f32 = -1.0;
 
-struct Params {
-    dims: vec4<u32>,       // x, y, z, unused
-    chunk: vec4<u32>,      // first brick or group, bricks or groups, workgroups per row, unused
-    mm_to_uvw: vec4<f32>,  // 1 / extent in mm per axis
-    counts: vec4<u32>,     // rays K, samples M, voxels listed, unused
-    grid: vec4<u32>,       // ray cells per axis, skipping (0/1)
-    readable: vec4<f32>,   // unused here (cao_lao.wgsl's per-voxel readability)
-}
+//!include cao_params.wgsl
 
 @group(0) @binding(0) var<uniform> p: Params;
 @group(0) @binding(1) var v_ao: texture_3d<f32>;

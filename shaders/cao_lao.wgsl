@@ -22,14 +22,7 @@ const FRAME: bool = false;
 //!include cao_ray.wgsl
 //!include readable.wgsl
 
-struct Params {
-    dims: vec4<u32>,       // x, y, z, unused
-    chunk: vec4<u32>,      // first brick, bricks, workgroups per row, unused
-    mm_to_uvw: vec4<f32>,  // 1 / extent in mm per axis
-    counts: vec4<u32>,     // rays K, samples M, unused, unused
-    grid: vec4<u32>,       // ray cells per axis, skipping (0/1)
-    readable: vec4<f32>,   // voxel readability: LUT index scale, offset, last, on
-}
+//!include cao_params.wgsl
 
 @group(0) @binding(0) var<uniform> p: Params;
 @group(0) @binding(1) var v_o: texture_3d<f32>;

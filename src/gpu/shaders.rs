@@ -22,6 +22,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     shader!("cao_gather.wgsl"),
     shader!("cao_lao.wgsl"),
     shader!("cao_listed.wgsl"),
+    shader!("cao_params.wgsl"),
     shader!("cao_ray.wgsl"),
     shader!("clip_common.wgsl"),
     shader!("clip_depth.wgsl"),

@@ -5,13 +5,13 @@
 //! [`Pacer`]'s slice of one UI frame (step V over the voxel list: gathering, then, once
 //! the list's length has come back through an asynchronous map, the listed ray cast);
 //! once all are submitted, the counters are copied and mapped asynchronously, and
-//! [`CaoGpu::poll_stats`] returns the frame's figures when the map has completed. The work and its order are those of [`CaoGpu::update`] (the same
-//! chunks of the same lists through the same pipelines; only where submissions are cut
-//! differs, which changes no voxel), so the viewer's `V_AO` is bit for bit the one
-//! `volao render` computes.
+//! [`CaoGpu::poll_stats`] returns the frame's figures when the map has completed. The
+//! work and its order are those of [`CaoGpu::update`] (the same chunks of the same lists
+//! through the same pipelines; only where submissions are cut differs, which changes no
+//! voxel), so the viewer's `V_AO` is bit for bit the one `volao render` computes.
 
 use super::{CaoGpu, CaoMode, CaoStats, Lists};
-use crate::gpu::dispatch::Pass;
+use crate::gpu::dispatch::{BrickDispatch, ChunkParams, Pass};
 use crate::gpu::pacer::Pacer;
 use crate::gpu::{Gpu, GpuError, readback_buffer, validated};
 use std::sync::{Arc, Mutex};
@@ -150,6 +150,32 @@ fn mapped_bytes(
     Some(Ok(bytes))
 }
 
+/// Submits `chunks` of `pass` with `params` from `*next` on, as many as the pacer's slice
+/// holds (at least one while any of it is left), advancing `*next`. Returns true once
+/// all are submitted.
+fn submit_paced<P: ChunkParams>(
+    gpu: &Gpu,
+    pacer: &mut Pacer,
+    (pass, params): (&Pass<'_>, P),
+    chunks: &BrickDispatch,
+    next: &mut u32,
+) -> Result<bool, GpuError> {
+    while *next < chunks.len() {
+        let left = (chunks.len() - *next) as u64;
+        let n = pacer.take(gpu, pass.label, (chunks.brick_work(), left), FIRST_RATE);
+        if n == 0 {
+            return Ok(false);
+        }
+        let n = n.min(chunks.max_chunk() as u64);
+        let piece = (pass.label, n * chunks.brick_work());
+        let first = *next;
+        *next += pacer.submit(gpu, piece, FIRST_RATE, || {
+            chunks.submit_chunk(gpu, pass, params, (first, n as u32), |_| {})
+        })?;
+    }
+    Ok(true)
+}
+
 /// A callback stamping when the work submitted so far is done.
 fn stamp_when_done(gpu: &Gpu) -> Stamp {
     let stamp: Stamp = Arc::default();
@@ -184,17 +210,8 @@ impl CaoGpu {
                 bind_groups: &[&self.clip_group, &clip_group],
                 uniforms: &self.clip_uniforms,
             };
-            while frame.next[0] < iv.len() {
-                let left = (iv.len() - frame.next[0]) as u64;
-                let n = pacer.take(gpu, pass.label, (iv.brick_work(), left), FIRST_RATE);
-                if n == 0 {
-                    return Ok(false);
-                }
-                let n = n.min(iv.max_chunk() as u64);
-                let piece = (pass.label, n * iv.brick_work());
-                frame.next[0] += pacer.submit(gpu, piece, FIRST_RATE, || {
-                    iv.submit_chunk(gpu, &pass, params, (frame.next[0], n as u32), |_| {})
-                })?;
+            if !submit_paced(gpu, pacer, (&pass, params), &iv, &mut frame.next[0])? {
+                return Ok(false);
             }
         }
         if frame.done[0].is_none() {
@@ -212,23 +229,9 @@ impl CaoGpu {
                 bind_groups: &[group],
                 uniforms,
             };
-            while frame.next[1] < v.len() {
-                let left = (v.len() - frame.next[1]) as u64;
-                let n = pacer.take(gpu, pass.label, (v.brick_work(), left), FIRST_RATE);
-                if n == 0 {
-                    return Ok(false);
-                }
-                let n = n.min(v.max_chunk() as u64);
-                let piece = (pass.label, n * v.brick_work());
-                frame.next[1] += pacer.submit(gpu, piece, FIRST_RATE, || {
-                    v.submit_chunk(
-                        gpu,
-                        &pass,
-                        self.lao_params,
-                        (frame.next[1], n as u32),
-                        |_| {},
-                    )
-                })?;
+            let step_v = (&pass, self.lao_params);
+            if !submit_paced(gpu, pacer, step_v, &v, &mut frame.next[1])? {
+                return Ok(false);
             }
         }
         frame.done[1] = Some(stamp_when_done(gpu));
@@ -293,18 +296,9 @@ impl CaoGpu {
         };
         let group = [parts.2];
         let pass = super::listed::pass(&parts, &group);
-        while listing.gathered < chunks.len() {
-            let left = (chunks.len() - listing.gathered) as u64;
-            let n = pacer.take(gpu, pass.label, (chunks.brick_work(), left), FIRST_RATE);
-            if n == 0 {
-                return Ok(false);
-            }
-            let n = n.min(chunks.max_chunk() as u64);
-            let piece = (pass.label, n * chunks.brick_work());
-            let first = listing.gathered;
-            listing.gathered += pacer.submit(gpu, piece, FIRST_RATE, || {
-                chunks.submit_chunk(gpu, &pass, self.lao_params, (first, n as u32), |_| {})
-            })?;
+        let gather = (&pass, self.lao_params);
+        if !submit_paced(gpu, pacer, gather, &chunks, &mut listing.gathered)? {
+            return Ok(false);
         }
         let count = match listing.count {
             Some(count) => count,
@@ -331,19 +325,6 @@ impl CaoGpu {
         };
         let group = [parts.2];
         let pass = super::listed::pass(&parts, &group);
-        while listing.traced < chunks.len() {
-            let left = (chunks.len() - listing.traced) as u64;
-            let n = pacer.take(gpu, pass.label, (chunks.brick_work(), left), FIRST_RATE);
-            if n == 0 {
-                return Ok(false);
-            }
-            let n = n.min(chunks.max_chunk() as u64);
-            let piece = (pass.label, n * chunks.brick_work());
-            let first = listing.traced;
-            listing.traced += pacer.submit(gpu, piece, FIRST_RATE, || {
-                chunks.submit_chunk(gpu, &pass, params, (first, n as u32), |_| {})
-            })?;
-        }
-        Ok(true)
+        submit_paced(gpu, pacer, (&pass, params), &chunks, &mut listing.traced)
     }
 }

@@ -22,9 +22,9 @@
 //! Both steps run over brick lists ([`super::sparse`]): step IV over the bricks near a
 //! shape now or in the previous frame (their `V_o` and `V_m` change), step V over those
 //! of them the ray caster can read (every readable brick in the baseline); a CAO frame
-//! then ray casts only the voxels step IV marked, from a list ([`listed`]). Outside the lists `V_o = α`, `V_m = 1` and `V_AO = V_PAO`
-//! hold from the previous frames; unreadable voxels keep whatever they hold, which no
-//! pixel uses. [`Bricks::dense`] turns all of it off.
+//! then ray casts only the voxels step IV marked, from a list ([`listed`]). Outside the
+//! lists `V_o = α`, `V_m = 1` and `V_AO = V_PAO` hold from the previous frames;
+//! unreadable voxels keep whatever they hold, which no pixel uses. [`Bricks::dense`] turns all of it off.
 
 use super::lao::{Rays, STEP_MM, lao_lut};
 use super::sparse::{Bricks, VoxelTest};
@@ -612,12 +612,12 @@ impl CaoGpu {
             },
         };
         self.was_near = near;
-        if self.lists_voxels(mode) {
+        let listing = self.lists_voxels(mode);
+        if listing {
             self.reserve_list(gpu, &lists)?;
         }
         self.write_lists(gpu, &lists);
         self.last = (lists.clone(), mode);
-        let listing = self.lists_voxels(mode);
         Ok(CaoFrame::new(
             lists,
             (mode, listing),
@@ -705,10 +705,7 @@ impl CaoGpu {
         })?;
         let bytes = read_buffer(device, &self.counters_readback, "Cao::counters")?;
         let c: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
-        Ok(c[..4]
-            .try_into()
-            .map(|c: [u32; 4]| c.map(u64::from))
-            .unwrap_or_default())
+        Ok([c[0], c[1], c[2], c[3]].map(u64::from))
     }
 
     /// Step IV's bricks over `lists.clip` and its uniforms.
