@@ -74,7 +74,7 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
         }
     }
     workgroupBarrier();
-    classify_voxel(origin + vec3<u32>(lid.x, lid.y, 0u), lid.x + 9u * lid.y);
+    classify_voxel(origin + vec3<u32>(lid.x, lid.y, 0u), lid.x + 9u * lid.y, brick_near(wid));
     workgroupBarrier();
     if lid.x == 0u && lid.y == 0u {
         atomicAdd(&counters[0], atomicLoad(&affected));
@@ -99,7 +99,11 @@ fn corner_bits(v: vec3<u32>, c: u32, k: u32) -> u32 {
 }
 
 // Step IV for voxel v, whose corner (−½, −½, −½) is `corners[c]` when they are shared.
-fn classify_voxel(v: vec3<u32>, c: u32) {
+// `reached`: the brick's list entry carries NEAR, set where a change of opacity can reach
+// it (ao::sparse::Bricks::reached; always in the baseline and the paper's mask). Elsewhere
+// V_o = α within every LAO ray's reach, so the voxel keeps V_PAO's bits even where a
+// shape's dilation reaches it, and a clipped voxel gets 1 here (step V skips the brick).
+fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
     if any(v >= p.dims.xyz) {
         return;
     }
@@ -139,11 +143,13 @@ fn classify_voxel(v: vec3<u32>, c: u32) {
         atomicAdd(&affected, 1u);
         if unread {
             ao = 1.0;
+        } else if !reached {
+            ao = min(pao, 1.0);
         }
     } else {
         // With p.mode.z step V runs over a list of the voxels to ray cast only
         // (cao_gather.wgsl): V_AO = 1 here, what step V over bricks would write.
-        ao = select(CLIPPED, 1.0, p.mode.z != 0u);
+        ao = select(CLIPPED, 1.0, p.mode.z != 0u || !reached);
         atomicAdd(&clipped, 1u);
     }
     let at = vec3<i32>(v);

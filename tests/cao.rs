@@ -70,6 +70,8 @@ struct Scene {
     dense: CaoGpu,
     tf: TransferFunction,
     rays: Rays,
+    /// Samples per LAO ray.
+    samples: u32,
     frame: Frame,
     /// Frames whose step V ran over the list of the voxels to ray cast, and sparse CAO
     /// frames whose list was too short for them (step V over bricks instead).
@@ -78,6 +80,11 @@ struct Scene {
 }
 
 fn scene(v: &Volume, preset: Preset, set: RaySet) -> Scene {
+    scene_with(v, preset, set, SAMPLES)
+}
+
+/// The same with `samples` per LAO ray.
+fn scene_with(v: &Volume, preset: Preset, set: RaySet, samples: u32) -> Scene {
     let gpu = device();
     let tf = TransferFunction::preset(preset, &v.stats());
     let settings = RenderSettings {
@@ -88,7 +95,7 @@ fn scene(v: &Volume, preset: Preset, set: RaySet) -> Scene {
         .unwrap_or_else(|e| panic!("{e}"));
     let rays = Rays::uniform(set.directions());
     let make = |bricks: Bricks| {
-        CaoGpu::new(&gpu, &vol, &tf, &rays, SAMPLES, 32, bricks, &|_, _| {})
+        CaoGpu::new(&gpu, &vol, &tf, &rays, samples, 32, bricks, &|_, _| {})
             .unwrap_or_else(|e| panic!("{e}"))
     };
     let sparse = Coverage::Readable.bricks(&vol.texels, vol.ranges(), &tf);
@@ -119,6 +126,7 @@ fn scene(v: &Volume, preset: Preset, set: RaySet) -> Scene {
         dense,
         tf,
         rays,
+        samples,
         frame,
         listed: 0,
         over_bricks: 0,
@@ -127,7 +135,7 @@ fn scene(v: &Volume, preset: Preset, set: RaySet) -> Scene {
 
 impl Scene {
     fn reach(&self) -> f32 {
-        reach_mm(SAMPLES, self.vol.texels.spacing)
+        reach_mm(self.samples, self.vol.texels.spacing)
     }
 
     /// V_AO, the rendered image and the percentage of category-b voxels after one frame
@@ -463,6 +471,72 @@ fn a_margin_shorter_than_the_rays_breaks_exactness() {
         wrong > 100,
         "a 40 % margin must miss affected voxels, {wrong} differ"
     );
+}
+
+/// A sphere cutting only empty space next to material: its dilation reaches voxels that
+/// can be read (Algorithm 2 puts them in category b), but no opacity changes, so sparse
+/// CAO keeps `V_PAO` there (ao::sparse::Bricks::reached) and ray casts nothing, and the
+/// frame stays exact; the same sphere moved into the material makes it ray cast.
+#[test]
+fn a_cut_into_empty_space_recomputes_nothing() {
+    // A slab of material (x < 16) and empty space beyond; LAO rays of 20 samples (21.6 mm
+    // reach) so that the dilation reaches the slab from farther than brick granularity.
+    let v = common::u8_volume([64, 32, 32], |x, y, z| {
+        if x < 16 {
+            120 + ((x * 7 + y * 3 + z) % 100) as u8
+        } else {
+            0
+        }
+    });
+    let mut s = scene_with(&v, Preset::CaoSingleColor, RaySet::Six, 20);
+    let reach = s.reach();
+    // Voxel x = 34: 16 mm of empty space to the slab's readable voxels (x ≤ 18).
+    let mut shape = ClipShape::new(Shape::Sphere, Vec3::new(2.5, 0.0, 0.0), 4.0);
+    let shapes = std::slice::from_ref(&shape);
+    let stats = s
+        .cao
+        .update(
+            &s.gpu,
+            &s.vol.texels,
+            shapes,
+            MAP,
+            reach,
+            CaoMode::Selective,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    let readable = readable_voxels(&s.vol.texels, &s.tf);
+    let paper = s
+        .cao
+        .read(&s.gpu, CaoVolume::Mask)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let marked_readable = (0..paper.len())
+        .filter(|&i| paper[i] == 0.5 && readable[i])
+        .count();
+    assert!(
+        marked_readable > 0,
+        "the dilation reaches no readable voxel"
+    );
+    assert_eq!(
+        stats.recomputed, 0,
+        "a cut into empty space ray cast voxels"
+    );
+    assert_exact(&mut s, shapes, reach, "a cut into empty space");
+    // Into the slab: now opacity changes and voxels are ray cast.
+    shape.translation = [-22.0, 0.0, 0.0];
+    let shapes = std::slice::from_ref(&shape);
+    let stats = s
+        .cao
+        .update(
+            &s.gpu,
+            &s.vol.texels,
+            shapes,
+            MAP,
+            reach,
+            CaoMode::Selective,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(stats.recomputed > 0, "a cut into material ray cast nothing");
+    assert_exact(&mut s, shapes, reach, "a cut into material");
 }
 
 #[test]

@@ -19,6 +19,9 @@
 //!   shape and its dilation, [`crate::clip::camera::ClipCamera::frame`]) step IV gives
 //!   `V_o = α` and `V_m = 1`: nothing to do. A probing shape clips everything outside
 //!   it, so with one every brick is near.
+//! - **Bricks a change can reach.** A cut lowers opacity only in occupied bricks that
+//!   meet a carving shape; beyond the LAO reach of those, every ray reads `V_o = α` and
+//!   a ray cast would give `V_PAO`'s bits ([`Bricks::reached`]).
 //!
 //! With skipping off ([`Bricks::dense`], `--no-skipping`) every list holds every brick
 //! and no ray skips: the paper's dense CAO.
@@ -479,6 +482,102 @@ impl Bricks {
             }
         }
         near
+    }
+}
+
+/// Where, in volume mm, each shape of `clip` can clip: its bounding sphere's centre, and
+/// the radius within which the maps may call a point inside (the mesh's bound and three
+/// pixels for the maps' quantisation, as [`ClipCamera::reach_bound`] counts them). `None`
+/// when a pose is not finite.
+fn clipping_spheres(clip: &ClipUniforms, cameras: &[ClipCamera]) -> Option<Vec<(Vec3, f32)>> {
+    let shapes = clip.counts[0] as usize;
+    clip.shapes[..shapes]
+        .iter()
+        .zip(cameras)
+        .map(|(s, camera)| {
+            let to_volume = Mat4::from_cols_array_2d(&s.volume_to_map).inverse();
+            let centre = to_volume.transform_point3(camera.project(camera.bound_centre));
+            let radius = camera.bound_radius + 3.0 / camera.pixels_per_mm;
+            (centre.is_finite() && radius.is_finite()).then_some((centre, radius))
+        })
+        .collect()
+}
+
+impl Bricks {
+    /// Bricks whose voxels' ambient factor the shapes of `clip` can change at all: those
+    /// within `reach_mm` (the LAO reach, [`crate::ao::cao::reach_mm`]) of a brick whose
+    /// opacity a shape can lower, that is, an occupied brick that meets a carving
+    /// shape's clipping sphere (`clipping_spheres`) widened by a voxel (a voxel's
+    /// opacity depends on clip samples anywhere in its cell). Elsewhere `V_o = α` within
+    /// every LAO ray's reach, so a ray cast gives `V_PAO`'s bits: step IV copies them
+    /// even where a shape's dilation reaches (a cut into empty space changes no AO).
+    /// Every brick when skipping is off or a shape probes (it clips all around it).
+    pub fn reached(
+        &self,
+        dims: [usize; 3],
+        spacing: [f32; 3],
+        clip: &ClipUniforms,
+        cameras: &[ClipCamera],
+        reach_mm: f32,
+    ) -> Vec<bool> {
+        let every = vec![true; self.count()];
+        if !self.skipping || clip.counts[1] > 0 || cameras.len() != clip.counts[0] as usize {
+            return every;
+        }
+        let Some(spheres) = clipping_spheres(clip, cameras) else {
+            return every;
+        };
+        let spacing = Vec3::from(spacing);
+        let half = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * spacing * 0.5;
+        let brick_mm = spacing * BRICK as f32;
+        let grid = self.grid.map(|g| g as i64);
+        let mut changed = Vec::new();
+        for (centre, radius) in spheres {
+            let radius = radius + spacing.length();
+            let first = ((centre - radius + half) / brick_mm).floor();
+            let last = ((centre + radius + half) / brick_mm).floor();
+            let range = |a: usize| first[a].max(0.0) as i64..=(last[a] as i64).min(grid[a] - 1);
+            for bz in range(2) {
+                for by in range(1) {
+                    for bx in range(0) {
+                        let b = [bx, by, bz].map(|c| c as usize);
+                        let lo = Vec3::new(bx as f32, by as f32, bz as f32) * brick_mm - half;
+                        let closest = centre.clamp(lo, lo + brick_mm);
+                        if self.occupied[self.index(b)] != 0 && closest.distance(centre) <= radius {
+                            changed.push([bx, by, bz]);
+                        }
+                    }
+                }
+            }
+        }
+        // The offsets between two bricks whose boxes lie within the reach (1 % and
+        // 0.01 mm more against rounding).
+        let reach = reach_mm * 1.01 + 0.01;
+        let n = (Vec3::splat(reach) / brick_mm).ceil().as_ivec3();
+        let mut stencil = Vec::new();
+        for dz in -n.z..=n.z {
+            for dy in -n.y..=n.y {
+                for dx in -n.x..=n.x {
+                    let d = glam::IVec3::new(dx, dy, dz);
+                    let gap = (d.abs() - glam::IVec3::ONE)
+                        .max(glam::IVec3::ZERO)
+                        .as_vec3();
+                    if (gap * brick_mm).length() <= reach {
+                        stencil.push([dx as i64, dy as i64, dz as i64]);
+                    }
+                }
+            }
+        }
+        let mut reached = vec![false; self.count()];
+        for c in &changed {
+            for d in &stencil {
+                let b = [c[0] + d[0], c[1] + d[1], c[2] + d[2]];
+                if (0..3).all(|a| (0..grid[a]).contains(&b[a])) {
+                    reached[self.index(b.map(|c| c as usize))] = true;
+                }
+            }
+        }
+        reached
     }
 }
 

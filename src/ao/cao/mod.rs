@@ -21,8 +21,9 @@
 //!
 //! Both steps run over brick lists ([`super::sparse`]): step IV over the bricks near a
 //! shape now or in the previous frame (their `V_o` and `V_m` change), step V over those
-//! of them the ray caster can read (every readable brick in the baseline); a CAO frame
-//! then ray casts only the voxels step IV marked, from a list ([`listed`]). Outside the
+//! of them the ray caster can read and a change of opacity can reach
+//! ([`Bricks::reached`]; every readable brick in the baseline); a CAO frame then ray
+//! casts only the voxels step IV marked, from a list ([`listed`]). Outside the
 //! lists `V_o = α`, `V_m = 1` and `V_AO = V_PAO` hold from the previous frames;
 //! unreadable voxels keep whatever they hold, which no pixel uses. [`Bricks::dense`] turns all of it off.
 
@@ -32,8 +33,8 @@ use crate::clip::ClipShape;
 use crate::clip::gpu::{ClipMaps, ClipUpdate};
 use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
 use crate::gpu::{
-    Gpu, GpuError, compute_pipeline, read_buffer, read_texture_f32, readback_buffer, shaders,
-    storage_buffer, uniform_group, validated,
+    Gpu, GpuError, compute_pipeline, read_buffer, readback_buffer, shaders, storage_buffer,
+    uniform_group, validated,
 };
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
@@ -49,6 +50,7 @@ pub use listed::MAX_LIST_BYTES_PER_VOXEL;
 mod cpu;
 mod frame;
 mod listed;
+mod readback;
 
 /// Selective recomputation (CAO) or the baseline that ray casts every voxel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -602,13 +604,27 @@ impl CaoGpu {
             .zip(&self.was_near)
             .map(|(a, b)| *a || *b)
             .collect();
-        let lists = Lists {
-            clip: b.list(|i| touched[i] && b.used(i)),
-            lao: match mode {
-                CaoMode::Selective => {
-                    b.list_flagged(|i| touched[i] && b.readable[i] != 0, |_| true)
+        let lists = match mode {
+            CaoMode::Selective => {
+                // Step IV marks voxels for step V only in bricks a change can reach;
+                // elsewhere it copies V_PAO (and writes 1 where it clips), so step V
+                // skips them.
+                let reached = b.reached(
+                    texels.dims,
+                    texels.spacing,
+                    &self.clip.uniforms,
+                    &cameras,
+                    reach_mm,
+                );
+                Lists {
+                    clip: b.list_flagged(|i| touched[i] && b.used(i), |i| reached[i]),
+                    lao: b
+                        .list_flagged(|i| touched[i] && reached[i] && b.readable[i] != 0, |_| true),
                 }
-                CaoMode::Full => b.list_flagged(|i| b.readable[i] != 0, |i| touched[i]),
+            }
+            CaoMode::Full => Lists {
+                clip: b.list_flagged(|i| touched[i] && b.used(i), |_| true),
+                lao: b.list_flagged(|i| b.readable[i] != 0, |i| touched[i]),
             },
         };
         self.was_near = near;
@@ -814,75 +830,6 @@ impl CaoGpu {
     /// `V_AO` for the ray caster.
     pub fn ao_view(&self) -> &wgpu::TextureView {
         &self.views[2]
-    }
-
-    /// Reads one of the CAO volumes back, x fastest. `V_PAO` and `V_AO` hold 1 in the
-    /// bricks the ray caster cannot read (which were never computed).
-    pub fn read(&self, gpu: &Gpu, which: CaoVolume) -> Result<Vec<f32>, GpuError> {
-        let t = match which {
-            CaoVolume::ClippedOpacity => &self.v_o,
-            CaoVolume::Mask => return self.read_mask(gpu),
-            CaoVolume::Precomputed => &self.v_pao,
-            CaoVolume::Ambient => &self.v_ao,
-        };
-        let mut values = read_texture_f32(gpu, t, self.dims, "Cao::read")?;
-        if matches!(which, CaoVolume::Precomputed | CaoVolume::Ambient)
-            && self.bricks.readable.contains(&0)
-        {
-            let dims = self.dims.map(|d| d as usize);
-            for (i, v) in values.iter_mut().enumerate() {
-                if !self.bricks.voxel_readable(crate::volume::voxel_of(i, dims)) {
-                    *v = 1.0;
-                }
-            }
-        }
-        Ok(values)
-    }
-
-    /// The last frame's mask, from step IV's marks in `V_AO`: steps IV (CAO's) and V
-    /// run again, which leaves `V_AO` as it was on every readable voxel.
-    fn read_mask(&self, gpu: &Gpu) -> Result<Vec<f32>, GpuError> {
-        let (lists, _) = &self.last;
-        self.write_lists(gpu, lists);
-        // The paper's marks: unreadable voxels marked for recomputation too.
-        let (chunks, mut params) = self.iv_dispatch(lists, CaoMode::Selective);
-        params.unread_marked = 0;
-        params.clipped_one = 0;
-        self.step_iv_with(gpu, chunks, params)?;
-        let marks = read_texture_f32(gpu, &self.v_ao, self.dims, "Cao::mask")?;
-        let dims = self.dims.map(|d| d as usize);
-        let mut mask = vec![1.0; marks.len()];
-        for &b in &lists.clip {
-            for [x, y, z] in super::sparse::brick_voxels(b, dims) {
-                let i = x + dims[0] * (y + dims[1] * z);
-                // Step IV's marks: -1 recompute, -2 clipped, else a copy.
-                mask[i] = if marks[i] == -1.0 {
-                    0.5
-                } else if marks[i] == -2.0 {
-                    0.0
-                } else {
-                    1.0
-                };
-            }
-        }
-        let relisted = Lists {
-            clip: lists.clip.clone(),
-            lao: lists.clip.iter().map(|b| b | super::sparse::NEAR).collect(),
-        };
-        self.write_lists(gpu, &relisted);
-        self.step_v(gpu, &relisted, true, &|_, _| {})?;
-        crate::gpu::wait(&gpu.device, "Cao::mask", crate::gpu::WAIT)?;
-        Ok(mask)
-    }
-
-    /// `values` as the CAO volumes hold them (rounded to f16 when they are R16Float):
-    /// for comparing a CPU twin with what was read back.
-    pub fn round_as_stored(&self, values: &mut [f32]) {
-        if self.v_ao.format() == wgpu::TextureFormat::R16Float {
-            for v in values {
-                *v = half::f16::from_f32(*v).to_f32();
-            }
-        }
     }
 
     /// GPU memory of the CAO volumes per voxel, in bytes (V_o, V_PAO, V_AO; the density
