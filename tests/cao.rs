@@ -160,6 +160,13 @@ impl Scene {
         (ao, pixels, category_b)
     }
 
+    /// One frame of sparse CAO, for its figures.
+    fn update(&mut self, shapes: &[ClipShape], reach: f32) -> volao::ao::cao::CaoStats {
+        let Scene { gpu, vol, cao, .. } = self;
+        cao.update(gpu, &vol.texels, shapes, MAP, reach, CaoMode::Selective)
+            .unwrap_or_else(|e| panic!("{e}"))
+    }
+
     /// The same with the dense CAO.
     fn frame_dense(
         &mut self,
@@ -493,17 +500,7 @@ fn a_cut_into_empty_space_recomputes_nothing() {
     // Voxel x = 34: 16 mm of empty space to the slab's readable voxels (x ≤ 18).
     let mut shape = ClipShape::new(Shape::Sphere, Vec3::new(2.5, 0.0, 0.0), 4.0);
     let shapes = std::slice::from_ref(&shape);
-    let stats = s
-        .cao
-        .update(
-            &s.gpu,
-            &s.vol.texels,
-            shapes,
-            MAP,
-            reach,
-            CaoMode::Selective,
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
+    let stats = s.update(shapes, reach);
     let readable = readable_voxels(&s.vol.texels, &s.tf);
     let paper = s
         .cao
@@ -524,17 +521,7 @@ fn a_cut_into_empty_space_recomputes_nothing() {
     // Into the slab: now opacity changes and voxels are ray cast.
     shape.translation = [-22.0, 0.0, 0.0];
     let shapes = std::slice::from_ref(&shape);
-    let stats = s
-        .cao
-        .update(
-            &s.gpu,
-            &s.vol.texels,
-            shapes,
-            MAP,
-            reach,
-            CaoMode::Selective,
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
+    let stats = s.update(shapes, reach);
     assert!(stats.recomputed > 0, "a cut into material ray cast nothing");
     assert_exact(&mut s, shapes, reach, "a cut into material");
 }

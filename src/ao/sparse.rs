@@ -27,7 +27,7 @@
 //! and no ray skips: the paper's dense CAO.
 
 use crate::clip::camera::ClipCamera;
-use crate::clip::gpu::ClipUniforms;
+use crate::clip::gpu::{ClipUniforms, ShapeUniform};
 use crate::render::texels::{BLOCK, BlockRanges, VolumeTexels};
 use crate::render::{RenderMode, RenderSettings};
 use crate::tf::{Lut, TransferFunction};
@@ -427,22 +427,17 @@ impl Bricks {
         clip: &ClipUniforms,
         cameras: &[ClipCamera],
     ) -> Vec<bool> {
+        if self.every_brick(clip, cameras) {
+            return vec![true; self.count()];
+        }
         let shapes = clip.counts[0] as usize;
-        if !self.skipping || clip.counts[1] > 0 {
-            return vec![true; self.count()];
-        }
-        if cameras.len() != shapes {
-            return vec![true; self.count()];
-        }
         let mut near = vec![false; self.count()];
         let spacing = Vec3::from(spacing);
         let half = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * spacing * 0.5;
         let voxel = spacing.length();
         for (s, camera) in clip.shapes[..shapes].iter().zip(cameras) {
             let res = s.info[2] as f32;
-            let to_volume = Mat4::from_cols_array_2d(&s.volume_to_map).inverse();
-            // The bounding sphere in volume mm (the pose is rigid: the radius stays).
-            let centre = to_volume.transform_point3(camera.project(camera.bound_centre));
+            let (to_volume, centre) = bound_in_volume(s, camera);
             let radius = camera.reach_bound() + voxel;
             let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
             for c in 0..8 {
@@ -467,15 +462,13 @@ impl Bricks {
                 (first.min(self.grid[a]), (last + 1).min(self.grid[a]))
             };
             let (x, y, z) = (range(0), range(1), range(2));
-            let brick_mm = spacing * BRICK as f32;
+            let box_of = BrickBox { spacing, half };
             for bz in z.0..z.1 {
                 for by in y.0..y.1 {
                     for bx in x.0..x.1 {
-                        // The brick's box (mm) against the sphere.
-                        let lo = Vec3::new(bx as f32, by as f32, bz as f32) * brick_mm - half;
-                        let closest = centre.clamp(lo, lo + brick_mm);
-                        if closest.distance(centre) <= radius || !centre.is_finite() {
-                            near[self.index([bx, by, bz])] = true;
+                        let b = [bx, by, bz];
+                        if box_of.meets(b, centre, radius) || !centre.is_finite() {
+                            near[self.index(b)] = true;
                         }
                     }
                 }
@@ -483,35 +476,17 @@ impl Bricks {
         }
         near
     }
-}
 
-/// Where, in volume mm, each shape of `clip` can clip: its bounding sphere's centre, and
-/// the radius within which the maps may call a point inside (the mesh's bound and three
-/// pixels for the maps' quantisation, as [`ClipCamera::reach_bound`] counts them). `None`
-/// when a pose is not finite.
-fn clipping_spheres(clip: &ClipUniforms, cameras: &[ClipCamera]) -> Option<Vec<(Vec3, f32)>> {
-    let shapes = clip.counts[0] as usize;
-    clip.shapes[..shapes]
-        .iter()
-        .zip(cameras)
-        .map(|(s, camera)| {
-            let to_volume = Mat4::from_cols_array_2d(&s.volume_to_map).inverse();
-            let centre = to_volume.transform_point3(camera.project(camera.bound_centre));
-            let radius = camera.bound_radius + 3.0 / camera.pixels_per_mm;
-            (centre.is_finite() && radius.is_finite()).then_some((centre, radius))
-        })
-        .collect()
-}
-
-impl Bricks {
     /// Bricks whose voxels' ambient factor the shapes of `clip` can change at all: those
     /// within `reach_mm` (the LAO reach, [`crate::ao::cao::reach_mm`]) of a brick whose
     /// opacity a shape can lower, that is, an occupied brick that meets a carving
-    /// shape's clipping sphere (`clipping_spheres`) widened by a voxel (a voxel's
-    /// opacity depends on clip samples anywhere in its cell). Elsewhere `V_o = α` within
-    /// every LAO ray's reach, so a ray cast gives `V_PAO`'s bits: step IV copies them
-    /// even where a shape's dilation reaches (a cut into empty space changes no AO).
-    /// Every brick when skipping is off or a shape probes (it clips all around it).
+    /// shape's clipping sphere widened by a voxel (a voxel's opacity depends on clip
+    /// samples anywhere in its cell). The clipping sphere is the mesh's bound and three
+    /// pixels for the maps' quantisation, as [`ClipCamera::reach_bound`] counts them
+    /// without the dilation. Elsewhere `V_o = α` within every LAO ray's reach, so a ray
+    /// cast gives `V_PAO`'s bits: step IV copies them even where a shape's dilation
+    /// reaches (a cut into empty space changes no AO). Every brick when skipping is off
+    /// or a shape probes (it clips all around it).
     pub fn reached(
         &self,
         dims: [usize; 3],
@@ -520,20 +495,22 @@ impl Bricks {
         cameras: &[ClipCamera],
         reach_mm: f32,
     ) -> Vec<bool> {
-        let every = vec![true; self.count()];
-        if !self.skipping || clip.counts[1] > 0 || cameras.len() != clip.counts[0] as usize {
-            return every;
+        if self.every_brick(clip, cameras) {
+            return vec![true; self.count()];
         }
-        let Some(spheres) = clipping_spheres(clip, cameras) else {
-            return every;
-        };
         let spacing = Vec3::from(spacing);
         let half = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * spacing * 0.5;
         let brick_mm = spacing * BRICK as f32;
+        let box_of = BrickBox { spacing, half };
         let grid = self.grid.map(|g| g as i64);
         let mut changed = Vec::new();
-        for (centre, radius) in spheres {
-            let radius = radius + spacing.length();
+        let shapes = clip.counts[0] as usize;
+        for (s, camera) in clip.shapes[..shapes].iter().zip(cameras) {
+            let (_, centre) = bound_in_volume(s, camera);
+            let radius = camera.bound_radius + 3.0 / camera.pixels_per_mm + spacing.length();
+            if !(centre.is_finite() && radius.is_finite()) {
+                return vec![true; self.count()];
+            }
             let first = ((centre - radius + half) / brick_mm).floor();
             let last = ((centre + radius + half) / brick_mm).floor();
             let range = |a: usize| first[a].max(0.0) as i64..=(last[a] as i64).min(grid[a] - 1);
@@ -541,9 +518,7 @@ impl Bricks {
                 for by in range(1) {
                     for bx in range(0) {
                         let b = [bx, by, bz].map(|c| c as usize);
-                        let lo = Vec3::new(bx as f32, by as f32, bz as f32) * brick_mm - half;
-                        let closest = centre.clamp(lo, lo + brick_mm);
-                        if self.occupied[self.index(b)] != 0 && closest.distance(centre) <= radius {
+                        if self.occupied[self.index(b)] != 0 && box_of.meets(b, centre, radius) {
                             changed.push([bx, by, bz]);
                         }
                     }
@@ -578,6 +553,35 @@ impl Bricks {
             }
         }
         reached
+    }
+
+    /// Whether the shape tests leave every brick in: skipping off, a probing shape
+    /// (it clips everything outside it) or cameras that do not match the shapes.
+    fn every_brick(&self, clip: &ClipUniforms, cameras: &[ClipCamera]) -> bool {
+        !self.skipping || clip.counts[1] > 0 || cameras.len() != clip.counts[0] as usize
+    }
+}
+
+/// A shape's clipping camera back in volume mm: map → volume, and the centre of the
+/// mesh's bounding sphere (the pose is rigid: the radius stays).
+fn bound_in_volume(s: &ShapeUniform, camera: &ClipCamera) -> (Mat4, Vec3) {
+    let to_volume = Mat4::from_cols_array_2d(&s.volume_to_map).inverse();
+    let centre = to_volume.transform_point3(camera.project(camera.bound_centre));
+    (to_volume, centre)
+}
+
+/// Brick boxes in volume mm, for a volume of `spacing` and half-extent `half`.
+struct BrickBox {
+    spacing: Vec3,
+    half: Vec3,
+}
+
+impl BrickBox {
+    /// Whether brick `b`'s box meets the ball of `radius` around `centre`.
+    fn meets(&self, b: [usize; 3], centre: Vec3, radius: f32) -> bool {
+        let brick_mm = self.spacing * BRICK as f32;
+        let lo = Vec3::new(b[0] as f32, b[1] as f32, b[2] as f32) * brick_mm - self.half;
+        centre.clamp(lo, lo + brick_mm).distance(centre) <= radius
     }
 }
 

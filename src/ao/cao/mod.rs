@@ -604,27 +604,25 @@ impl CaoGpu {
             .zip(&self.was_near)
             .map(|(a, b)| *a || *b)
             .collect();
-        let lists = match mode {
-            CaoMode::Selective => {
-                // Step IV marks voxels for step V only in bricks a change can reach;
-                // elsewhere it copies V_PAO (and writes 1 where it clips), so step V
-                // skips them.
-                let reached = b.reached(
-                    texels.dims,
-                    texels.spacing,
-                    &self.clip.uniforms,
-                    &cameras,
-                    reach_mm,
-                );
-                Lists {
-                    clip: b.list_flagged(|i| touched[i] && b.used(i), |i| reached[i]),
-                    lao: b
-                        .list_flagged(|i| touched[i] && reached[i] && b.readable[i] != 0, |_| true),
+        // Step IV marks voxels for step V only in bricks a change can reach; elsewhere
+        // it copies V_PAO (and writes 1 where it clips), so step V skips them.
+        let reached = match mode {
+            CaoMode::Selective => b.reached(
+                texels.dims,
+                texels.spacing,
+                &self.clip.uniforms,
+                &cameras,
+                reach_mm,
+            ),
+            CaoMode::Full => vec![true; b.count()],
+        };
+        let lists = Lists {
+            clip: b.list_flagged(|i| touched[i] && b.used(i), |i| reached[i]),
+            lao: match mode {
+                CaoMode::Selective => {
+                    b.list_flagged(|i| touched[i] && reached[i] && b.readable[i] != 0, |_| true)
                 }
-            }
-            CaoMode::Full => Lists {
-                clip: b.list_flagged(|i| touched[i] && b.used(i), |_| true),
-                lao: b.list_flagged(|i| b.readable[i] != 0, |i| touched[i]),
+                CaoMode::Full => b.list_flagged(|i| b.readable[i] != 0, |i| touched[i]),
             },
         };
         self.was_near = near;

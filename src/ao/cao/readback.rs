@@ -2,6 +2,7 @@
 //! CPU twins and the paper's mask.
 
 use super::{CaoGpu, CaoMode, CaoVolume, Lists};
+use crate::ao::sparse::{NEAR, brick_voxels};
 use crate::gpu::{Gpu, GpuError, read_texture_f32};
 
 impl CaoGpu {
@@ -31,16 +32,12 @@ impl CaoGpu {
     /// The last frame's mask, from step IV's marks in `V_AO`: steps IV (CAO's) and V
     /// run again, which leaves `V_AO` as it was on every readable voxel.
     fn read_mask(&self, gpu: &Gpu) -> Result<Vec<f32>, GpuError> {
-        // The paper's marks: every brick of step IV marks what its dilation reaches.
+        // The paper's marks: every brick of step IV marks what its dilation reaches,
+        // and step V then ray casts what it marked in all of them.
+        let all: Vec<u32> = self.last.0.clip.iter().map(|b| b | NEAR).collect();
         let lists = &Lists {
-            clip: self
-                .last
-                .0
-                .clip
-                .iter()
-                .map(|b| b | crate::ao::sparse::NEAR)
-                .collect(),
-            lao: Vec::new(),
+            clip: all.clone(),
+            lao: all,
         };
         self.write_lists(gpu, lists);
         // Unreadable voxels marked for recomputation too.
@@ -52,7 +49,7 @@ impl CaoGpu {
         let dims = self.dims.map(|d| d as usize);
         let mut mask = vec![1.0; marks.len()];
         for &b in &lists.clip {
-            for [x, y, z] in crate::ao::sparse::brick_voxels(b, dims) {
+            for [x, y, z] in brick_voxels(b, dims) {
                 let i = x + dims[0] * (y + dims[1] * z);
                 // Step IV's marks: -1 recompute, -2 clipped, else a copy.
                 mask[i] = if marks[i] == -1.0 {
@@ -64,16 +61,7 @@ impl CaoGpu {
                 };
             }
         }
-        let relisted = Lists {
-            clip: lists.clip.clone(),
-            lao: lists
-                .clip
-                .iter()
-                .map(|b| b | crate::ao::sparse::NEAR)
-                .collect(),
-        };
-        self.write_lists(gpu, &relisted);
-        self.step_v(gpu, &relisted, true, &|_, _| {})?;
+        self.step_v(gpu, lists, true, &|_, _| {})?;
         crate::gpu::wait(&gpu.device, "Cao::mask", crate::gpu::WAIT)?;
         Ok(mask)
     }
