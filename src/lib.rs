@@ -33,8 +33,9 @@
 //!    modulation and light volumes; the demo opens carved, with AO. Its viewport image
 //!    (the ray cast in strips and tiles costed by what the same part of the picture took
 //!    last time) and CAO's per-frame update behind it are submitted in slices between
-//!    UI frames ([`gpu::pacer::Pacer`]), so the UI thread never waits for the GPU; a dragged shape's images read `V_AO` as it stands, and at rest the image
-//!    waits for the exact one.
+//!    UI frames ([`gpu::pacer::Pacer`]), so the UI thread never waits for the GPU; a
+//!    dragged shape's images read CAO's `V_PAO` while its `V_AO` is updated (never a
+//!    `V_AO` of another pose), and at rest the image waits for the exact one.
 //!
 //! The command-line interface and the benchmarks live in the binary (`src/bin/volao`);
 //! [`process`] holds the few process-wide settings it makes at start.

@@ -526,6 +526,57 @@ fn a_cut_into_empty_space_recomputes_nothing() {
     assert_exact(&mut s, shapes, reach, "a cut into material");
 }
 
+/// The viewer's images of a shape being moved read `V_PAO` while `V_AO` is updated for
+/// another pose (`GpuVolume::read_stand_in`): such an image is the one of `V_PAO`'s
+/// values uploaded as the AO volume, not the exact `V_AO`'s, and switching back (or
+/// replacing the AO) reads `V_AO` again.
+#[test]
+fn the_stand_in_reads_v_pao_in_place_of_v_ao() {
+    let mut s = scene(&engine(), Preset::CaoSingleColor, RaySet::Six);
+    let reach = s.reach();
+    // A cut into the middle of the crop: CAO differs from V_PAO around it.
+    let shapes = [ClipShape::new(Shape::Sphere, Vec3::ZERO, 10.0)];
+    let stats = s.update(&shapes, reach);
+    assert!(stats.recomputed > 0, "the cut changed no AO");
+    let Scene {
+        gpu,
+        vol,
+        rc,
+        cao,
+        frame,
+        ..
+    } = &mut s;
+    let render = |vol: &GpuVolume| {
+        rc.render(gpu, vol, frame, Some(&cao.clip))
+            .unwrap_or_else(|e| panic!("{e}"))
+            .pixels
+    };
+    vol.set_ambient_occlusion_view(cao.ao_view());
+    vol.set_ambient_occlusion_stand_in(Some(cao.pao_view()));
+    let exact = render(vol);
+    vol.read_stand_in(true);
+    assert!(vol.reads_stand_in());
+    let stand_in = render(vol);
+    vol.read_stand_in(false);
+    assert_eq!(render(vol), exact, "switching back must read V_AO again");
+    let pao = cao
+        .read(gpu, CaoVolume::Precomputed)
+        .unwrap_or_else(|e| panic!("{e}"));
+    vol.set_ambient_occlusion(gpu, &pao);
+    vol.read_stand_in(true);
+    assert!(!vol.reads_stand_in(), "a new AO volume drops the stand-in");
+    let uploaded = render(vol);
+    assert_eq!(
+        differing(&stand_in, &uploaded),
+        0,
+        "the stand-in image is not V_PAO's"
+    );
+    assert!(
+        differing(&stand_in, &exact) > 0,
+        "V_PAO and the exact V_AO drew the same image: the test shows nothing"
+    );
+}
+
 #[test]
 fn readable_bricks_one_voxel_too_tight_break_exactness() {
     let v = engine();

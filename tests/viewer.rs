@@ -1094,6 +1094,12 @@ fn a_shape_dragged_away_and_back_while_cao_catches_up_comes_to_rest_exact() {
         h.state().cao_update_in_flight(),
         "the image came before CAO's update for the pose"
     );
+    // Drawn while V_AO is rewritten for the pose: it read V_PAO, not a V_AO of another
+    // pose or half updated (debug builds also assert it for every image made).
+    assert!(
+        !h.state().viewport_ao_exact(),
+        "an image read a V_AO being updated"
+    );
     move_to(&mut h, x0 + 12.0);
     let away_in_flight = h.state().cao_update_in_flight();
     move_to(&mut h, x0 + 6.0);

@@ -407,6 +407,12 @@ impl Viewer {
         self.with_viewport(|v| v.cao_in_flight()).unwrap_or(false)
     }
 
+    /// Whether the image drawn read CAO's exact `V_AO` for its clip shapes (true without
+    /// CAO); false: it read `V_PAO`, while CAO's update for the shapes was on its way.
+    pub fn viewport_ao_exact(&self) -> bool {
+        self.with_viewport(|v| v.shown_ao_exact()).unwrap_or(true)
+    }
+
     /// Images the viewport has completed so far.
     pub fn viewport_images(&self) -> u64 {
         self.with_viewport(|v| v.frames_rendered).unwrap_or(0)

@@ -446,7 +446,7 @@ impl Viewer {
             });
             progress_bar(ui, Some(fraction));
         } else if !ao_exact {
-            ui.weak("View: the AO is catching up with the clip shapes");
+            ui.weak("View: precomputed AO (without the cut) until Contextual AO catches up");
         } else if scale > 1 {
             ui.weak(format!("View: interactive quality (1/{scale} resolution)"));
         }

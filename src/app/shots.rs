@@ -88,13 +88,18 @@ impl Viewer {
         }
         if let Some(shot) = &mut self.shots.pending {
             let gpu = Arc::clone(&self.gpu);
-            let renderer = self.render_state.renderer.read();
-            let result = match renderer.callback_resources.get::<ViewportGpu>() {
-                Some(
-                    v @ ViewportGpu {
-                        volume: Some(vol), ..
-                    },
-                ) => shot.pump(&gpu, &v.ray_caster, vol, v.clip_maps()),
+            let mut renderer = self.render_state.renderer.write();
+            let result = match renderer.callback_resources.get_mut::<ViewportGpu>() {
+                Some(v) => match &mut v.volume {
+                    Some(vol) => {
+                        // A screenshot waits for a current image, whose V_AO is exact:
+                        // never CAO's stand-in.
+                        vol.read_stand_in(false);
+                        let vol = v.volume.as_ref().expect("just matched");
+                        shot.pump(&gpu, &v.ray_caster, vol, v.clip_maps())
+                    }
+                    None => Err("no volume to render".into()),
+                },
                 _ => Err("no volume to render".into()),
             };
             drop(renderer);

@@ -99,8 +99,9 @@ pub(super) struct ViewKey {
     pub(super) revision: u64,
     pub(super) clip: Vec<ClipShape>,
     pub(super) scale: u32,
-    /// False for an image made while CAO's update was still on its way: its AO lags
-    /// behind the shapes (the clipping does not).
+    /// False for an image made while CAO's `V_AO` was not exact for its shapes (its
+    /// update still on its way): such an image reads `V_PAO` instead, LAO of the
+    /// unclipped volume, never a `V_AO` posed for other shapes or half updated.
     pub(super) ao_exact: bool,
 }
 
@@ -236,6 +237,7 @@ impl ViewportGpu {
     pub fn set_cao(&mut self, cao: Option<CaoGpu>) {
         if let (Some(c), Some(v)) = (&cao, &mut self.volume) {
             v.set_ambient_occlusion_view(c.ao_view());
+            v.set_ambient_occlusion_stand_in(Some(c.pao_view()));
         }
         self.cao = cao;
         self.cao_generation += 1;
@@ -520,8 +522,8 @@ impl ViewportGpu {
         self.cao_work.is_some() || self.stats_pending.is_some()
     }
 
-    /// Whether the image drawn read an exact `V_AO` for its shapes (false while CAO's
-    /// update catches up with a shape being dragged).
+    /// Whether the image drawn read an exact `V_AO` for its shapes (false: it read
+    /// `V_PAO`, while CAO's update caught up with a shape being dragged).
     pub fn shown_ao_exact(&self) -> bool {
         self.shown.as_ref().is_none_or(|s| s.key.ao_exact)
     }
@@ -572,6 +574,16 @@ impl ViewportGpu {
             && self.cao_work.is_none()
             && self.ao_exact_for.as_ref() != Some(&key.clip)
         {
+            // The update poses the clip maps for these shapes and rewrites V_AO: an image
+            // being made for other shapes, or reading V_AO, would mix two poses. It is
+            // dropped, and one that reads V_PAO takes its place if the view moves.
+            if self
+                .work
+                .as_ref()
+                .is_some_and(|w| w.key.ao_exact || w.key.clip != key.clip)
+            {
+                self.work = None;
+            }
             match self.begin_cao(gpu, &key.clip, want.setup) {
                 Ok(errors) => out.clip_errors = errors,
                 Err(e) => {
@@ -580,13 +592,12 @@ impl ViewportGpu {
                 }
             }
         }
-        // An image being made while an update is on its way reads a V_AO that changes
-        // under it (after a new CAO, say): it is not exact, and one follows at rest.
-        if self.cao_work.is_some()
-            && let Some(w) = &mut self.work
-        {
-            w.key.ao_exact = false;
-        }
+        // An image that reads V_AO is never made while an update is on its way (which
+        // rewrites it): dropped above, or started reading V_PAO (`start`).
+        debug_assert!(
+            self.cao_work.is_none() || self.work.as_ref().is_none_or(|w| !w.key.ao_exact),
+            "an image reads a V_AO being updated"
+        );
         for (tag, took) in pacer.timed(STRIP) {
             if let Some(i) = self.tiles_in_flight.iter().position(|s| s.0 == tag) {
                 let (_, size, step, tile) = self.tiles_in_flight.swap_remove(i);
@@ -646,8 +657,8 @@ impl ViewportGpu {
 
     /// Whether to start an image for `key` now. Not while CAO's update is on its way,
     /// unless the view moves (an interactive image, `key.scale > 1`) and the image drawn
-    /// shows another view: dragging a shape, the clipping follows the mouse and the AO
-    /// catches up; at rest the image waits for the exact AO.
+    /// shows another view: dragging a shape, the clipping follows the mouse with
+    /// `V_PAO` for AO; at rest the image waits for the exact AO.
     fn should_start(&self, key: &ViewKey) -> bool {
         let shown = self.shown.as_ref().map(|s| &s.key);
         if shown == Some(key) {
@@ -757,6 +768,11 @@ impl ViewportGpu {
             ao_exact: self.ao_exact(&key.clip),
             ..key
         };
+        // Without an exact V_AO for these shapes the image reads V_PAO (the stand-in
+        // set with CAO), so that its AO and its clipping never come from two poses.
+        if let Some(vol) = &mut self.volume {
+            vol.read_stand_in(!key.ao_exact);
+        }
         let (width, height) = (key.frame.width, key.frame.height);
         let target = self.target(&gpu.device, (width, height));
         self.work = Some(Work {
@@ -828,6 +844,11 @@ impl ViewportGpu {
                 }
             }
         }
+        // An image reads V_AO only when it is exact for its shapes, else V_PAO.
+        debug_assert!(
+            cao.is_none() || vol.reads_stand_in() != w.key.ao_exact,
+            "an image reads the wrong AO volume"
+        );
         let pixel_rate = pacer.rate(STRIP).unwrap_or_else(|| first_pixel_rate(gpu));
         let step = w.key.frame.settings.step_voxels;
         let estimate = |t: Tile| {

@@ -58,6 +58,8 @@ struct Bound {
     generation: u64,
     /// Bound the LUT baked for the frame's own step ([`GpuVolume::prepare_step`]).
     step_lut: bool,
+    /// Bound the AO stand-in ([`GpuVolume::read_stand_in`]).
+    stand_in: bool,
     layer: Option<(wgpu::TextureView, wgpu::TextureView)>,
     group: wgpu::BindGroup,
     group_2: wgpu::BindGroup,
@@ -72,6 +74,11 @@ pub struct GpuVolume {
     ao_view: wgpu::TextureView,
     /// `ao_view` is an AO volume, not the 1×1×1 texel of 1 (see [`Variant`]).
     pub(super) ao_bound: bool,
+    /// An AO volume of the same size and format read instead of `ao_view` while
+    /// `reads_stand_in` (the viewer's images of a moving clip shape read CAO's `V_PAO`
+    /// while its `V_AO` catches up).
+    ao_stand_in: Option<wgpu::TextureView>,
+    reads_stand_in: bool,
     modulation_view: wgpu::TextureView,
     /// `modulation_view` is a modulation volume, not the 1×1×1 texel of 1.
     pub(super) modulation_bound: bool,
@@ -219,6 +226,8 @@ impl GpuVolume {
                 volume_view: volume.create_view(&Default::default()),
                 ao_view: ao.create_view(&Default::default()),
                 ao_bound: false,
+                ao_stand_in: None,
+                reads_stand_in: false,
                 modulation_view: no_modulation(device, queue),
                 modulation_bound: false,
                 occupancy_view: occupancy.create_view(&Default::default()),
@@ -321,6 +330,7 @@ impl GpuVolume {
         write_3d(&gpu.queue, &texture, dims, 4, bytemuck::cast_slice(values));
         self.ao_view = texture.create_view(&Default::default());
         self.ao_bound = true;
+        self.ao_stand_in = None;
     }
 
     /// Uses an AO volume already on the GPU (R32Float, the volume's dims), such as
@@ -329,6 +339,33 @@ impl GpuVolume {
         self.generation = next_generation();
         self.ao_view = view.clone();
         self.ao_bound = true;
+        self.ao_stand_in = None;
+    }
+
+    /// An AO volume of the same dims and format as the one set, read instead of it
+    /// while [`Self::read_stand_in`] says so: CAO's `V_PAO`, which the viewer's images
+    /// of a moving clip shape read while `V_AO` is being updated for another pose.
+    pub fn set_ambient_occlusion_stand_in(&mut self, view: Option<&wgpu::TextureView>) {
+        self.ao_stand_in = view.cloned();
+    }
+
+    /// Whether frames encoded from now on read the stand-in (when one is set) instead of
+    /// the AO volume. Switching changes no other binding and bakes nothing.
+    pub fn read_stand_in(&mut self, yes: bool) {
+        self.reads_stand_in = yes;
+    }
+
+    /// Whether frames encoded now read the stand-in.
+    pub fn reads_stand_in(&self) -> bool {
+        self.reads_stand_in && self.ao_stand_in.is_some()
+    }
+
+    /// The AO volume frames encoded now read.
+    fn ao_view_read(&self) -> &wgpu::TextureView {
+        match (&self.ao_stand_in, self.reads_stand_in) {
+            (Some(view), true) => view,
+            _ => &self.ao_view,
+        }
     }
 
     /// Back to no ambient occlusion (A = 1 everywhere), as right after upload. The viewer
@@ -344,6 +381,7 @@ impl GpuVolume {
         write_3d(&gpu.queue, &ao, [1, 1, 1], 4, bytemuck::bytes_of(&1.0f32));
         self.ao_view = ao.create_view(&Default::default());
         self.ao_bound = false;
+        self.ao_stand_in = None;
     }
 
     /// Drops the opacity modulation (factor 1 everywhere).
@@ -571,6 +609,7 @@ impl RayCaster {
         let layer_views = layer.map(|l| (l.position.clone(), l.color.clone()));
         let lut = vol.lut_buffer_for(frame.settings.step_voxels);
         let step_lut = !std::ptr::eq(lut, &vol.lut_buffer);
+        let stand_in = vol.reads_stand_in();
         let mut bound = self.bound.lock().unwrap_or_else(|e| e.into_inner());
         validated(device, "RayCaster::encode_tile", || {
             let slot = match bound.iter().position(|b| b.target == *target) {
@@ -599,6 +638,7 @@ impl RayCaster {
                         extras,
                         generation: vol.generation,
                         step_lut,
+                        stand_in,
                         layer: layer_views.clone(),
                         group,
                         group_2,
@@ -607,13 +647,18 @@ impl RayCaster {
                 }
             };
             let b = &mut bound[slot];
-            if b.generation != vol.generation || b.layer != layer_views || b.step_lut != step_lut {
+            if b.generation != vol.generation
+                || b.layer != layer_views
+                || b.step_lut != step_lut
+                || b.stand_in != stand_in
+            {
                 let (group, group_2) =
                     self.bind_groups(device, (vol, lut), target, &b.params, &b.extras, layer);
                 b.group = group;
                 b.group_2 = group_2;
                 b.generation = vol.generation;
                 b.step_lut = step_lut;
+                b.stand_in = stand_in;
                 b.layer = layer_views.clone();
             }
             queue.write_buffer(&b.params, 0, bytemuck::bytes_of(&params));
@@ -651,7 +696,7 @@ impl RayCaster {
                 wgpu::BindingResource::TextureView(&vol.volume_view),
                 wgpu::BindingResource::Sampler(&self.sampler),
                 lut.as_entire_binding(),
-                wgpu::BindingResource::TextureView(&vol.ao_view),
+                wgpu::BindingResource::TextureView(vol.ao_view_read()),
                 wgpu::BindingResource::TextureView(&vol.occupancy_view),
                 wgpu::BindingResource::TextureView(&target_view),
                 wgpu::BindingResource::TextureView(&vol.modulation_view),

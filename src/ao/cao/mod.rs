@@ -830,6 +830,12 @@ impl CaoGpu {
         &self.views[2]
     }
 
+    /// `V_PAO` (LAO of the unclipped volume), for images that cannot wait for `V_AO`:
+    /// the ray caster reads it like `V_AO` (voxels it marks unread are never read).
+    pub fn pao_view(&self) -> &wgpu::TextureView {
+        &self.views[1]
+    }
+
     /// GPU memory of the CAO volumes per voxel, in bytes (V_o, V_PAO, V_AO; the density
     /// volume V is the ray caster's).
     pub fn bytes_per_voxel(&self) -> u32 {
