@@ -14,7 +14,8 @@ struct Params {
     spacing: vec4<f32>,   // mm per voxel, w: N extra MSAA samples
     half: vec4<f32>,      // half the volume's extent (mm)
     lut_map: vec4<f32>,   // a, b, entries − 1
-    mode: vec4<u32>,      // full (0/1), V_PAO marks unreadable voxels (0/1), clipped → 1 (0/1)
+    mode: vec4<u32>,      // full (0/1), V_PAO marks unreadable voxels (0/1), clipped → 1 (0/1),
+                          // affected by the centre's dilation test alone (0/1)
 }
 
 // Marks in V_AO between steps IV and V (an ambient factor is never negative).
@@ -129,6 +130,11 @@ fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
             dilated = dilated + u32(t.y);
         }
         opacity = f32(visible) / f32(n + 9u) * voxel_opacity(v);
+    }
+    if p.mode.w != 0u {
+        // The reach (ao::cao::reach_mm) runs from the voxel's centre and already covers
+        // its cell's clip samples and the trilinear stencils: the centre decides.
+        dilated = u32(t.y);
     }
     var ao = RECOMPUTE;
     // With p.mode.y, V_PAO holds UNREAD (cao_lao.wgsl) where the ray caster cannot read

@@ -110,7 +110,11 @@ struct ClipParams {
     /// frame whose step V runs over the voxel list, which holds only voxels to ray
     /// cast), 0: they are marked CLIPPED.
     clipped_one: u32,
-    _pad2: u32,
+    /// 1: a voxel is marked for a ray cast when its centre lies in a carving shape's
+    /// dilation ([`reach_mm`] already covers its cell and the trilinear stencils), 0: when
+    /// any of its 9 + N clip samples does, as Algorithm 2 is written (the dense pipeline,
+    /// the paper's mask).
+    centre_reach: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<ClipParams>() == 96);
@@ -412,7 +416,7 @@ impl CaoGpu {
             full: 0,
             unread_marked: 0,
             clipped_one: 0,
-            _pad2: 0,
+            centre_reach: 0,
         };
         let lao_params = LaoParams {
             bricks: BrickChunk::of(dims),
@@ -737,6 +741,7 @@ impl CaoGpu {
         params.full = u32::from(mode == CaoMode::Full);
         params.unread_marked = u32::from(self.pao_ready);
         params.clipped_one = u32::from(self.lists_voxels(mode));
+        params.centre_reach = u32::from(self.bricks.skipping);
         (chunks, params)
     }
 
