@@ -17,6 +17,19 @@ struct Clip {
 }
 
 @group(1) @binding(0) var<uniform> clip: Clip;
+
+// The number of shapes when a pipeline is built for it (the ray caster's variants,
+// render::Variant): the loops over the shapes then have a constant bound, which a CPU
+// driver unrolls into loads of one shape's uniforms instead of per-lane gathers
+// (lavapipe: half the cost of a clip test per sample). 0: `clip.counts.x`, any number.
+override CLIP_SHAPES: u32 = 0u;
+
+fn clip_shapes() -> u32 {
+    if CLIP_SHAPES != 0u {
+        return CLIP_SHAPES;
+    }
+    return clip.counts.x;
+}
 @group(1) @binding(1) var clip_maps: texture_2d_array<f32>;
 
 struct ClipTest {
@@ -57,7 +70,7 @@ fn clip_classify(pos: vec3<f32>) -> vec2<bool> {
     var probed = false;
     var near_carve = false;
     var deep_probe = false;
-    for (var s = 0u; s < clip.counts.x; s = s + 1u) {
+    for (var s = 0u; s < clip_shapes(); s = s + 1u) {
         let t = clip_test(s, pos);
         if clip.shapes[s].info.x == 0u {
             carved = carved || t.inside;

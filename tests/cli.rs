@@ -597,10 +597,31 @@ fn bench_render_times_the_configurations_asked_for_as_json_lines() {
     ]);
     assert!(!out.status.success());
     assert!(
-        text(&out.stderr).contains("no clip shapes"),
+        text(&out.stderr).contains("unclipped"),
         "{}",
         text(&out.stderr)
     );
+    // Clipped frames: the shapes are counted in the JSON.
+    let out = volao(&[
+        "bench",
+        "render",
+        file.to_str().expect("utf-8 path"),
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--runs",
+        "1",
+        "--clip",
+        "sphere:0,0,0,20",
+        "--clip",
+        "box:0,0,30,20,20,20",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let j: serde_json::Value =
+        serde_json::from_str(text(&out.stdout).lines().next().expect("a line")).expect("JSON");
+    assert_eq!(j["clip_shapes"], 2, "{j}");
 }
 
 /// The voxels of an f32 volume file, x fastest.

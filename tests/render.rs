@@ -742,6 +742,64 @@ fn specialised_pipelines_draw_the_general_pixels() {
 /// Every variant `Variant::of` can choose, with the frame's features off at run time,
 /// draws the general shader's pixels: 5 modes × 256 pipelines (~2 min on lavapipe).
 /// `cargo test --release --test render every_variant -- --ignored`
+/// With clip shapes, a frame's pipeline is built for their number (`CLIP_SHAPES`, a
+/// constant loop bound): it draws the pixels of the pipeline that reads the number from
+/// the uniforms, for one to three carving and probing shapes, in composite and MIP.
+#[test]
+fn a_pipeline_built_for_its_number_of_clip_shapes_draws_the_general_pixels() {
+    use glam::Vec3;
+    use volao::clip::gpu::ClipMaps;
+    use volao::clip::{ClipMode, ClipShape, Shape};
+    use volao::render::RenderMode;
+    use volao::render::gpu::Variant;
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let v = load("raw/engine.raw");
+    let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
+    let vol = GpuVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let shapes = [
+        ClipShape::new(Shape::Sphere, Vec3::new(0.0, 0.0, 10.0), 20.0),
+        ClipShape {
+            mode: ClipMode::Probe,
+            ..ClipShape::new(Shape::Box, Vec3::ZERO, 60.0)
+        },
+        ClipShape::new(Shape::Sphere, Vec3::new(20.0, -10.0, 0.0), 12.0),
+    ];
+    let radius = glam::Vec3::from(vol.texels.extent()).length() * 0.5;
+    let mut maps = ClipMaps::new(&gpu).unwrap_or_else(|e| panic!("{e}"));
+    let unclipped = rc
+        .render(&gpu, &vol, &frame(32, Shading::Phong), None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    for n in 1..=shapes.len() {
+        let report = maps
+            .update(&gpu, &shapes[..n], radius, 1.0, 128)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(report.errors.is_empty(), "{:?}", report.errors);
+        for mode in [RenderMode::Composite, RenderMode::Mip] {
+            let mut f = frame(32, Shading::Phong);
+            f.settings.mode = mode;
+            let variant = Variant::of(&vol, &f, Some(&maps), false);
+            assert_eq!(variant.clip_shapes, n as u32);
+            let render = |variant| {
+                rc.render_variant(&gpu, &vol, &f, Some(&maps), Some(variant))
+                    .unwrap_or_else(|e| panic!("{e}"))
+                    .pixels
+            };
+            let built = render(variant);
+            assert!(
+                built == render(Variant::general(mode)),
+                "{mode} with {n} shapes: the pipeline built for them draws other pixels"
+            );
+            if mode == RenderMode::Composite {
+                assert!(
+                    built != unclipped.pixels,
+                    "{n} shapes clip nothing: the test shows nothing"
+                );
+            }
+        }
+    }
+}
+
 #[test]
 #[ignore = "sweep of 1280 pipelines, ~2 min on lavapipe"]
 fn every_variant_draws_the_general_pixels() {
@@ -763,6 +821,7 @@ fn every_variant_draws_the_general_pixels() {
                 shadows: on(2),
                 surfaces: on(3),
                 clip: on(4),
+                clip_shapes: 0,
                 modulation: on(5),
                 skipping: on(6),
             };

@@ -19,6 +19,9 @@ pub struct Variant {
     pub shadows: bool,
     pub surfaces: bool,
     pub clip: bool,
+    /// The number of clip shapes the pipeline is built for (`CLIP_SHAPES` of
+    /// `clip_common.wgsl`); 0: any (read from the uniforms).
+    pub clip_shapes: u32,
     /// An opacity-modulation volume is bound (not the 1×1×1 texel of 1).
     pub modulation: bool,
     pub skipping: bool,
@@ -49,6 +52,7 @@ impl Variant {
             // surfaces' uniform flag still decides, so the pixels are the same.
             surfaces: surfaces || shadows,
             clip: clip.is_some_and(|c| c.uniforms.counts[0] > 0),
+            clip_shapes: clip.map_or(0, |c| c.uniforms.counts[0]),
             modulation: s.mode.is_composite() && vol.modulation_bound,
             skipping: s.empty_space_skipping,
         }
@@ -64,13 +68,14 @@ impl Variant {
             shadows: true,
             surfaces: true,
             clip: true,
+            clip_shapes: 0,
             modulation: true,
             skipping: true,
         }
     }
 
     /// The values of the shader's `override` constants.
-    pub(super) fn constants(&self) -> [(&'static str, f64); 10] {
+    pub(super) fn constants(&self) -> [(&'static str, f64); 11] {
         let b = |on: bool| f64::from(u8::from(on));
         // Shading that fetches: worth finding a sample with opacity before shading.
         let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
@@ -83,6 +88,7 @@ impl Variant {
             ("SHADOWS", b(self.shadows)),
             ("SURFACES", b(self.surfaces)),
             ("CLIP", b(self.clip)),
+            ("CLIP_SHAPES", f64::from(self.clip_shapes)),
             ("MODULATION", b(self.modulation)),
             ("SKIPPING", b(self.skipping)),
         ]

@@ -28,8 +28,8 @@ pub struct RenderBenchArgs {
     /// Shadings to time, comma-separated (none, phong).
     #[arg(long, value_delimiter = ',', default_value = "phong", value_parser = crate::args::parse_shading)]
     pub shading: Vec<volao::render::Shading>,
-    /// AO method, computed once before the frames are timed (no clipping here, so not
-    /// cao or lao-full).
+    /// AO method, computed once before the frames are timed (unclipped, so not cao or
+    /// lao-full).
     #[arg(long, default_value = "none", value_parser = crate::args::ao_method())]
     pub ao: volao::ao::AoMethod,
     /// Transfer-function preset (default: chosen from the volume's range).
@@ -38,12 +38,16 @@ pub struct RenderBenchArgs {
     /// One JSON object per configuration on stdout instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Clip shapes to render with (repeatable, as `volao render --clip`; carving): the
+    /// frames then pay the clip test of every sample.
+    #[arg(long = "clip", value_name = "SHAPE", value_parser = volao::clip::ClipShape::parse)]
+    pub clip: Vec<volao::clip::ClipShape>,
 }
 
 impl RenderBenchArgs {
     /// Whether only the fixed tables were asked for.
     fn is_fixed(&self) -> bool {
-        self.files.is_empty() && !self.json
+        self.files.is_empty() && !self.json && self.clip.is_empty()
     }
 }
 
@@ -54,13 +58,13 @@ fn warm_frame(
     rc: &volao::render::gpu::RayCaster,
     vol: &volao::render::gpu::GpuVolume,
     frame: &volao::render::Frame,
-    runs: usize,
+    (clip, runs): (Option<&volao::clip::gpu::ClipMaps>, usize),
 ) -> Result<f64> {
-    rc.render(gpu, vol, frame, None)?;
+    rc.render(gpu, vol, frame, clip)?;
     let mut times = Vec::new();
     for _ in 0..runs.max(1) {
         let start = Instant::now();
-        rc.render(gpu, vol, frame, None)?;
+        rc.render(gpu, vol, frame, clip)?;
         times.push(start.elapsed().as_secs_f64());
     }
     Ok(median(times))
@@ -77,6 +81,8 @@ struct Timed {
     median_frame_ms: f64,
     /// Time to compute the AO volume (once per file and method), 0 without.
     ao_ms: f64,
+    /// Clip shapes the frames were clipped with.
+    clip_shapes: usize,
     adapter: String,
 }
 
@@ -93,7 +99,9 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
         .unwrap_or_default()
         .to_owned();
     if args.ao.is_clipped() {
-        anyhow::bail!("--ao {ao_name}: bench render has no clip shapes; use lao");
+        anyhow::bail!(
+            "--ao {ao_name}: bench render computes the AO once, unclipped (--clip only clips the frames); use lao"
+        );
     }
     if args.files.is_empty() {
         anyhow::bail!(
@@ -145,6 +153,19 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
         )?;
         volao::render::offscreen::show_ambient(&gpu, &mut vol, &tf, &ao, computed.ambient)?;
         let ao_ms = start.elapsed().as_secs_f64() * 1e3;
+        let maps = match args.clip.is_empty() {
+            true => None,
+            false => {
+                let mut maps = volao::clip::gpu::ClipMaps::new(&gpu)?;
+                let radius = glam::Vec3::from(vol.texels.extent()).length() * 0.5;
+                // No AO depends on the clipping: the dilation margin is unused.
+                let update = maps.update(&gpu, &args.clip, radius, 1.0, ao.clip_resolution)?;
+                if let Some(e) = update.errors.first() {
+                    anyhow::bail!("{}: --clip: {e}", path.display());
+                }
+                Some(maps)
+            }
+        };
         let name = path.display().to_string();
         for &mode in &args.mode {
             for &shading in &args.shading {
@@ -155,7 +176,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
                 };
                 let mut frame = super::frame(20.0, settings, args.width);
                 frame.height = args.height;
-                let seconds = warm_frame(&gpu, &rc, &vol, &frame, args.runs)?;
+                let seconds = warm_frame(&gpu, &rc, &vol, &frame, (maps.as_ref(), args.runs))?;
                 let t = Timed {
                     file: name.clone(),
                     size: [args.width, args.height],
@@ -164,6 +185,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
                     ao: args.ao,
                     median_frame_ms: seconds * 1e3,
                     ao_ms,
+                    clip_shapes: args.clip.len(),
                     adapter: adapter.clone(),
                 };
                 if args.json {
@@ -253,7 +275,7 @@ pub fn render_bench(args: &RenderBenchArgs) -> Result<()> {
                         ..Default::default()
                     };
                     let frame = super::frame(20.0, settings, size);
-                    let t = warm_frame(&gpu, &rc, &vol, &frame, args.runs)?;
+                    let t = warm_frame(&gpu, &rc, &vol, &frame, (None, args.runs))?;
                     let steps = box_steps(&frame, &vol.texels, &vol.lut);
                     println!(
                         "| {name} | {size}² | {shading:?} | {} | {:.1} ms | {:.2e} |",
