@@ -33,8 +33,7 @@ use crate::clip::ClipShape;
 use crate::clip::gpu::{ClipMaps, ClipUpdate};
 use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
 use crate::gpu::{
-    Gpu, GpuError, compute_pipeline, read_buffer, readback_buffer, shaders, storage_buffer,
-    uniform_group, validated,
+    Gpu, GpuError, read_buffer, readback_buffer, storage_buffer, uniform_group, validated,
 };
 use crate::render::gpu::GpuVolume;
 use crate::render::texels::VolumeTexels;
@@ -46,10 +45,12 @@ pub use super::settings::DEFAULT_MSAA;
 pub use cpu::{clip_volume_cpu, lao_on_opacity_cpu};
 pub use frame::CaoFrame;
 pub use listed::MAX_LIST_BYTES_PER_VOXEL;
+pub use pipelines::CaoPipelines;
 
 mod cpu;
 mod frame;
 mod listed;
+mod pipelines;
 mod readback;
 
 /// Selective recomputation (CAO) or the baseline that ray casts every voxel.
@@ -156,171 +157,6 @@ pub enum CaoVolume {
     Precomputed,
     /// `V_AO`, this frame's ambient factor.
     Ambient,
-}
-
-/// CAO's pipelines and sampler, built once per device.
-#[derive(Debug)]
-pub struct CaoPipelines {
-    /// Step IV, and its dense variant (`--no-skipping`: every voxel tests its corners).
-    clip: ClipPipelines,
-    clip_dense: ClipPipelines,
-    /// Step V with skipping, and its dense variant (`--no-skipping`).
-    lao: wgpu::ComputePipeline,
-    lao_dense: wgpu::ComputePipeline,
-    /// `V_PAO` of readable voxels only: every ray sample fetched.
-    lao_readable: wgpu::ComputePipeline,
-    /// Step V of a frame with skipping: readable voxels, every ray sample fetched.
-    lao_frame: wgpu::ComputePipeline,
-    /// A frame's step V over a list of its voxels.
-    listed: listed::ListedPipelines,
-    sampler: wgpu::Sampler,
-    /// The format of `V_o`, `V_PAO` and `V_AO`: R16Float (2 bytes per voxel each) where
-    /// the adapter can write it from a shader, else R32Float.
-    format: wgpu::TextureFormat,
-}
-
-/// Step IV's pipelines by the number of clip shapes they are built for (`CLIP_SHAPES` of
-/// `clip_common.wgsl`, a constant bound that lavapipe unrolls: step IV about 20 %
-/// faster with skipping, 45 % without): index 0 reads the number from the uniforms (any
-/// number), 1 and 2 are built for that many. All share one explicit layout, so one set
-/// of bind groups serves them all.
-#[derive(Debug)]
-struct ClipPipelines([wgpu::ComputePipeline; 3]);
-
-impl ClipPipelines {
-    fn new(
-        device: &wgpu::Device,
-        label: &str,
-        module: &wgpu::ShaderModule,
-        format: wgpu::TextureFormat,
-    ) -> Self {
-        use crate::gpu::entry;
-        use wgpu::TextureViewDimension::D3;
-        let c = wgpu::ShaderStages::COMPUTE;
-        // `cao_clip.wgsl`'s group 0.
-        let group_0 = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some(label),
-            entries: &[
-                entry::uniform(0, c),
-                entry::texture(1, c, D3, Some(false)),
-                entry::storage(2, c, true),
-                entry::storage(3, c, true),
-                entry::storage_texture(4, c, format, D3),
-                entry::storage_texture(5, c, format, D3),
-                entry::storage(6, c, false),
-                entry::storage(7, c, true),
-                entry::texture(8, c, D3, Some(false)),
-            ],
-        });
-        let group_1 = crate::clip::gpu::bind_group_layout(device);
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some(label),
-            bind_group_layouts: &[Some(&group_0), Some(&group_1)],
-            immediate_size: 0,
-        });
-        let built_for = |shapes: u32| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(label),
-                layout: Some(&layout),
-                module,
-                entry_point: Some("main"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("CLIP_SHAPES", f64::from(shapes))],
-                    ..Default::default()
-                },
-                cache: None,
-            })
-        };
-        ClipPipelines([built_for(0), built_for(1), built_for(2)])
-    }
-
-    /// The pipeline for `shapes` clip shapes.
-    fn for_shapes(&self, shapes: u32) -> &wgpu::ComputePipeline {
-        self.0.get(shapes as usize).unwrap_or(&self.0[0])
-    }
-
-    /// The one whose layouts the bind groups are made with.
-    fn any(&self) -> &wgpu::ComputePipeline {
-        &self.0[0]
-    }
-}
-
-impl crate::gpu::Stage for CaoPipelines {
-    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let build = |format: wgpu::TextureFormat| -> Result<Self, GpuError> {
-            let name = if format == wgpu::TextureFormat::R16Float {
-                "r16float"
-            } else {
-                "r32float"
-            };
-            let format_of = |code: String| code.replace("r16float", name);
-            let clip_module = shaders::module_with(device, "cao_clip.wgsl", format_of)?;
-            let clip_dense_module = shaders::module_with(device, "cao_clip.wgsl", |code| {
-                super::sparse::dense_variant(format_of(code))
-            })?;
-            let lao_module = shaders::module_with(device, "cao_lao.wgsl", format_of)?;
-            let dense_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
-                super::sparse::dense_variant(format_of(code))
-            })?;
-            let readable_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
-                super::sparse::readable_variant(format_of(code))
-            })?;
-            let frame_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
-                super::sparse::frame_variant(format_of(code))
-            })?;
-            let listed = listed::ListedPipelines::create(device, format_of)?;
-            validated(device, "CaoPipelines::create", || CaoPipelines {
-                clip: ClipPipelines::new(device, "Cao::clip", &clip_module, format),
-                clip_dense: ClipPipelines::new(
-                    device,
-                    "Cao::clip_dense",
-                    &clip_dense_module,
-                    format,
-                ),
-                lao: compute_pipeline(device, "Cao::lao", &lao_module, "main", None),
-                lao_dense: compute_pipeline(device, "Cao::lao_dense", &dense_module, "main", None),
-                lao_readable: compute_pipeline(
-                    device,
-                    "Cao::lao_readable",
-                    &readable_module,
-                    "main",
-                    None,
-                ),
-                lao_frame: compute_pipeline(device, "Cao::lao_frame", &frame_module, "main", None),
-                listed,
-                sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
-                format,
-            })
-        };
-        let narrow = device
-            .features()
-            .contains(wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES);
-        match narrow && std::env::var_os("VOLAO_CAO_F32").is_none() {
-            true => build(wgpu::TextureFormat::R16Float)
-                .or_else(|_| build(wgpu::TextureFormat::R32Float)),
-            false => build(wgpu::TextureFormat::R32Float),
-        }
-    }
-}
-
-impl CaoPipelines {
-    /// Step IV's pipelines for `bricks`.
-    fn clip_for(&self, bricks: &Bricks) -> &ClipPipelines {
-        match bricks.skipping {
-            true => &self.clip,
-            false => &self.clip_dense,
-        }
-    }
-
-    /// Step V's pipeline for `bricks`, for `V_PAO` or (`frame`) for a frame.
-    fn lao_for(&self, bricks: &Bricks, frame: bool) -> &wgpu::ComputePipeline {
-        match (bricks.skipping, frame) {
-            (false, _) => &self.lao_dense,
-            (true, true) => &self.lao_frame,
-            (true, false) if super::sparse::readable_only(bricks) => &self.lao_readable,
-            (true, false) => &self.lao,
-        }
-    }
 }
 
 /// Per-frame figures.
