@@ -89,18 +89,13 @@ impl Viewer {
         if let Some(shot) = &mut self.shots.pending {
             let gpu = Arc::clone(&self.gpu);
             let mut renderer = self.render_state.renderer.write();
-            let result = match renderer.callback_resources.get_mut::<ViewportGpu>() {
-                Some(v) => match &mut v.volume {
-                    Some(vol) => {
-                        // A screenshot waits for a current image, whose V_AO is exact:
-                        // never CAO's stand-in.
-                        vol.read_stand_in(false);
-                        let vol = v.volume.as_ref().expect("just matched");
-                        shot.pump(&gpu, &v.ray_caster, vol, v.clip_maps())
-                    }
-                    None => Err("no volume to render".into()),
-                },
-                _ => Err("no volume to render".into()),
+            let parts = renderer
+                .callback_resources
+                .get_mut::<ViewportGpu>()
+                .and_then(ViewportGpu::for_screenshot);
+            let result = match parts {
+                Some((ray_caster, vol, clip)) => shot.pump(&gpu, ray_caster, vol, clip),
+                None => Err("no volume to render".into()),
             };
             drop(renderer);
             match result {

@@ -261,6 +261,14 @@ impl ViewportGpu {
         self.cao.as_ref().map(|c| &c.clip).or(self.clip.as_ref())
     }
 
+    /// What a screenshot renders with: the ray caster, the volume (reading `V_AO`: a
+    /// screenshot waits for a current image, whose `V_AO` is exact, never the stand-in)
+    /// and the clip maps; `None` before a volume is uploaded.
+    pub(super) fn for_screenshot(&mut self) -> Option<(&RayCaster, &GpuVolume, Option<&ClipMaps>)> {
+        self.volume.as_mut()?.read_stand_in(false);
+        Some((&*self.ray_caster, self.volume.as_ref()?, self.clip_maps()))
+    }
+
     /// Marks the volume's transfer function or AO as changed.
     pub fn touch(&mut self) {
         self.revision += 1;
