@@ -586,7 +586,7 @@ fn readable_bricks_one_voxel_too_tight_break_exactness() {
     // apron and not grown by a brick for the AO read off the surface: the voxels such
     // samples weight are no longer all counted.
     let texels = &s.vol.texels;
-    let tight = BlockRanges::with_apron(texels, 0);
+    let tight = BlockRanges::of_cells(texels, volao::ao::sparse::BRICK, 0);
     let render = volao::sample::bake_lut(&s.tf, texels, 1.0);
     let mut bricks = Bricks::new(texels, &tight, Some(&render), &lao_lut(&s.tf, texels));
     bricks.readable = tight.occupancy(texels, &render);

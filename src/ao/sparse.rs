@@ -60,7 +60,8 @@ impl Coverage {
         }
     }
 
-    /// The bricks for `tf` on `texels`, whose block ranges are `ranges`.
+    /// The bricks for `tf` on `texels`, whose block ranges (of any edge dividing
+    /// [`BRICK`]) are `ranges`.
     pub fn bricks(
         self,
         texels: &VolumeTexels,
@@ -98,8 +99,10 @@ fn dilate(flags: &[u8], grid: [usize; 3]) -> Vec<u8> {
     out
 }
 
-/// Brick edge in voxels: the ray caster's occupancy block.
-pub const BRICK: usize = BLOCK;
+/// Brick edge in voxels: a whole number of the ray caster's occupancy blocks, whose
+/// ranges [`BlockRanges::merged`] turns into the bricks'.
+pub const BRICK: usize = 8;
+const _: () = assert!(BRICK % BLOCK == 0);
 
 /// Bricks per axis at most (a packed brick index has 10 bits per axis).
 pub const MAX_BRICKS_PER_AXIS: usize = 1 << 10;
@@ -239,15 +242,23 @@ impl Bricks {
         }
     }
 
-    /// Bricks for `ranges` of `texels`: readable under `render_lut` (every brick when
-    /// `None`, for a render mode that reads AO at samples the LUT's opacity does not
-    /// decide, such as an isosurface), occupied under the LAO LUT `lao_lut`.
+    /// Bricks for `ranges` of `texels` (blocks of any edge dividing [`BRICK`]):
+    /// readable under `render_lut` (every brick when `None`, for a render mode that
+    /// reads AO at samples the LUT's opacity does not decide, such as an isosurface),
+    /// occupied under the LAO LUT `lao_lut`.
     pub fn new(
         texels: &VolumeTexels,
         ranges: &BlockRanges,
         render_lut: Option<&Lut>,
         lao_lut: &Lut,
     ) -> Self {
+        let merged;
+        let ranges = if ranges.edge == BRICK {
+            ranges
+        } else {
+            merged = ranges.merged(BRICK / ranges.edge);
+            &merged
+        };
         assert_eq!(
             ranges.grid,
             grid_of(texels.dims),
