@@ -15,7 +15,7 @@ struct Params {
     half: vec4<f32>,      // half the volume's extent (mm)
     lut_map: vec4<f32>,   // a, b, entries − 1
     mode: vec4<u32>,      // full (0/1), V_PAO marks unreadable voxels (0/1), clipped → 1 (0/1),
-                          // affected by the centre's dilation test alone (0/1)
+                          // unused
 }
 
 // Marks in V_AO between steps IV and V (an ambient factor is never negative).
@@ -49,6 +49,13 @@ fn position_mm(v: vec3<u32>, offset: vec3<f32>) -> vec3<f32> {
 // (`--no-skipping`, ao::sparse::dense_variant), which tests the 8 corners of every
 // voxel as Algorithm 2 is written. The same classifications either way.
 const SHARED_CORNERS: bool = true;
+// Whether a voxel is affected when its centre lies in a dilation, as with skipping: the
+// reach (ao::cao::reach_mm) runs from the voxel's centre and already covers its cell's
+// clip samples and the trilinear stencils. The corners and anti-aliasing samples then
+// need only whether they are visible, which reads half the clip maps. `false` in the
+// dense pipeline: any of the 9 + N samples in a dilation marks the voxel, as Algorithm 2
+// is written (the paper's mask).
+const CENTRE_REACH: bool = true;
 
 // The classification (bit 0 visible, bit 1 affected) of the corners of this workgroup's
 // voxels: the 9 × 9 × 2 lattice points of one layer of a brick, shared by up to 8 voxels
@@ -83,8 +90,11 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
     }
 }
 
-// clip_classify's (visible, affected) as bits 0 and 1.
+// clip_classify's (visible, affected) as bits 0 and 1; visible alone with CENTRE_REACH.
 fn classify_bits(pos: vec3<f32>) -> u32 {
+    if CENTRE_REACH {
+        return u32(clip_visible(pos));
+    }
     let t = clip_classify(pos);
     return u32(t.x) | (u32(t.y) << 1u);
 }
@@ -125,15 +135,13 @@ fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
         opacity = voxel_opacity(v);
     } else if visible > 0u {
         for (var k = 0u; k < n; k = k + 1u) {
-            let t = clip_classify(position_mm(v, msaa[k].xyz));
-            visible = visible + u32(t.x);
-            dilated = dilated + u32(t.y);
+            let bits = classify_bits(position_mm(v, msaa[k].xyz));
+            visible = visible + (bits & 1u);
+            dilated = dilated + (bits >> 1u);
         }
         opacity = f32(visible) / f32(n + 9u) * voxel_opacity(v);
     }
-    if p.mode.w != 0u {
-        // The reach (ao::cao::reach_mm) runs from the voxel's centre and already covers
-        // its cell's clip samples and the trilinear stencils: the centre decides.
+    if CENTRE_REACH {
         dilated = u32(t.y);
     }
     var ao = RECOMPUTE;

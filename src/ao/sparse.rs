@@ -634,7 +634,8 @@ fn plane_ranges(
 /// A skipping shader's source (one including `lao_ray.wgsl`, or CAO's step IV) made into
 /// its dense variant, the computation as the papers write it: the skipping code is
 /// compiled out, so that `--no-skipping` runs as fast as the plain loops did, and step
-/// IV tests the corners of every voxel itself (`cao_clip.wgsl`; the same bits).
+/// IV tests the corners of every voxel itself (`cao_clip.wgsl`; the same bits) and marks
+/// a voxel when any of its clip samples lies in a dilation (the paper's mask).
 pub fn dense_variant(code: String) -> String {
     code.replace(
         "const SKIPPING: bool = true;",
@@ -643,6 +644,10 @@ pub fn dense_variant(code: String) -> String {
     .replace(
         "const SHARED_CORNERS: bool = true;",
         "const SHARED_CORNERS: bool = false;",
+    )
+    .replace(
+        "const CENTRE_REACH: bool = true;",
+        "const CENTRE_REACH: bool = false;",
     )
 }
 
@@ -759,6 +764,22 @@ mod tests {
         for b in [[0, 0, 0], [1023, 0, 5], [3, 1023, 1023], [17, 42, 999]] {
             assert_eq!(unpack(pack(b)), b);
         }
+    }
+
+    /// Each variant's text replacement finds its constant: a renamed constant would
+    /// otherwise leave the variant silently the same as the skipping shader.
+    #[test]
+    fn every_variant_changes_what_it_names() {
+        let source = |name| crate::gpu::shaders::source(name).expect("embedded shader");
+        let clip = source("cao_clip.wgsl");
+        let lao = source("cao_lao.wgsl");
+        let dense_clip = dense_variant(clip.clone());
+        for off in ["SHARED_CORNERS: bool = false", "CENTRE_REACH: bool = false"] {
+            assert!(dense_clip.contains(off), "dense step IV lacks {off}");
+        }
+        assert!(dense_variant(lao.clone()).contains("SKIPPING: bool = false"));
+        assert!(readable_variant(lao.clone()).contains("RAY_SKIPPING: bool = false"));
+        assert!(frame_variant(lao).contains("const FRAME: bool = true;"));
     }
 
     #[test]

@@ -46,6 +46,7 @@ pub use cpu::{clip_volume_cpu, lao_on_opacity_cpu};
 pub use frame::CaoFrame;
 pub use listed::MAX_LIST_BYTES_PER_VOXEL;
 pub use pipelines::CaoPipelines;
+use pipelines::ClipPipelines;
 
 mod cpu;
 mod frame;
@@ -111,11 +112,9 @@ struct ClipParams {
     /// frame whose step V runs over the voxel list, which holds only voxels to ray
     /// cast), 0: they are marked CLIPPED.
     clipped_one: u32,
-    /// 1: a voxel is marked for a ray cast when its centre lies in a carving shape's
-    /// dilation ([`reach_mm`] already covers its cell and the trilinear stencils), 0: when
-    /// any of its 9 + N clip samples does, as Algorithm 2 is written (the dense pipeline,
-    /// the paper's mask).
-    centre_reach: u32,
+    /// Unused. Whether a voxel's centre alone decides if a dilation reaches it is the
+    /// pipeline's (`CENTRE_REACH` in `cao_clip.wgsl`: with skipping).
+    _pad2: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<ClipParams>() == 96);
@@ -317,7 +316,7 @@ impl CaoGpu {
             full: 0,
             unread_marked: 0,
             clipped_one: 0,
-            centre_reach: 0,
+            _pad2: 0,
         };
         let lao_params = LaoParams {
             bricks: BrickChunk::of(dims),
@@ -642,16 +641,10 @@ impl CaoGpu {
         params.full = u32::from(mode == CaoMode::Full);
         params.unread_marked = u32::from(self.pao_ready);
         params.clipped_one = u32::from(self.lists_voxels(mode));
-        params.centre_reach = u32::from(self.bricks.skipping);
         (chunks, params)
     }
 
     /// Step IV's pipeline for the shapes the clip maps are posed for.
-    fn clip_pipeline(&self) -> &wgpu::ComputePipeline {
-        let shapes = self.clip.uniforms.counts[0];
-        self.pipelines.clip_for(&self.bricks).for_shapes(shapes)
-    }
-
     /// Step IV's bind group of the clip maps (group 1).
     fn iv_clip_group(&self, device: &wgpu::Device) -> wgpu::BindGroup {
         let layout = self.pipelines.clip_for(&self.bricks).any();
@@ -684,19 +677,28 @@ impl CaoGpu {
     /// Step IV over `lists.clip`.
     fn step_iv(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<(), GpuError> {
         let (chunks, params) = self.iv_dispatch(lists, mode);
-        self.step_iv_with(gpu, chunks, params)
+        self.step_iv_with(gpu, chunks, params, self.pipelines.clip_for(&self.bricks))
     }
 
+    /// Step IV's pipeline for these bricks and the number of shapes.
+    fn clip_pipeline(&self) -> &wgpu::ComputePipeline {
+        let shapes = self.clip.uniforms.counts[0];
+        self.pipelines.clip_for(&self.bricks).for_shapes(shapes)
+    }
+
+    /// Step IV with `pipelines` (CAO's for its bricks, or the dense ones for the
+    /// paper's mask).
     fn step_iv_with(
         &self,
         gpu: &Gpu,
         chunks: BrickDispatch,
         params: ClipParams,
+        pipelines: &ClipPipelines,
     ) -> Result<(), GpuError> {
         let clip_group = self.iv_clip_group(&gpu.device);
         let pass = Pass {
             label: "Cao::step_iv",
-            pipeline: self.clip_pipeline(),
+            pipeline: pipelines.for_shapes(self.clip.uniforms.counts[0]),
             bind_groups: &[&self.clip_group, &clip_group],
             uniforms: &self.clip_uniforms,
         };

@@ -35,18 +35,14 @@ pub struct CaoPipelines {
 pub(super) struct ClipPipelines([wgpu::ComputePipeline; 3]);
 
 impl ClipPipelines {
-    fn new(
-        device: &wgpu::Device,
-        label: &str,
-        module: &wgpu::ShaderModule,
-        format: wgpu::TextureFormat,
-    ) -> Self {
+    /// The one layout of every step IV pipeline (`cao_clip.wgsl`'s groups 0 and 1), so
+    /// that the bind groups made for one serve the others, skipping or dense.
+    fn layout(device: &wgpu::Device, format: wgpu::TextureFormat) -> wgpu::PipelineLayout {
         use crate::gpu::entry;
         use wgpu::TextureViewDimension::D3;
         let c = wgpu::ShaderStages::COMPUTE;
-        // `cao_clip.wgsl`'s group 0.
         let group_0 = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some(label),
+            label: Some("Cao::clip"),
             entries: &[
                 entry::uniform(0, c),
                 entry::texture(1, c, D3, Some(false)),
@@ -60,15 +56,23 @@ impl ClipPipelines {
             ],
         });
         let group_1 = crate::clip::gpu::bind_group_layout(device);
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some(label),
+        device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("Cao::clip"),
             bind_group_layouts: &[Some(&group_0), Some(&group_1)],
             immediate_size: 0,
-        });
+        })
+    }
+
+    fn new(
+        device: &wgpu::Device,
+        label: &str,
+        module: &wgpu::ShaderModule,
+        layout: &wgpu::PipelineLayout,
+    ) -> Self {
         let built_for = |shapes: u32| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(label),
-                layout: Some(&layout),
+                layout: Some(layout),
                 module,
                 entry_point: Some("main"),
                 compilation_options: wgpu::PipelineCompilationOptions {
@@ -116,13 +120,14 @@ impl crate::gpu::Stage for CaoPipelines {
                 crate::ao::sparse::frame_variant(format_of(code))
             })?;
             let listed = listed::ListedPipelines::create(device, format_of)?;
+            let clip_layout = ClipPipelines::layout(device, format);
             validated(device, "CaoPipelines::create", || CaoPipelines {
-                clip: ClipPipelines::new(device, "Cao::clip", &clip_module, format),
+                clip: ClipPipelines::new(device, "Cao::clip", &clip_module, &clip_layout),
                 clip_dense: ClipPipelines::new(
                     device,
                     "Cao::clip_dense",
                     &clip_dense_module,
-                    format,
+                    &clip_layout,
                 ),
                 lao: compute_pipeline(device, "Cao::lao", &lao_module, "main", None),
                 lao_dense: compute_pipeline(device, "Cao::lao_dense", &dense_module, "main", None),
@@ -152,6 +157,11 @@ impl crate::gpu::Stage for CaoPipelines {
 
 impl CaoPipelines {
     /// Step IV's pipelines for `bricks`.
+    /// The dense step IV: the paper's mask, whatever the bricks.
+    pub(super) fn clip_dense(&self) -> &ClipPipelines {
+        &self.clip_dense
+    }
+
     pub(super) fn clip_for(&self, bricks: &Bricks) -> &ClipPipelines {
         match bricks.skipping {
             true => &self.clip,

@@ -44,8 +44,8 @@ impl CaoGpu {
         let (chunks, mut params) = self.iv_dispatch(lists, CaoMode::Selective);
         params.unread_marked = 0;
         params.clipped_one = 0;
-        params.centre_reach = 0;
-        self.step_iv_with(gpu, chunks, params)?;
+        // The dense pipeline: any of a voxel's clip samples in a dilation marks it.
+        self.step_iv_with(gpu, chunks, params, self.pipelines.clip_dense())?;
         let marks = read_texture_f32(gpu, &self.v_ao, self.dims, "Cao::mask")?;
         let dims = self.dims.map(|d| d as usize);
         let mut mask = vec![1.0; marks.len()];
