@@ -6,9 +6,10 @@
 //            needs: min of fronts and max of backs to dilate, the reverse to contract)
 //   dilate:  Algorithm 1 over blocks: D_front = min over the disk of Z_front − r_z·√(1 − (d/r_xy)²),
 //            D_back = max of Z_back + …; contraction: max / min with the signs swapped.
-//            d is the smallest pixel distance between the two blocks, so every pixel's
-//            value is at least as wide as the per-pixel Algorithm 1 (conservative); with
-//            f = 1 it is exactly Algorithm 1.
+//            d is the smallest pixel distance between the two blocks (from the gaps
+//            between them along x and y), so every pixel's value is at least as wide as
+//            the per-pixel Algorithm 1 (conservative); with f = 1 it is exactly
+//            Algorithm 1.
 //   expand:  each pixel takes its block's dilated values.
 
 struct Params {
@@ -106,9 +107,9 @@ fn dilate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let r_xy = p.radii.x;
     let r_z = p.radii.y;
     let probe = p.info.z != 0u;
-    // Pixels of two blocks D blocks apart are at least f·D − (f − 1)·√2 apart.
-    let slack = f32(f - 1u) * 1.41421356;
-    let reach = i32(ceil((r_xy + slack) / f32(f)));
+    // Pixels of two blocks (i, j) blocks apart are at least max(|i|·f − (f − 1), 0)
+    // apart along x, and the same along y.
+    let reach = i32(ceil((r_xy + f32(f - 1u)) / f32(f)));
     var d = identity();
     for (var j = -reach; j <= reach; j = j + 1) {
         for (var i = -reach; i <= reach; i = i + 1) {
@@ -116,7 +117,8 @@ fn dilate(@builtin(global_invocation_id) gid: vec3<u32>) {
             if q.x < 0 || q.y < 0 || q.x >= blocks || q.y >= blocks {
                 continue;
             }
-            let dist = max(length(vec2<f32>(f32(i), f32(j))) * f32(f) - slack, 0.0);
+            let gap = max(abs(vec2<i32>(i, j)) * i32(f) - vec2<i32>(i32(f) - 1), vec2<i32>(0));
+            let dist = length(vec2<f32>(gap));
             if dist > r_xy {
                 continue;
             }

@@ -137,8 +137,8 @@ pub fn dilate(
             reduced[(by * blocks + bx) as usize] = acc;
         }
     }
-    let slack = (f - 1) as f32 * std::f32::consts::SQRT_2;
-    let reach = ((r_xy + slack) / f as f32).ceil() as i32;
+    let reach = ((r_xy + (f - 1) as f32) / f as f32).ceil() as i32;
+    let gap = |i: i32| (i.abs() * f - (f - 1)).max(0) as f32;
     let r = r_xy.ceil() as i32;
     let mut dilated = vec![identity; (blocks * blocks) as usize];
     for by in 0..blocks {
@@ -150,8 +150,7 @@ pub fn dilate(
                     if qx < 0 || qy < 0 || qx >= blocks || qy >= blocks {
                         continue;
                     }
-                    let dist =
-                        (glam::Vec2::new(i as f32, j as f32).length() * f as f32 - slack).max(0.0);
+                    let dist = glam::Vec2::new(gap(i), gap(j)).length();
                     if dist > r_xy {
                         continue;
                     }
@@ -186,4 +185,102 @@ pub fn dilate(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Algorithm 1 per pixel, as the paper writes it: the reference the block dilation
+    /// must cover.
+    fn exact(z: &[f32], res: i32, r_xy: f32, r_z: f32, probe: bool, back: bool) -> Vec<f32> {
+        let r = r_xy.ceil() as i32;
+        let mut out = vec![0.0; z.len()];
+        for y in 0..res {
+            for x in 0..res {
+                // Carving moves fronts to −z (min) and backs to +z (max); probing the reverse.
+                let outward = probe != back;
+                let mut d = if outward { -EMPTY } else { EMPTY };
+                for j in -r..=r {
+                    for i in -r..=r {
+                        let (qx, qy) = (x + i, y + j);
+                        let dist = ((i * i + j * j) as f32).sqrt();
+                        if qx < 0 || qy < 0 || qx >= res || qy >= res || dist > r_xy {
+                            continue;
+                        }
+                        let h = r_z * (1.0 - (dist / r_xy).powi(2)).max(0.0).sqrt();
+                        let zq = z[(qy * res + qx) as usize];
+                        d = if outward {
+                            d.max(zq + h)
+                        } else {
+                            d.min(zq - h)
+                        };
+                    }
+                }
+                out[(y * res + x) as usize] = d;
+            }
+        }
+        out
+    }
+
+    /// On depth maps of a bumpy blob, the block dilation holds every depth
+    /// Algorithm 1's dilation holds at every pixel, and the contraction no depth that
+    /// Algorithm 1's lacks; for a lone pixel it equals Algorithm 1 along the axes.
+    #[test]
+    fn the_block_dilation_covers_algorithm_1() {
+        let res = 48i32;
+        let n = (res * res) as usize;
+        let mut front = vec![EMPTY; n];
+        let mut back = vec![-EMPTY; n];
+        for y in 0..res {
+            for x in 0..res {
+                let (dx, dy) = (x as f32 - 20.0, y as f32 - 26.0);
+                let rr = (dx * dx + dy * dy).sqrt();
+                if rr < 14.0 {
+                    let bump = 0.03 * ((x * 7 + y * 13) % 5) as f32;
+                    front[(y * res + x) as usize] = 0.3 + rr * 0.01 + bump;
+                    back[(y * res + x) as usize] = 0.8 - rr * 0.01 - bump;
+                }
+            }
+        }
+        let none_f = vec![EMPTY; n];
+        let none_b = vec![-EMPTY; n];
+        let (r_xy, r_z) = (9.5, 0.2);
+        for probe in [false, true] {
+            for f in [1, 2, 4] {
+                let z = [&front[..], &back[..], &none_f[..], &none_b[..]];
+                let d = dilate(z, res as u32, r_xy, r_z, probe, f);
+                let want_front = exact(&front, res, r_xy, r_z, probe, false);
+                let want_back = exact(&back, res, r_xy, r_z, probe, true);
+                // Depths lie in [0, 1]: compare which of them each pixel holds.
+                for i in 0..n {
+                    for z in (0..=100).map(|k| k as f32 / 100.0) {
+                        let block = d[0][i] <= z && z <= d[1][i];
+                        let paper = want_front[i] <= z && z <= want_back[i];
+                        if probe {
+                            assert!(!block || paper, "probe f {f} px {i} z {z}: deeper");
+                        } else {
+                            assert!(!paper || block, "carve f {f} px {i} z {z}: narrower");
+                        }
+                    }
+                }
+            }
+        }
+        // A lone pixel, dilated per pixel (f = 1): exactly Algorithm 1 along the axes.
+        let mut lone = vec![EMPTY; n];
+        lone[(24 * res + 24) as usize] = 0.5;
+        let z = [&lone[..], &none_b[..], &none_f[..], &none_b[..]];
+        let d = dilate(z, res as u32, r_xy, r_z, false, 1);
+        let want = exact(&lone, res, r_xy, r_z, false, false);
+        for k in -9..=9 {
+            for i in [(24 * res + 24 + k) as usize, ((24 + k) * res + 24) as usize] {
+                assert!(
+                    (d[0][i] - want[i]).abs() < 1e-6,
+                    "axis offset {k}: {} vs {}",
+                    d[0][i],
+                    want[i]
+                );
+            }
+        }
+    }
 }
