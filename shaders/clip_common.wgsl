@@ -1,14 +1,14 @@
 // Shadow-test clipping (CAO paper §3.2, §3.6) against up to 8 clip meshes, each seen by
 // its own orthographic clipping camera. CPU twin: src/clip/cpu.rs (`ClipMapsCpu`).
 //
-// Per shape, 8 layers of `clip_maps` (from clip_maps.wgsl):
-//   base + 0..3: Z_front1, Z_back1, Z_front2, Z_back2   (two depth-peeling layers)
-//   base + 4..7: the same dilated (carve) or contracted (probe) by Algorithm 1.
+// Per shape, 2 RGBA layers of `clip_maps` (from clip_maps.wgsl), one load per test:
+//   base:      (Z_front1, Z_back1, Z_front2, Z_back2)   (two depth-peeling layers)
+//   base + 1:  the same dilated (carve) or contracted (probe) by Algorithm 1.
 // Empty pixels hold +3 (front) / −3 (back) so they are never inside.
 
 struct ClipShape {
     volume_to_map: mat4x4<f32>, // volume-centred mm → (pixel x, pixel y, depth)
-    info: vec4<u32>,            // mode (0 carve, 1 probe), first layer, resolution, unused
+    info: vec4<u32>,            // mode (0 carve, 1 probe), first RGBA layer, resolution, unused
 }
 
 struct Clip {
@@ -38,14 +38,12 @@ struct ClipTest {
 }
 
 fn clip_in_interval(xy: vec2<i32>, layer: u32, z: f32, strict: bool) -> bool {
-    let f1 = textureLoad(clip_maps, xy, layer, 0).r;
-    let b1 = textureLoad(clip_maps, xy, layer + 1u, 0).r;
-    let f2 = textureLoad(clip_maps, xy, layer + 2u, 0).r;
-    let b2 = textureLoad(clip_maps, xy, layer + 3u, 0).r;
+    // (front1, back1, front2, back2)
+    let m = textureLoad(clip_maps, xy, layer, 0);
     if strict {
-        return (f1 < z && z < b1) || (f2 < z && z < b2);
+        return (m.x < z && z < m.y) || (m.z < z && z < m.w);
     }
-    return (f1 <= z && z <= b1) || (f2 <= z && z <= b2);
+    return (m.x <= z && z <= m.y) || (m.z <= z && z <= m.w);
 }
 
 fn clip_test(s: u32, pos: vec3<f32>) -> ClipTest {
@@ -58,7 +56,7 @@ fn clip_test(s: u32, pos: vec3<f32>) -> ClipTest {
     }
     let xy = vec2<i32>(floor(c.xy));
     t.inside = clip_in_interval(xy, shape.info.y, c.z, false);
-    t.near = clip_in_interval(xy, shape.info.y + 4u, c.z, true);
+    t.near = clip_in_interval(xy, shape.info.y + 1u, c.z, true);
     return t;
 }
 

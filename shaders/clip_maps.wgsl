@@ -14,7 +14,7 @@
 
 struct Params {
     radii: vec4<f32>,   // r_xy (pixels), r_z (depth), unused, unused
-    info: vec4<u32>,    // resolution, first layer, probe (0/1), block size f
+    info: vec4<u32>,    // resolution, first RGBA layer, probe (0/1), block size f
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
@@ -22,7 +22,7 @@ struct Params {
 @group(0) @binding(2) var back1: texture_depth_2d;
 @group(0) @binding(3) var front2: texture_depth_2d;
 @group(0) @binding(4) var back2: texture_depth_2d;
-@group(0) @binding(5) var maps: texture_storage_2d_array<r32float, write>;
+@group(0) @binding(5) var maps: texture_storage_2d_array<rgba32float, write>;
 @group(0) @binding(6) var blocks_out: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(7) var blocks_in: texture_2d<f32>;
 
@@ -70,11 +70,7 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let xy = vec2<i32>(gid.xy);
     let z = resolved(xy);
-    let base = p.info.y;
-    textureStore(maps, xy, base, vec4<f32>(z.x, 0.0, 0.0, 1.0));
-    textureStore(maps, xy, base + 1u, vec4<f32>(z.y, 0.0, 0.0, 1.0));
-    textureStore(maps, xy, base + 2u, vec4<f32>(z.z, 0.0, 0.0, 1.0));
-    textureStore(maps, xy, base + 3u, vec4<f32>(z.w, 0.0, 0.0, 1.0));
+    textureStore(maps, xy, p.info.y, z);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -153,9 +149,5 @@ fn expand(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let xy = vec2<i32>(gid.xy);
     let d = textureLoad(blocks_in, xy / i32(p.info.w), 0);
-    let base = p.info.y + 4u;
-    textureStore(maps, xy, base, vec4<f32>(d.x, 0.0, 0.0, 1.0));
-    textureStore(maps, xy, base + 1u, vec4<f32>(d.y, 0.0, 0.0, 1.0));
-    textureStore(maps, xy, base + 2u, vec4<f32>(d.z, 0.0, 0.0, 1.0));
-    textureStore(maps, xy, base + 3u, vec4<f32>(d.w, 0.0, 0.0, 1.0));
+    textureStore(maps, xy, p.info.y + 1u, d);
 }

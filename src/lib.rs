@@ -23,7 +23,8 @@
 //!    their rays step over; a CAO frame lists the voxels its step IV marked and ray
 //!    casts only those ([`ao::cao`]'s voxel list). [`clip`] turns clip shapes into the depth and dilation maps CAO and the ray
 //!    caster clip with.
-//! 6. [`render`] ray-casts the volume into an image in one of its [`render::RenderMode`]s
+//! 6. [`render`] ray-casts the volume into an image in one of its [`render::RenderMode`]s,
+//!    stepping over 4³ blocks that cannot change the pixel
 //!    (compositing with the AO factor on ambient and diffuse light, shadows from
 //!    `render::shadow`'s filtered light volume and surfaces; MIP, MinIP, average;
 //!    isosurface); [`render::offscreen`] does one frame for the CLI and tests on the

@@ -53,8 +53,10 @@ impl ClipMapsCpu {
             return t;
         }
         let (x, y) = (c.x.floor() as u32, c.y.floor() as u32);
-        t.inside = self.in_interval(x, y, shape.info[1], c.z, false);
-        t.near = self.in_interval(x, y, shape.info[1] + 4, c.z, true);
+        // info[1] is the shape's first RGBA array layer: 4 maps each.
+        let first = shape.info[1] * 4;
+        t.inside = self.in_interval(x, y, first, c.z, false);
+        t.near = self.in_interval(x, y, first + 4, c.z, true);
         t
     }
 

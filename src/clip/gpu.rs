@@ -3,12 +3,15 @@
 //! For each shape, depth-only render passes peel two layers of front and back faces
 //! (`shaders/clip_depth.wgsl`), then a compute pass (`shaders/clip_maps.wgsl`) resolves
 //! empty pixels and builds the dilation (carve) or contraction (probe) maps by
-//! Algorithm 1. All maps live in one `R32Float` 2-D array texture, 8 layers per shape.
+//! Algorithm 1. All maps live in one `Rgba32Float` 2-D array texture, 2 layers per shape
+//! of 4 maps each.
 //! Maps are re-rendered only when a shape's geometry (shape, scale, mode, margin,
 //! resolution) changes; moving a shape only rewrites its matrix in the uniforms.
 
 use super::camera::ClipCamera;
-pub use super::gpu_data::{ClipUniforms, DEFAULT_RESOLUTION, LAYERS_PER_SHAPE, ShapeUniform};
+pub use super::gpu_data::{
+    ARRAY_LAYERS_PER_SHAPE, ClipUniforms, DEFAULT_RESOLUTION, LAYERS_PER_SHAPE, ShapeUniform,
+};
 use super::mesh::TriMesh;
 use super::{ClipError, ClipMode, ClipShape, MAX_SHAPES, Shape};
 use crate::gpu::{Gpu, GpuError, bind_group, shaders, uniform_buffer, validated};
@@ -146,7 +149,7 @@ fn maps_texture(device: &wgpu::Device, resolution: u32, layers: u32) -> wgpu::Te
         mip_level_count: 1,
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::R32Float,
+        format: wgpu::TextureFormat::Rgba32Float,
         usage: wgpu::TextureUsages::STORAGE_BINDING
             | wgpu::TextureUsages::TEXTURE_BINDING
             | wgpu::TextureUsages::COPY_SRC,
@@ -200,7 +203,7 @@ pub fn empty_bind_group(device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -
         usage: wgpu::BufferUsages::UNIFORM,
         mapped_at_creation: false,
     });
-    let maps = maps_texture(device, 1, LAYERS_PER_SHAPE);
+    let maps = maps_texture(device, 1, ARRAY_LAYERS_PER_SHAPE);
     bind_group(
         device,
         "clip::no_shapes",
@@ -219,7 +222,7 @@ fn shape_uniform(shape: &ClipShape, camera: &ClipCamera, slot: usize) -> ShapeUn
         volume_to_map: to_map.to_cols_array_2d(),
         info: [
             u32::from(shape.mode == ClipMode::Probe),
-            slot as u32 * LAYERS_PER_SHAPE,
+            slot as u32 * ARRAY_LAYERS_PER_SHAPE,
             camera.resolution,
             0,
         ],
@@ -231,7 +234,7 @@ impl ClipMaps {
         let device = &gpu.device;
         let pipelines = gpu.stage::<ClipPipelines>()?;
         validated(device, "ClipMaps::new", || {
-            let maps = maps_texture(device, 1, LAYERS_PER_SHAPE);
+            let maps = maps_texture(device, 1, ARRAY_LAYERS_PER_SHAPE);
             let dummy = depth_texture(device, "ClipMaps::no_previous_layer", 1);
             let uniforms: ClipUniforms = bytemuck::Zeroable::zeroed();
             ClipMaps {
@@ -295,7 +298,7 @@ impl ClipMaps {
             };
             usable.push((s, key));
         }
-        let layers = (usable.len().max(1) as u32) * LAYERS_PER_SHAPE;
+        let layers = (usable.len().max(1) as u32) * ARRAY_LAYERS_PER_SHAPE;
         if resolution != self.resolution || layers > self.maps.depth_or_array_layers() {
             self.maps = validated(device, "ClipMaps::allocate", || {
                 maps_texture(device, resolution, layers)
@@ -463,7 +466,7 @@ impl ClipMaps {
                 radii: [r_xy, r_z, 0.0, 0.0],
                 info: [
                     res,
-                    slot as u32 * LAYERS_PER_SHAPE,
+                    slot as u32 * ARRAY_LAYERS_PER_SHAPE,
                     u32::from(mode == ClipMode::Probe),
                     f,
                 ],
@@ -552,16 +555,26 @@ impl ClipMaps {
 
     /// Reads every map layer in use back (for the CPU twin and tests).
     pub fn read_back(&self, gpu: &Gpu) -> Result<super::cpu::ClipMapsCpu, GpuError> {
-        let layers = (self.slots.len().max(1) as u32) * LAYERS_PER_SHAPE;
-        let values = crate::gpu::read_texture_f32(
+        let array_layers = (self.slots.len().max(1) as u32) * ARRAY_LAYERS_PER_SHAPE;
+        let texels = crate::gpu::read_texture_f32(
             gpu,
             &self.maps,
-            [self.resolution, self.resolution, layers],
+            [self.resolution, self.resolution, array_layers],
             "ClipMaps::read_back",
         )?;
+        // RGBA texels, array layer by array layer → one map after another.
+        let plane = (self.resolution as usize).pow(2);
+        let mut layers = vec![0.0; texels.len()];
+        for (l, rgba) in texels.chunks_exact(plane * 4).enumerate() {
+            for (i, t) in rgba.chunks_exact(4).enumerate() {
+                for (c, &v) in t.iter().enumerate() {
+                    layers[(l * 4 + c) * plane + i] = v;
+                }
+            }
+        }
         Ok(super::cpu::ClipMapsCpu {
             resolution: self.resolution,
-            layers: values,
+            layers,
             uniforms: self.uniforms,
         })
     }

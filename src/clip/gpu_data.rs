@@ -4,8 +4,13 @@
 
 use super::MAX_SHAPES;
 
-/// Layers per shape in the map array (see `shaders/clip_common.wgsl`).
+/// Maps per shape (see `shaders/clip_common.wgsl`): Z_front1, Z_back1, Z_front2, Z_back2
+/// and the same dilated or contracted.
 pub const LAYERS_PER_SHAPE: u32 = 8;
+
+/// Texture array layers per shape: the maps packed four to an RGBA texel, so a clip
+/// test reads one texel where it read four.
+pub const ARRAY_LAYERS_PER_SHAPE: u32 = LAYERS_PER_SHAPE / 4;
 
 /// Default depth-map size (pixels, square).
 pub const DEFAULT_RESOLUTION: u32 = 1024;
@@ -15,7 +20,7 @@ pub const DEFAULT_RESOLUTION: u32 = 1024;
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct ShapeUniform {
     pub volume_to_map: [[f32; 4]; 4],
-    /// mode (0 carve, 1 probe), first layer, resolution, unused.
+    /// mode (0 carve, 1 probe), first array layer (RGBA), resolution, unused.
     pub info: [u32; 4],
 }
 

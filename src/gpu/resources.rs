@@ -538,8 +538,9 @@ pub fn texture_readback(
     (buffer, row)
 }
 
-/// Reads an `R32Float` or `R16Float` texture (2-D array or 3-D; `size` = width, height, layers/depth)
-/// back as f32 values, x fastest, then y, then layer.
+/// Reads an `R32Float`, `R16Float` or `Rgba32Float` texture (2-D array or 3-D; `size` =
+/// width, height, layers/depth) back as f32 values, channels fastest (RGBA), then x, then
+/// y, then layer.
 pub fn read_texture_f32(
     gpu: &Gpu,
     texture: &wgpu::Texture,
@@ -548,8 +549,13 @@ pub fn read_texture_f32(
 ) -> Result<Vec<f32>, GpuError> {
     let device = &gpu.device;
     let half = texture.format() == wgpu::TextureFormat::R16Float;
+    let channels = match texture.format() {
+        wgpu::TextureFormat::Rgba32Float => 4,
+        _ => 1,
+    };
     let (readback, row) = validated(device, stage, || {
-        let (readback, row) = texture_readback(device, stage, size, if half { 2 } else { 4 });
+        let texel = if half { 2 } else { 4 * channels };
+        let (readback, row) = texture_readback(device, stage, size, texel);
         let mut encoder =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(stage) });
         copy_texture_out(&mut encoder, texture, &readback, row, size);
@@ -563,7 +569,7 @@ pub fn read_texture_f32(
             .map(|h| half::f16::from_bits(h).to_f32())
             .collect()
     } else {
-        unpad::<f32>(&bytes, row, size[0])
+        unpad::<f32>(&bytes, row, size[0] * channels)
     })
 }
 
