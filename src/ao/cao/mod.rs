@@ -46,7 +46,6 @@ pub use cpu::{clip_volume_cpu, lao_on_opacity_cpu};
 pub use frame::CaoFrame;
 pub use listed::MAX_LIST_BYTES_PER_VOXEL;
 pub use pipelines::CaoPipelines;
-use pipelines::ClipPipelines;
 
 mod cpu;
 mod frame;
@@ -677,7 +676,7 @@ impl CaoGpu {
     /// Step IV over `lists.clip`.
     fn step_iv(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<(), GpuError> {
         let (chunks, params) = self.iv_dispatch(lists, mode);
-        self.step_iv_with(gpu, chunks, params, self.pipelines.clip_for(&self.bricks))
+        self.step_iv_with(gpu, chunks, params, self.clip_pipeline())
     }
 
     /// Step IV's pipeline for these bricks and the number of shapes.
@@ -686,19 +685,19 @@ impl CaoGpu {
         self.pipelines.clip_for(&self.bricks).for_shapes(shapes)
     }
 
-    /// Step IV with `pipelines` (CAO's for its bricks, or the dense ones for the
-    /// paper's mask).
+    /// Step IV with `pipeline` (CAO's for its bricks, or the dense one for the paper's
+    /// mask).
     fn step_iv_with(
         &self,
         gpu: &Gpu,
         chunks: BrickDispatch,
         params: ClipParams,
-        pipelines: &ClipPipelines,
+        pipeline: &wgpu::ComputePipeline,
     ) -> Result<(), GpuError> {
         let clip_group = self.iv_clip_group(&gpu.device);
         let pass = Pass {
             label: "Cao::step_iv",
-            pipeline: pipelines.for_shapes(self.clip.uniforms.counts[0]),
+            pipeline,
             bind_groups: &[&self.clip_group, &clip_group],
             uniforms: &self.clip_uniforms,
         };

@@ -45,7 +45,13 @@ impl CaoGpu {
         params.unread_marked = 0;
         params.clipped_one = 0;
         // The dense pipeline: any of a voxel's clip samples in a dilation marks it.
-        self.step_iv_with(gpu, chunks, params, self.pipelines.clip_dense())?;
+        let dense = self.pipelines.clip_dense();
+        self.step_iv_with(
+            gpu,
+            chunks,
+            params,
+            dense.for_shapes(self.clip.uniforms.counts[0]),
+        )?;
         let marks = read_texture_f32(gpu, &self.v_ao, self.dims, "Cao::mask")?;
         let dims = self.dims.map(|d| d as usize);
         let mut mask = vec![1.0; marks.len()];

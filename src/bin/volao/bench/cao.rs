@@ -614,7 +614,7 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
             println!(
                 "\nGPU memory ({scene}): {bytes} B per voxel for CAO (V_o, V_m, V_PAO, V_AO) plus the density V \
                  (the paper keeps 5 full-size volumes), and sparse CAO's voxel list, {list:.2} B per voxel here \
-                 (4 B per voxel of the frame's step-V bricks, at most {}); clip maps {:.0} MiB per shape ({} layers of {}² f32).",
+                 (4 B per voxel of the frame's step-V bricks, at most {}); clip maps {:.0} MiB per shape ({} maps of {}² f32).",
                 volao::ao::cao::MAX_LIST_BYTES_PER_VOXEL,
                 maps as f64 / (1 << 20) as f64,
                 volao::clip::gpu::LAYERS_PER_SHAPE,
