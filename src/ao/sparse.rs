@@ -102,7 +102,7 @@ fn dilate(flags: &[u8], grid: [usize; 3]) -> Vec<u8> {
 /// Brick edge in voxels: a whole number of the ray caster's occupancy blocks, whose
 /// ranges [`BlockRanges::merged`] turns into the bricks'.
 pub const BRICK: usize = 8;
-const _: () = assert!(BRICK % BLOCK == 0);
+const _: () = assert!(BRICK.is_multiple_of(BLOCK));
 
 /// Bricks per axis at most (a packed brick index has 10 bits per axis).
 pub const MAX_BRICKS_PER_AXIS: usize = 1 << 10;
