@@ -739,9 +739,6 @@ fn specialised_pipelines_draw_the_general_pixels() {
     assert!(failures.is_empty(), "differ: {}", failures.join(", "));
 }
 
-/// Every variant `Variant::of` can choose, with the frame's features off at run time,
-/// draws the general shader's pixels: 5 modes × 256 pipelines (~2 min on lavapipe).
-/// `cargo test --release --test render every_variant -- --ignored`
 /// With clip shapes, a frame's pipeline is built for their number (`CLIP_SHAPES`, a
 /// constant loop bound): it draws the pixels of the pipeline that reads the number from
 /// the uniforms, for one to three carving and probing shapes, in composite and MIP.
@@ -800,6 +797,9 @@ fn a_pipeline_built_for_its_number_of_clip_shapes_draws_the_general_pixels() {
     }
 }
 
+/// Every variant `Variant::of` can choose, with the frame's features off at run time,
+/// draws the general shader's pixels: 5 modes × 256 pipelines (~2 min on lavapipe).
+/// `cargo test --release --test render every_variant -- --ignored`
 #[test]
 #[ignore = "sweep of 1280 pipelines, ~2 min on lavapipe"]
 fn every_variant_draws_the_general_pixels() {

@@ -553,8 +553,8 @@ pub fn read_texture_f32(
         wgpu::TextureFormat::Rgba32Float => 4,
         _ => 1,
     };
+    let texel = if half { 2 } else { 4 * channels };
     let (readback, row) = validated(device, stage, || {
-        let texel = if half { 2 } else { 4 * channels };
         let (readback, row) = texture_readback(device, stage, size, texel);
         let mut encoder =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(stage) });

@@ -643,7 +643,6 @@ impl CaoGpu {
         (chunks, params)
     }
 
-    /// Step IV's pipeline for the shapes the clip maps are posed for.
     /// Step IV's bind group of the clip maps (group 1).
     fn iv_clip_group(&self, device: &wgpu::Device) -> wgpu::BindGroup {
         let layout = self.pipelines.clip_for(&self.bricks).any();
@@ -679,7 +678,7 @@ impl CaoGpu {
         self.step_iv_with(gpu, chunks, params, self.clip_pipeline())
     }
 
-    /// Step IV's pipeline for these bricks and the number of shapes.
+    /// Step IV's pipeline for these bricks and the shapes the clip maps are posed for.
     fn clip_pipeline(&self) -> &wgpu::ComputePipeline {
         let shapes = self.clip.uniforms.counts[0];
         self.pipelines.clip_for(&self.bricks).for_shapes(shapes)

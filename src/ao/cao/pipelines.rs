@@ -156,12 +156,12 @@ impl crate::gpu::Stage for CaoPipelines {
 }
 
 impl CaoPipelines {
-    /// Step IV's pipelines for `bricks`.
     /// The dense step IV: the paper's mask, whatever the bricks.
     pub(super) fn clip_dense(&self) -> &ClipPipelines {
         &self.clip_dense
     }
 
+    /// Step IV's pipelines for `bricks`.
     pub(super) fn clip_for(&self, bricks: &Bricks) -> &ClipPipelines {
         match bricks.skipping {
             true => &self.clip,
