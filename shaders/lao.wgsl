@@ -37,6 +37,10 @@ fn opacity_at(uvw: vec3<f32>) -> f32 {
     if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) {
         return 0.0;
     }
+    return opacity_in_box(uvw);
+}
+
+fn opacity_in_box(uvw: vec3<f32>) -> f32 {
     let norm = textureSampleLevel(volume, linear_clamp, uvw, 0.0).r;
     let t = clamp(norm * p.lut_map.x + p.lut_map.y, 0.0, p.lut_map.z);
     let i0 = u32(floor(t));

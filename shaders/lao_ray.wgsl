@@ -5,7 +5,9 @@
 // With skipping (ao::sparse), runs of samples known to have opacity exactly 0 (outside
 // the volume, or inside a cell of RAY_CELL³ voxels the LAO LUT leaves empty) are not
 // fetched: their factor is 1, and the transmittance is still added once per sample, in order, so the sum is
-// the dense one bit for bit. The including shader declares `opacity_at(uvw) -> f32`,
+// the dense one bit for bit. Rays from readable voxels (RAY_SKIPPING off) skip only the
+// samples past the box (boxed_ray). The including shader declares `opacity_at(uvw) -> f32`
+// and `opacity_in_box(uvw) -> f32` (the same without the box test),
 // `p.dims: vec4<u32>`, `p.grid: vec4<u32>` (cells per axis, skipping 0/1) and
 // `occupied: array<u32>` (1 per cell where a sample may be opaque).
 
@@ -14,7 +16,8 @@
 const SKIPPING: bool = true;
 // Whether rays step over empty cells: `false` for rays from readable voxels only (LAO
 // for rendering, CAO's V_PAO and frames: ao::sparse::readable_variant), which start at
-// surfaces and cross occupied cells, where the per-sample check costs more than it saves.
+// surfaces and cross occupied cells, where the per-sample check costs more than it saves
+// (they still stop fetching at the box: boxed_ray).
 const RAY_SKIPPING: bool = true;
 // Edge of the cells rays step over, in voxels (ao::sparse::RAY_CELL).
 const RAY_CELL: u32 = 4u;
@@ -47,8 +50,11 @@ fn empty_run(centre: vec3<f32>, step: vec3<f32>, m: u32, samples: u32) -> u32 {
 }
 
 fn lao_ray(centre: vec3<f32>, step: vec3<f32>, samples: u32) -> f32 {
-    if !SKIPPING || !RAY_SKIPPING || p.grid.w == 0u {
+    if !SKIPPING || p.grid.w == 0u {
         return dense_ray(centre, step, samples);
+    }
+    if !RAY_SKIPPING {
+        return boxed_ray(centre, step, samples);
     }
     var transmittance = 1.0;
     var sum = transmittance;  // sample 1
@@ -70,6 +76,54 @@ fn lao_ray(centre: vec3<f32>, step: vec3<f32>, samples: u32) -> f32 {
         }
         transmittance = transmittance * (1.0 - opacity_at(centre + step * f32(m)));
         m = m + 1u;
+        sum = sum + transmittance;
+    }
+    return sum;
+}
+
+fn in_box(uvw: vec3<f32>) -> bool {
+    return !(any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)));
+}
+
+// The samples 1 ..= n that lie in the box (a prefix: the ray is straight and the box
+// convex, and `centre + step * f32(m)` is monotonic in m per axis): estimated from the
+// box exit, then settled with the per-sample test itself, so it is the same n.
+fn samples_in_box(centre: vec3<f32>, step: vec3<f32>, samples: u32) -> u32 {
+    var exit = f32(samples);
+    for (var a = 0u; a < 3u; a = a + 1u) {
+        if step[a] > 0.0 {
+            exit = min(exit, (1.0 - centre[a]) / step[a]);
+        } else if step[a] < 0.0 {
+            exit = min(exit, -centre[a] / step[a]);
+        }
+    }
+    var n = min(u32(max(floor(exit), 0.0)), samples - 1u);
+    loop {
+        if n + 1u >= samples || !in_box(centre + step * f32(n + 1u)) {
+            break;
+        }
+        n = n + 1u;
+    }
+    loop {
+        if n == 0u || in_box(centre + step * f32(n)) {
+            break;
+        }
+        n = n - 1u;
+    }
+    return n;
+}
+
+// The dense sum with the samples past the box exit not fetched (their opacity is 0, so
+// the transmittance stays as it is): for rays from readable voxels.
+fn boxed_ray(centre: vec3<f32>, step: vec3<f32>, samples: u32) -> f32 {
+    let n = samples_in_box(centre, step, samples);
+    var transmittance = 1.0;
+    var sum = 0.0;
+    for (var m = 1u; m <= n; m = m + 1u) {
+        sum = sum + transmittance;
+        transmittance = transmittance * (1.0 - opacity_in_box(centre + step * f32(m)));
+    }
+    for (var m = n + 1u; m <= samples; m = m + 1u) {
         sum = sum + transmittance;
     }
     return sum;

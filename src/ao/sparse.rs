@@ -652,9 +652,11 @@ pub fn dense_variant(code: String) -> String {
 }
 
 /// Rays from readable voxels (LAO for rendering, CAO's `V_PAO`): they fetch every
-/// sample, the same bits. Such rays start at surfaces and cross occupied cells, where
-/// the per-sample check costs more than it saves on lavapipe (the cranium CT's 54-ray
-/// `V_PAO`: 49.6 s with the check, 39.1 s without); the voxels skipped are the saving.
+/// sample inside the box (`boxed_ray` in `lao_ray.wgsl`: the in-box samples found once
+/// per ray instead of a bounds test per sample), the same bits. Such rays start at
+/// surfaces and cross occupied cells, where a per-sample cell check costs more than it
+/// saves on lavapipe (the cranium CT's 54-ray `V_PAO`: 49.6 s with the check, 39.1 s
+/// without); the voxels skipped are the saving.
 /// Exported AO volumes (every voxel, most of them in empty space) keep stepping over
 /// empty cells.
 pub fn readable_variant(code: String) -> String {
