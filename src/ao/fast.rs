@@ -69,7 +69,7 @@ pub fn twin_is_faster(gpu: &Gpu) -> bool {
     gpu.info.device_type == wgpu::DeviceType::Cpu
 }
 
-/// What ran the box statistics of [`compute`] and [`modulation`] on `gpu`.
+/// What ran the box statistics of the ambient maps and of [`modulation`] on `gpu`.
 pub fn statistics_device(gpu: &Gpu) -> String {
     if twin_is_faster(gpu) {
         format!(

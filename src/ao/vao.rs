@@ -7,7 +7,7 @@
 //! Design choices the paper leaves open:
 //! - directions: a spherical Fibonacci lattice of N_dir points (20 by default, their
 //!   Fig. 7c); each ray k has one constant jitter `j_k = frac(0.5 + k/Φ)` for all its
-//!   samples (stratified sampling with constant jitter, their ref. [30]), the same at
+//!   samples (stratified sampling with constant jitter, their ref. \[30\]), the same at
 //!   every point, so the result is deterministic and noise-free and the live and
 //!   precomputed modes agree exactly at voxel centres;
 //! - V is the transfer function's opacity per voxel length `v_s` (the smallest spacing),

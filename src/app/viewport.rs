@@ -5,7 +5,7 @@
 //! [`ViewportGpu`] is the long-lived part and lives in egui_wgpu's callback resources.
 //! The picture is made off the paint path, in slices (see "making the image in slices" below): each UI
 //! frame submits the part of CAO's update and of the ray cast (in strips of rows) that
-//! fits in the [`Pacer`](crate::gpu::pacer::Pacer)'s slice into a back image, and the
+//! fits in the [`Pacer`]'s slice into a back image, and the
 //! paint callback draws the last complete image — 1:1 at full quality, scaled up while
 //! the view moves at interactive quality. A [`ViewportCallback`] carries only the
 //! rectangle to draw into.

@@ -6,7 +6,7 @@ use super::lut::{Lut, entry_value};
 
 /// One opacity control point: data value (physical units) → opacity in [0, 1].
 ///
-/// The opacity is per unit step (one voxel); see [`correct_opacity`].
+/// The opacity is per unit step (one voxel); see [`correct_opacity`](super::correct_opacity).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct OpacityPoint {
     pub value: f64,

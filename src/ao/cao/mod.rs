@@ -23,7 +23,7 @@
 //! shape now or in the previous frame (their `V_o` and `V_m` change), step V over those
 //! of them the ray caster can read and a change of opacity can reach
 //! ([`Bricks::reached`]; every readable brick in the baseline); a CAO frame then ray
-//! casts only the voxels step IV marked, from a list ([`listed`]). Outside the
+//! casts only the voxels step IV marked, from a list (`listed`). Outside the
 //! lists `V_o = α`, `V_m = 1` and `V_AO = V_PAO` hold from the previous frames;
 //! unreadable voxels keep whatever they hold, which no pixel uses. [`Bricks::dense`] turns all of it off.
 
@@ -179,7 +179,7 @@ pub struct CaoStats {
     pub lao_seconds: f64,
     /// Shapes left out, with why.
     pub clip_errors: Vec<String>,
-    /// Step V ray cast over a list of the voxels to ray cast ([`listed`]) rather than
+    /// Step V ray cast over a list of the voxels to ray cast (`listed`) rather than
     /// over bricks.
     pub listed: bool,
 }
