@@ -15,6 +15,7 @@ pub mod camera;
 pub mod cpu;
 pub mod extras;
 pub mod gpu;
+mod gpu_volume;
 pub mod image;
 pub mod offscreen;
 pub mod shadow;

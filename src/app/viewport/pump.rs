@@ -1,0 +1,481 @@
+//! Making the viewport's image without ever waiting for the GPU on the UI thread.
+//!
+//! Each UI frame the viewer says what it wants on screen ([`Want`]: the frame, the clip
+//! shapes' poses and the interactive scale) and [`ViewportGpu::pump`] moves one image
+//! ([`Work`]) towards it, submitting only what fits in the [`Pacer`]'s slice:
+//!
+//! 1. when the shapes moved, CAO's update for their new pose ([`CaoGpu::begin`] /
+//!    [`CaoGpu::advance`]: steps IV and V in chunks of bricks) or, without CAO, the clip
+//!    maps re-posed;
+//! 2. the ray cast of the frame in strips of rows into a back image;
+//! 3. once every strip is submitted the back image becomes the one drawn. The queue is
+//!    in order, so the paint that follows sees it complete.
+//!
+//! An image is consistent with the pose it was made for: its clipping and its `V_AO` come
+//! from the same CAO frame, and nothing else changes them until it is shown; an image made
+//! while `V_AO` is not exact for its pose reads `V_PAO` instead. Requests
+//! coalesce: while an image is made, newer poses only replace the wanted one, and the
+//! next image is made for the newest (a CAO update is never abandoned half-way, since
+//! the next one relies on what it restored). A full-quality image still being ray-cast
+//! when the view moves again is dropped for an interactive one. A change to the volume,
+//! its transfer function or AO during a ray cast starts the strips again.
+
+use super::*;
+
+/// The share of a frame's slice kept for CAO's update once it has waited [`CAO_PATIENCE`]
+/// behind the images, which come first until then.
+const CAO_SHARE: f64 = 0.5;
+const CAO_PATIENCE: std::time::Duration = std::time::Duration::from_millis(500);
+
+impl ViewportGpu {
+    /// What an image made for `want` would show now.
+    fn key_of(&self, want: &Want) -> ViewKey {
+        let s = want.scale.max(1);
+        let mut frame = Frame {
+            width: want.frame.width.max(1).div_ceil(s),
+            height: want.frame.height.max(1).div_ceil(s),
+            ..want.frame
+        };
+        if s > 1 {
+            frame.settings.step_voxels *= want.step_factor.clamp(1.0, MAX_INTERACTIVE_STEP);
+        }
+        ViewKey {
+            frame,
+            revision: self.revision,
+            clip: want.clip.clone(),
+            scale: s,
+            ao_exact: true,
+        }
+    }
+
+    /// Whether an image started now would read an exact `V_AO` for `clip`.
+    fn ao_exact(&self, clip: &[ClipShape]) -> bool {
+        self.cao.is_none()
+            || (self.cao_work.is_none() && self.ao_exact_for.as_deref() == Some(clip))
+    }
+
+    /// Whether the image drawn is the full-quality one of `want`.
+    pub(in crate::app) fn is_current(&self, want: &Want) -> bool {
+        self.work.is_none()
+            && self.cao_work.is_none()
+            && want.scale <= 1
+            && self
+                .shown
+                .as_ref()
+                .is_some_and(|s| s.key == self.key_of(want))
+    }
+
+    /// Whether an image or CAO's update is being made.
+    pub(in crate::app) fn working(&self) -> bool {
+        self.work.is_some() || self.cao_work.is_some()
+    }
+
+    /// How far the image being made is, or else CAO's update (then true), if either is.
+    pub(in crate::app) fn work_fraction(&self) -> Option<(f32, bool)> {
+        match (&self.work, &self.cao_work) {
+            (Some(w), _) => Some((w.fraction(), false)),
+            (None, Some(c)) => Some((c.fraction(), true)),
+            (None, None) => None,
+        }
+    }
+
+    /// Whether a CAO update is being submitted or its figures have not come back.
+    pub(in crate::app) fn cao_in_flight(&self) -> bool {
+        self.cao_work.is_some() || self.stats_pending.is_some()
+    }
+
+    /// Whether the image drawn read an exact `V_AO` for its shapes (false: it read
+    /// `V_PAO`, while CAO's update caught up with a shape being dragged).
+    pub fn shown_ao_exact(&self) -> bool {
+        self.shown.as_ref().is_none_or(|s| s.key.ao_exact)
+    }
+
+    /// The interactive scale of the image drawn (1: full quality).
+    pub(in crate::app) fn shown_scale(&self) -> u32 {
+        self.shown.as_ref().map_or(1, |s| s.key.scale)
+    }
+
+    /// Moves the viewport's image towards `want` within the pacer's slice (see the
+    /// module's documentation). Never waits for the GPU.
+    pub(in crate::app) fn pump(&mut self, gpu: &Gpu, want: &Want, pacer: &mut Pacer) -> Pumped {
+        let mut out = Pumped::default();
+        if let (Some(cao), Some(f)) = (&self.cao, &mut self.stats_pending)
+            && let Some(result) = cao.poll_stats(f)
+        {
+            match result {
+                Ok(stats) => out.stats = Some(stats),
+                Err(e) => out.error = Some(e.to_string()),
+            }
+            self.stats_pending = None;
+        }
+        if self.volume.is_none() {
+            self.work = None;
+            self.cao_work = None;
+            return out;
+        }
+        let key = self.key_of(want);
+        if self
+            .cao_work
+            .as_ref()
+            .is_some_and(|c| c.generation != self.cao_generation)
+        {
+            self.cao_work = None;
+            self.synced_clip = None;
+        }
+        if let Some(w) = &mut self.work {
+            if w.key.scale == 1 && key.scale > 1 {
+                // The view moves again: an interactive image comes sooner.
+                self.work = None;
+            } else if w.key.revision != self.revision {
+                w.key.revision = self.revision;
+                w.next_row = 0;
+            }
+        }
+        // CAO's update for the shapes wanted, unless its V_AO is exact for them already.
+        if self.cao.is_some()
+            && self.cao_work.is_none()
+            && self.ao_exact_for.as_ref() != Some(&key.clip)
+        {
+            // The update poses the clip maps for these shapes and rewrites V_AO: an image
+            // being made for other shapes, or reading V_AO, would mix two poses. It is
+            // dropped, and one that reads V_PAO takes its place if the view moves.
+            if self
+                .work
+                .as_ref()
+                .is_some_and(|w| w.key.ao_exact || w.key.clip != key.clip)
+            {
+                self.work = None;
+            }
+            match self.begin_cao(gpu, &key.clip, want.setup) {
+                Ok(errors) => out.clip_errors = errors,
+                Err(e) => {
+                    out.error = Some(e);
+                    return out;
+                }
+            }
+        }
+        // An image that reads V_AO is never made while an update is on its way (which
+        // rewrites it): dropped above, or started reading V_PAO (`start`).
+        debug_assert!(
+            self.cao_work.is_none() || self.work.as_ref().is_none_or(|w| !w.key.ao_exact),
+            "an image reads a V_AO being updated"
+        );
+        for (tag, took) in pacer.timed(STRIP) {
+            if let Some(i) = self.tiles_in_flight.iter().position(|s| s.0 == tag) {
+                let (_, size, step, tile) = self.tiles_in_flight.swap_remove(i);
+                self.tile_costs.record(size, step, tile, took.as_secs_f64());
+            }
+        }
+        if self.work.is_none() && self.should_start(&key) {
+            match self.start(gpu, key, want) {
+                Ok(errors) => out.clip_errors.extend(errors),
+                Err(e) => {
+                    out.error = Some(e);
+                    return out;
+                }
+            }
+        }
+        // The image first (the view follows the mouse), then CAO with what is left of
+        // the slice, and at least CAO_SHARE of it once the update has waited
+        // CAO_PATIENCE: interactive images come every frame while a shape is dragged,
+        // and would otherwise leave CAO nothing until the drag stops.
+        let waited = |c: &CaoWork| c.began.elapsed() > CAO_PATIENCE;
+        let held = match self.cao_work.as_ref().is_some_and(waited) {
+            true => pacer.hold(CAO_SHARE),
+            false => 0.0,
+        };
+        let advanced = self.advance(gpu, pacer);
+        pacer.release(held);
+        match advanced {
+            Ok(false) => {}
+            Ok(true) => {
+                if let Some(w) = self.work.take() {
+                    out.completed = Some(w.started.elapsed().as_secs_f64());
+                    if let Some(old) = self.shown.take() {
+                        self.spare = Some(old.target);
+                    }
+                    self.shown = Some(Shown {
+                        target: w.target,
+                        key: w.key,
+                    });
+                    self.frames_rendered += 1;
+                    self.last_error = None;
+                }
+            }
+            Err(e) => {
+                self.work = None;
+                self.last_error = Some(e.to_string());
+                out.error = Some(e.to_string());
+            }
+        }
+        if let Err(e) = self.advance_cao(gpu, pacer) {
+            self.cao_work = None;
+            self.synced_clip = None;
+            self.last_error = Some(e.to_string());
+            out.error = Some(e.to_string());
+        }
+        out
+    }
+
+    /// Whether to start an image for `key` now. Not while CAO's update is on its way,
+    /// unless the view moves (an interactive image, `key.scale > 1`) and the image drawn
+    /// shows another view: dragging a shape, the clipping follows the mouse with
+    /// `V_PAO` for AO; at rest the image waits for the exact AO.
+    fn should_start(&self, key: &ViewKey) -> bool {
+        let shown = self.shown.as_ref().map(|s| &s.key);
+        if shown == Some(key) {
+            return false;
+        }
+        if self.cao_work.is_none() {
+            return true;
+        }
+        key.scale > 1 && !shown.is_some_and(|s| s.same_view(key))
+    }
+
+    /// Begins CAO's update for `clip` (posing the clip maps for it). Returns the shapes
+    /// left out, with why.
+    fn begin_cao(
+        &mut self,
+        gpu: &Gpu,
+        clip: &[ClipShape],
+        setup: ClipSetup,
+    ) -> Result<Vec<String>, String> {
+        let (Some(cao), Some(vol)) = (&mut self.cao, &self.volume) else {
+            return Ok(Vec::new());
+        };
+        self.synced_clip = Some(clip.to_vec());
+        let reach = cao.reach_mm(&vol.texels);
+        let frame = cao
+            .begin(
+                gpu,
+                &vol.texels,
+                clip,
+                setup.resolution,
+                reach,
+                setup.cao_mode,
+            )
+            .map_err(|e| e.to_string())?;
+        let errors = frame.clip_errors().to_vec();
+        self.cao_work = Some(CaoWork {
+            generation: self.cao_generation,
+            clip: clip.to_vec(),
+            frame,
+            tainted: false,
+            began: Instant::now(),
+        });
+        Ok(errors)
+    }
+
+    /// Submits what fits of CAO's update; once all of it is submitted, its `V_AO` is
+    /// exact for its shapes unless the clip maps moved meanwhile.
+    fn advance_cao(&mut self, gpu: &Gpu, pacer: &mut Pacer) -> Result<(), GpuError> {
+        let (Some(c), Some(cao)) = (&mut self.cao_work, &self.cao) else {
+            return Ok(());
+        };
+        if !cao.advance(gpu, &mut c.frame, pacer)? {
+            return Ok(());
+        }
+        if let Some(c) = self.cao_work.take() {
+            self.ao_exact_for = (!c.tainted).then_some(c.clip);
+            self.stats_pending = Some(c.frame);
+        }
+        Ok(())
+    }
+
+    /// Starts an image for `key`: poses CAO or the clip maps when the shapes moved,
+    /// allocates the back image. Returns the shapes left out, with why.
+    fn start(&mut self, gpu: &Gpu, key: ViewKey, want: &Want) -> Result<Vec<String>, String> {
+        if let Some(vol) = &mut self.volume {
+            vol.prepare_step(gpu, key.frame.settings.step_voxels);
+        }
+        let mut errors = Vec::new();
+        if self.synced_clip.as_ref() != Some(&key.clip) {
+            // Whatever happens, these shapes are done with (an error is not retried).
+            self.synced_clip = Some(key.clip.clone());
+            let Some(vol) = &self.volume else {
+                return Err("no volume".into());
+            };
+            let setup = want.setup;
+            let (maps, reach) = if let Some(cao) = &mut self.cao {
+                // Posed for the image of a shape being dragged while CAO's update for
+                // an earlier pose is on its way: that update is no longer exact.
+                if let Some(c) = &mut self.cao_work
+                    && c.clip != key.clip
+                {
+                    c.tainted = true;
+                }
+                if self.ao_exact_for.as_ref() != Some(&key.clip) {
+                    self.ao_exact_for = None;
+                }
+                let reach = cao.reach_mm(&vol.texels);
+                (Some(&mut cao.clip), reach)
+            } else if key.clip.is_empty() {
+                self.clip = None;
+                (None, 0.0)
+            } else {
+                if self.clip.is_none() {
+                    self.clip = Some(ClipMaps::new(gpu).map_err(|e| e.to_string())?);
+                }
+                let reach = crate::ao::cao::reach_mm(setup.samples, vol.texels.spacing);
+                (self.clip.as_mut(), reach)
+            };
+            if let Some(maps) = maps {
+                let report = maps
+                    .update(gpu, &key.clip, setup.radius, reach, setup.resolution)
+                    .map_err(|e| e.to_string())?;
+                errors = report.errors.iter().map(|e| e.to_string()).collect();
+            }
+        }
+        let key = ViewKey {
+            ao_exact: self.ao_exact(&key.clip),
+            ..key
+        };
+        // Without an exact V_AO for these shapes the image reads V_PAO (the stand-in
+        // set with CAO), so that its AO and its clipping never come from two poses.
+        if let Some(vol) = &mut self.volume {
+            vol.read_stand_in(!key.ao_exact);
+        }
+        let (width, height) = (key.frame.width, key.frame.height);
+        let target = self.target(&gpu.device, (width, height));
+        self.work = Some(Work {
+            key,
+            target,
+            next_row: 0,
+            next_column: 0,
+            started: Instant::now(),
+        });
+        Ok(errors)
+    }
+
+    /// Submits what fits of the image being made, in the pieces [`next_tile`] cuts (each
+    /// costed by [`TileCosts`], else the pacer's mean rate); true once all is submitted.
+    fn advance(&mut self, gpu: &Gpu, pacer: &mut Pacer) -> Result<bool, crate::gpu::GpuError> {
+        let ViewportGpu {
+            work,
+            cao,
+            volume,
+            clip,
+            ray_caster,
+            strips,
+            compiling,
+            tile_costs,
+            tiles_in_flight,
+            next_strip_tag,
+            ..
+        } = self;
+        let (Some(w), Some(vol)) = (work.as_mut(), volume.as_ref()) else {
+            return Ok(false);
+        };
+        let clip = cao.as_ref().map(|c| &c.clip).or(clip.as_ref());
+        let (width, height) = (w.key.frame.width, w.key.frame.height);
+        // A pipeline variant not built yet compiles on a worker thread (~0.1 s on
+        // lavapipe), not in the UI's frame; the image waits for it.
+        let surfaces = !vol.extras.surfaces.is_empty();
+        let variant = Variant::of(vol, &w.key.frame, clip, surfaces);
+        if !ray_caster.has_pipeline(variant) {
+            match compiling {
+                Some((v, state)) if *v == variant => {
+                    let failed = state.lock().ok().and_then(|s| s.clone());
+                    match failed {
+                        // Still compiling.
+                        None => return Ok(false),
+                        // It failed there: the ray cast below builds it again and
+                        // reports the error.
+                        Some(_) => *compiling = None,
+                    }
+                }
+                _ => {
+                    let state: Compiled = Default::default();
+                    let (rc, device, s) = (
+                        std::sync::Arc::clone(ray_caster),
+                        gpu.device.clone(),
+                        std::sync::Arc::clone(&state),
+                    );
+                    let spawned = std::thread::Builder::new()
+                        .name("volao-pipeline".into())
+                        .spawn(move || {
+                            let r = rc.build_pipeline(&device, variant);
+                            if let Ok(mut s) = s.lock() {
+                                *s = Some(r.err().map(|e| e.to_string()));
+                            }
+                        });
+                    if spawned.is_ok() {
+                        *compiling = Some((variant, state));
+                        return Ok(false);
+                    }
+                }
+            }
+        }
+        // An image reads V_AO only when it is exact for its shapes, else V_PAO.
+        debug_assert!(
+            cao.is_none() || vol.reads_stand_in() != w.key.ao_exact,
+            "an image reads the wrong AO volume"
+        );
+        let pixel_rate = pacer.rate(STRIP).unwrap_or_else(|| first_pixel_rate(gpu));
+        let step = w.key.frame.settings.step_voxels;
+        let estimate = |t: Tile| {
+            tile_costs
+                .estimate((width, height), step, t)
+                .unwrap_or_else(|| {
+                    ((t.2.min(width - t.0) * t.3.min(height - t.1)) as f64) / pixel_rate
+                })
+        };
+        while w.next_row < height {
+            let (x0, y0) = (w.next_column, w.next_row);
+            let idle = pacer.has_time() && !pacer.busy();
+            let slice = (pacer.slice.as_secs_f64(), pacer.left());
+            let Some(tile) = next_tile((width, (x0, y0)), slice, idle, estimate) else {
+                return Ok(false);
+            };
+            let (tx, ty, tw, th) = tile;
+            let strip = strip_texture(strips, &gpu.device, ((tw, th), IMAGE_FORMAT));
+            let tag = *next_strip_tag;
+            *next_strip_tag += 1;
+            let (cw, ch) = (tw.min(width - tx), th.min(height - ty));
+            pacer.submit_estimated(
+                gpu,
+                (STRIP, (cw * ch) as u64),
+                (estimate(tile), tag),
+                || -> Result<(), crate::gpu::GpuError> {
+                    let mut encoder = gpu.device.create_command_encoder(&Default::default());
+                    ray_caster.encode_tile(
+                        (&gpu.device, &gpu.queue),
+                        vol,
+                        &w.key.frame,
+                        clip,
+                        (strip, (tx, ty)),
+                        &mut encoder,
+                    )?;
+                    encoder.copy_texture_to_texture(
+                        strip.as_image_copy(),
+                        wgpu::TexelCopyTextureInfo {
+                            texture: &w.target.texture,
+                            mip_level: 0,
+                            origin: wgpu::Origin3d { x: tx, y: ty, z: 0 },
+                            aspect: wgpu::TextureAspect::All,
+                        },
+                        wgpu::Extent3d {
+                            width: cw,
+                            height: ch,
+                            depth_or_array_layers: 1,
+                        },
+                    );
+                    gpu.queue.submit([encoder.finish()]);
+                    Ok(())
+                },
+            )?;
+            tiles_in_flight.push((tag, (width, height), step, tile));
+            if tiles_in_flight.len() > 4 * RECENT_TILES {
+                // Never timed (the pacer was replaced): forgotten.
+                tiles_in_flight.remove(0);
+            }
+            if tx + tw >= width {
+                w.next_column = 0;
+                w.next_row += th;
+            } else {
+                w.next_column = tx + tw;
+            }
+        }
+        Ok(true)
+    }
+}
