@@ -8,13 +8,6 @@
 // `counts` (rays K, samples M) and `grid` as in cao_lao.wgsl.
 //!include lao_ray.wgsl
 
-fn opacity_at(uvw: vec3<f32>) -> f32 {
-    if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) {
-        return 0.0;
-    }
-    return opacity_in_box(uvw);
-}
-
 fn opacity_in_box(uvw: vec3<f32>) -> f32 {
     return textureSampleLevel(v_o, linear_clamp, uvw, 0.0).r;
 }

@@ -33,13 +33,6 @@ struct Params {
 @group(0) @binding(6) var<storage, read> voxels: array<u32>;  // this submission's, x fastest
 @group(0) @binding(7) var<storage, read> occupied: array<u32>;
 
-fn opacity_at(uvw: vec3<f32>) -> f32 {
-    if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) {
-        return 0.0;
-    }
-    return opacity_in_box(uvw);
-}
-
 fn opacity_in_box(uvw: vec3<f32>) -> f32 {
     let norm = textureSampleLevel(volume, linear_clamp, uvw, 0.0).r;
     let t = clamp(norm * p.lut_map.x + p.lut_map.y, 0.0, p.lut_map.z);

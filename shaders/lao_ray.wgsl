@@ -6,8 +6,8 @@
 // the volume, or inside a cell of RAY_CELL³ voxels the LAO LUT leaves empty) are not
 // fetched: their factor is 1, and the transmittance is still added once per sample, in order, so the sum is
 // the dense one bit for bit. Rays from readable voxels (RAY_SKIPPING off) skip only the
-// samples past the box (boxed_ray). The including shader declares `opacity_at(uvw) -> f32`
-// and `opacity_in_box(uvw) -> f32` (the same without the box test),
+// samples past the box (boxed_ray). The including shader declares
+// `opacity_in_box(uvw) -> f32` (a sample's opacity, uvw inside the box),
 // `p.dims: vec4<u32>`, `p.grid: vec4<u32>` (cells per axis, skipping 0/1) and
 // `occupied: array<u32>` (1 per cell where a sample may be opaque).
 
@@ -22,10 +22,35 @@ const RAY_SKIPPING: bool = true;
 // Edge of the cells rays step over, in voxels (ao::sparse::RAY_CELL).
 const RAY_CELL: u32 = 4u;
 
+fn in_box(uvw: vec3<f32>) -> bool {
+    return !(any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)));
+}
+
+// A sample's opacity: 0 outside the volume.
+fn opacity_at(uvw: vec3<f32>) -> f32 {
+    if !in_box(uvw) {
+        return 0.0;
+    }
+    return opacity_in_box(uvw);
+}
+
+// The ray parameter (in samples) at which `centre + step · t` leaves the box [lo, hi].
+fn box_exit(centre: vec3<f32>, step: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
+    var exit = 3.0e38;
+    for (var a = 0u; a < 3u; a = a + 1u) {
+        if step[a] > 0.0 {
+            exit = min(exit, (hi[a] - centre[a]) / step[a]);
+        } else if step[a] < 0.0 {
+            exit = min(exit, (lo[a] - centre[a]) / step[a]);
+        }
+    }
+    return exit;
+}
+
 // Samples from m on (all before the last) whose opacity is exactly 0; 0: fetch m.
 fn empty_run(centre: vec3<f32>, step: vec3<f32>, m: u32, samples: u32) -> u32 {
     let uvw = centre + step * f32(m);
-    if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) {
+    if !in_box(uvw) {
         return samples - m;  // a straight ray that left the box never comes back
     }
     let size = vec3<f32>(p.dims.xyz);
@@ -35,14 +60,7 @@ fn empty_run(centre: vec3<f32>, step: vec3<f32>, m: u32, samples: u32) -> u32 {
     }
     let lo = vec3<f32>(b * RAY_CELL) / size;
     let hi = vec3<f32>((b + vec3<u32>(1u)) * RAY_CELL) / size;
-    var exit = 3.0e38;
-    for (var a = 0u; a < 3u; a = a + 1u) {
-        if step[a] > 0.0 {
-            exit = min(exit, (hi[a] - centre[a]) / step[a]);
-        } else if step[a] < 0.0 {
-            exit = min(exit, (lo[a] - centre[a]) / step[a]);
-        }
-    }
+    let exit = box_exit(centre, step, lo, hi);
     // Samples m ..= floor(exit) lie in the box; what they read reaches half a voxel
     // past it, far more than rounding.
     let inside = min(u32(max(floor(exit), f32(m))), samples - 1u);
@@ -81,22 +99,11 @@ fn lao_ray(centre: vec3<f32>, step: vec3<f32>, samples: u32) -> f32 {
     return sum;
 }
 
-fn in_box(uvw: vec3<f32>) -> bool {
-    return !(any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)));
-}
-
 // The samples 1 ..= n that lie in the box (a prefix: the ray is straight and the box
 // convex, and `centre + step * f32(m)` is monotonic in m per axis): estimated from the
 // box exit, then settled with the per-sample test itself, so it is the same n.
 fn samples_in_box(centre: vec3<f32>, step: vec3<f32>, samples: u32) -> u32 {
-    var exit = f32(samples);
-    for (var a = 0u; a < 3u; a = a + 1u) {
-        if step[a] > 0.0 {
-            exit = min(exit, (1.0 - centre[a]) / step[a]);
-        } else if step[a] < 0.0 {
-            exit = min(exit, -centre[a] / step[a]);
-        }
-    }
+    let exit = min(box_exit(centre, step, vec3<f32>(0.0), vec3<f32>(1.0)), f32(samples));
     var n = min(u32(max(floor(exit), 0.0)), samples - 1u);
     loop {
         if n + 1u >= samples || !in_box(centre + step * f32(n + 1u)) {
