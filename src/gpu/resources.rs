@@ -462,6 +462,9 @@ pub fn submit_compute(
     submit_compute_with(device, queue, label, pipeline, &[bind_group], groups, after);
 }
 
+/// How long a map callback may lag behind the wait that completed its map.
+const CALLBACK_GRACE: std::time::Duration = std::time::Duration::from_secs(5);
+
 /// Maps a `MAP_READ` buffer, copies its bytes out and unmaps it.
 pub fn read_buffer(
     device: &wgpu::Device,
@@ -477,7 +480,10 @@ pub fn read_buffer(
         stage: stage.into(),
         message,
     };
-    match rx.try_recv() {
+    // The map is done once the wait returns, but another thread polling the same device
+    // (the viewer's pacer) may have taken its callback and not yet run it: give it a
+    // moment rather than a spurious failure.
+    match rx.recv_timeout(CALLBACK_GRACE) {
         Ok(Ok(())) => {}
         Ok(Err(e)) => return Err(failed(e.to_string())),
         Err(_) => return Err(failed("map callback never ran".into())),
