@@ -220,11 +220,12 @@ pub fn quantise(values: &[f32]) -> Vec<f32> {
         .collect()
 }
 
-/// Passes of the (¼, ½, ¼) filter along each axis that [`filter_light`] makes: eight
-/// make a binomial kernel of 17 taps, σ = 2 voxels (chosen on the cranium CT: fewer leave
-/// the light volume's slice stair-steps and hard shadow edges in the image, see
-/// docs/benchmarks.md, "Shadows").
-pub const FILTER_PASSES: usize = 8;
+/// Passes of the (¼, ½, ¼) filter along each axis that [`filter_light`] makes: twelve
+/// make a binomial kernel of 25 taps, σ = √6 ≈ 2.45 voxels (chosen on the cranium CT:
+/// fewer leave the light volume's slice stair-steps and hard shadow edges in the image;
+/// eight, σ = 2, added texture at 2048² with a step of 0.125, see docs/benchmarks.md,
+/// "Shadows").
+pub const FILTER_PASSES: usize = 12;
 
 /// Low-pass filters a light volume (x fastest) in place: [`FILTER_PASSES`] passes of
 /// (¼, ½, ¼) along x, y and z, the edge voxel repeated. The transmittance computed at the
@@ -279,10 +280,10 @@ impl LightVolume {
 
 /// The guard limit `g` of the shadow lookup, in voxels of the smallest spacing: the
 /// light volume is read `g / cos θ` from the sample towards the light (see
-/// [`shadow_factor`]). Three voxels: one for the depth a view ray reaches into an opaque
-/// surface before it stops, one for the trilinear footprint of the light volume, one for
-/// what [`filter_light`] spreads of the dark inside of a surface.
-pub const GUARD_VOXELS: f32 = 3.0;
+/// [`shadow_factor`]). Four voxels: one for the depth a view ray reaches into an opaque
+/// surface before it stops, one for the trilinear footprint of the light volume, two for
+/// what [`filter_light`] spreads of the dark inside of a surface (its σ ≈ 2.45 voxels).
+pub const GUARD_VOXELS: f32 = 4.0;
 
 /// How far `d` (texture coordinates) may be followed from `uvw` inside the box, as a
 /// fraction of it in [0, 1].
