@@ -39,6 +39,12 @@ override FIND: bool = true;       // shading fetches: find a sample with opacity
 // would otherwise read the occluded inside (CPU twin: render::cpu::AO_EDGE_GAIN).
 const AO_EDGE_GAIN: f32 = 8.0;
 
+// A sample within CUT_SHELL voxels (of the smallest spacing) behind a carved sample that
+// had opacity lies on a cut face (docs/algorithms.md, "Cut faces"): the material's
+// gradient there is not the surface's, so it is lit without a direction and its AO is
+// read back along the ray, in the carved space (CPU twin: render::cpu::CUT_SHELL).
+const CUT_SHELL: f32 = 2.0;
+
 const MODE_COMPOSITE: u32 = 0u;
 const MODE_MIP: u32 = 1u;
 const MODE_MINIP: u32 = 2u;
@@ -155,7 +161,7 @@ fn light(rgb: vec3<f32>, ao: f32, diffuse: f32, specular: f32, lit: f32) -> vec3
 }
 
 // Blinn–Phong (a headlight, or the directional light of shadows), with the AO factor.
-fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
+fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>, cut: bool) -> vec3<f32> {
     let shadows = SHADOWS && extras.flags.y != 0u;
     let phong = PHONG && p.shading.w != 0.0;
     var diffuse = 1.0;
@@ -166,7 +172,10 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
     // the material along the normal (docs/algorithms.md): inside the material every
     // voxel is occluded.
     var ao_at = uvw;
-    if phong || ((AO_VOLUME || (LIVE_VAO && extras.flags.x != 0u)) && p.ao.z > 0.0) {
+    if cut {
+        // A cut face: out of the material is back towards the eye, through what was carved.
+        ao_at = uvw + view * (p.ao.z * p.voxel_uvw.w) / (2.0 * p.box_half.xyz);
+    } else if phong || ((AO_VOLUME || (LIVE_VAO && extras.flags.x != 0u)) && p.ao.z > 0.0) {
         let d = p.voxel_uvw.xyz;
         // Central differences in texel units per mm.
         let g = vec3<f32>(
@@ -410,7 +419,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if t_hit >= 0.0 {
                 front = t_hit;
                 let uvw = (origin + dir * t_hit) / (2.0 * half) + 0.5;
-                result = vec4<f32>(shade(classify(sample_norm(uvw)).rgb, uvw, -dir), 1.0);
+                result = vec4<f32>(shade(classify(sample_norm(uvw)).rgb, uvw, -dir, false), 1.0);
             }
         } else {
             result = project(origin, dir, t_enter, t_exit, offset, max_steps, mode);
@@ -435,6 +444,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // until a sample has opacity, so shading (gradient, AO, shadows) runs once per
         // sample that shows instead of once per step.
         var k = 0u;
+        // The last carved sample that had opacity (cut faces lie just behind it).
+        var cut_t = -3.0e38;
         loop {
             var t = 0.0;
             var uvw = vec3<f32>(0.0);
@@ -479,6 +490,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
                 // Shadow-test clipping (CAO step VI): clipped samples are empty.
                 if CLIP && clip.counts.x > 0u && !clip_visible(origin + dir * t) {
+                    // Only shading looks at cut faces.
+                    if (PHONG || AO_VOLUME || LIVE_VAO || SHADOWS) && classify(sample_norm(uvw)).a > 0.0 {
+                        cut_t = t;
+                    }
                     k = k + 1u;
                     continue;
                 }
@@ -504,7 +519,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             // The last step ends at the box exit: correct its opacity for its length.
             let len = min(dt, t_exit - t);
-            let rgb = shade(rgba.rgb, uvw, -dir);
+            let rgb = shade(rgba.rgb, uvw, -dir, t - cut_t <= CUT_SHELL * p.voxel_uvw.w);
             if pending && t_surf < t + len {
                 // The surface cuts this step: the part before it, the surface, then (if
                 // it is translucent) the part behind it, each for its true length.

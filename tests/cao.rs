@@ -937,3 +937,123 @@ fn clipped_rendering_matches_the_cpu_twin() {
     let unclipped = cpu::render(&s.vol.texels, &cv, &s.vol.lut, &occ, &s.frame);
     assert!(check("twin_cao_unclipped", &g, &unclipped, twin, &out).is_err());
 }
+
+/// A cut face is lit like an open surface: inside carved material the density's gradient
+/// is not the cut's (here layers across the face, as a skull's diploë between its
+/// tables), and AO read off the sample along it lands deeper in the material, where every
+/// voxel is occluded: the face of a pocket carved into a layered block went dark. It is
+/// now lit without a direction and its AO read back along the ray, in the carved space,
+/// so with CAO it keeps the brightness it has without AO (GPU and CPU twin).
+#[test]
+fn a_carved_pocket_keeps_its_light_with_cao_gpu_and_cpu() {
+    use volao::render::cpu;
+    use volao::render::image::{Image, Tolerance, check};
+    use volao::tf::{ColorStop, OpacityPoint};
+    let n = 40;
+    let v = common::u8_volume([n; 3], |x, y, z| {
+        let inside = |c: usize| (4..36).contains(&c);
+        if inside(x) && inside(y) && inside(z) {
+            (140.0 + 90.0 * (0.8 * x as f32).sin()) as u8
+        } else {
+            0
+        }
+    });
+    let tf = TransferFunction {
+        name: "block".into(),
+        opacity: vec![
+            OpacityPoint {
+                value: 30.0,
+                alpha: 0.0,
+            },
+            OpacityPoint {
+                value: 50.0,
+                alpha: 0.9,
+            },
+        ],
+        color: vec![ColorStop {
+            value: 0.0,
+            rgb: [1.0; 3],
+        }],
+    };
+    let gpu = device();
+    let settings = RenderSettings::default();
+    let mut vol = GpuVolume::from_texels(&gpu, texels(&v), &tf, settings.step_voxels)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let rays = Rays::uniform(RaySet::Fourteen.directions());
+    let bricks = Coverage::Readable.bricks(&vol.texels, vol.ranges(), &tf);
+    let mut cao = CaoGpu::new(&gpu, &vol, &tf, &rays, SAMPLES, 32, bricks, &|_, _| {})
+        .unwrap_or_else(|e| panic!("{e}"));
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    // Seen from +y (azimuth 0); the pocket is 20 × 20 mm and 10 deep, its face at y = 26.
+    let frame = Frame {
+        camera: Camera::default(),
+        settings,
+        width: 48,
+        height: 48,
+    };
+    let pocket = ClipShape {
+        shape: Shape::Box,
+        translation: [0.0, 14.0, 0.0],
+        rotation_deg: [0.0; 3],
+        scale: [10.0, 8.0, 10.0],
+        mode: ClipMode::Carve,
+    };
+    let reach = reach_mm(SAMPLES, vol.texels.spacing);
+    let stats = cao
+        .update(&gpu, &vol.texels, &[pocket], MAP, reach, CaoMode::Selective)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        stats.clip_errors.is_empty() && stats.clipped > 0,
+        "{stats:?}"
+    );
+    let ao = cao
+        .read(&gpu, CaoVolume::Ambient)
+        .unwrap_or_else(|e| panic!("{e}"));
+    vol.set_ambient_occlusion_view(cao.ao_view());
+    let with_ao = rc
+        .render(&gpu, &vol, &frame, Some(&cao.clip))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let maps = cao.clip.read_back(&gpu).unwrap_or_else(|e| panic!("{e}"));
+    let (mut cv, occ) = cpu::prepare(&vol.texels, &vol.lut);
+    cv.clip = Some(maps);
+    let without_ao = cpu::render(&vol.texels, &cv, &vol.lut, &occ, &frame);
+    cv.ao = Some(ao);
+    let twin = cpu::render(&vol.texels, &cv, &vol.lut, &occ, &frame);
+    // The middle of the pocket's face: the central 8 × 8 pixels.
+    let face = |pixels: &[[u8; 4]]| {
+        let mut sum = 0.0;
+        for y in 20..28 {
+            for x in 20..28 {
+                sum += pixels[y * 48 + x][..3]
+                    .iter()
+                    .map(|&c| c as f64)
+                    .sum::<f64>()
+                    / 3.0;
+            }
+        }
+        sum / 64.0
+    };
+    let (lit, bare) = (face(&with_ao.pixels), face(&without_ao.pixels));
+    assert!(bare > 100.0, "the face is lit without AO: {bare:.1}");
+    assert!(
+        lit >= 0.95 * bare,
+        "the carved face with CAO {lit:.1} against {bare:.1} without AO"
+    );
+    assert!(
+        (face(&twin.pixels) - lit).abs() < 2.0,
+        "the CPU twin's face {:.1}",
+        face(&twin.pixels)
+    );
+    let out = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("cao");
+    let g = Image {
+        width: 48,
+        height: 48,
+        pixels: with_ao.pixels,
+    };
+    let tolerance = Tolerance {
+        max_channel_diff: 3,
+        max_outlier_fraction: 0.01,
+        max_outlier_diff: 64,
+    };
+    check("twin_cao_pocket", &g, &twin, tolerance, &out).unwrap_or_else(|e| panic!("{e}"));
+}

@@ -77,7 +77,7 @@ fn classify(p: &RaycastParams, lut: &Lut, norm: f32) -> Vec4 {
     a.lerp(b, t - t.floor())
 }
 
-fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -> Vec3 {
+fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3, cut: bool) -> Vec3 {
     let lit_at = |cos_theta: f32| {
         vol.light.as_ref().map_or(1.0, |l| {
             super::shadow::shadow_factor(&l.values, vol.dims, p, uvw, view, l.direction, cos_theta)
@@ -88,7 +88,11 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3) -
     // Where the AO is read: p.ao[2] voxels out of the material along the normal
     // (raycast.wgsl's `ao_at`).
     let mut ao_at = uvw;
-    if phong || ((vol.ao.is_some() || vol.live_vao.is_some()) && p.ao[2] > 0.0) {
+    if cut {
+        // A cut face: out of the material is back towards the eye, through what was carved.
+        let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
+        ao_at = uvw + view * (p.ao[2] * p.voxel_uvw[3]) / (2.0 * half);
+    } else if phong || ((vol.ao.is_some() || vol.live_vao.is_some()) && p.ao[2] > 0.0) {
         let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
         let s = |o: Vec3| trilinear(&vol.norm, vol.dims, uvw + o);
         let g = Vec3::new(
@@ -179,6 +183,11 @@ fn past_block(
 /// The AO is read the full offset out wherever the gradient is at least 1/8 of a full
 /// edge (raycast.wgsl's `AO_EDGE_GAIN`).
 const AO_EDGE_GAIN: f32 = 8.0;
+
+/// A sample within this many voxels (of the smallest spacing) behind a carved sample
+/// that had opacity lies on a cut face: lit without a direction, its AO read back along
+/// the ray (raycast.wgsl's `CUT_SHELL`; docs/algorithms.md, "Cut faces").
+pub const CUT_SHELL: f32 = 2.0;
 
 const MODE_COMPOSITE: u32 = 0;
 const MODE_MIP: u32 = 1;
@@ -388,7 +397,7 @@ pub fn pixel(
                 Some(t_hit) => {
                     let uvw = (origin + dir * t_hit) / (2.0 * half) + Vec3::splat(0.5);
                     let norm = trilinear(&vol.norm, vol.dims, uvw);
-                    let rgb = shade(p, vol, classify(p, lut, norm).truncate(), uvw, -dir);
+                    let rgb = shade(p, vol, classify(p, lut, norm).truncate(), uvw, -dir, false);
                     (t_hit, rgb.extend(1.0))
                 }
                 None => (3.0e38, Vec4::ZERO),
@@ -414,6 +423,8 @@ pub fn pixel(
         // One loop over the samples; the shader nests three around the same steps (skip,
         // fetch, shade) for SIMD drivers that run every branch masked.
         let mut k = 0u32;
+        // The last carved sample that had opacity (cut faces lie just behind it).
+        let mut cut_t = -3.0e38f32;
         while k < max_steps {
             let t = t_enter + (k as f32 + offset) * dt;
             if pending && t_surf <= t {
@@ -441,6 +452,9 @@ pub fn pixel(
                 && c.uniforms.counts[0] > 0
                 && !c.classify(pos).0
             {
+                if classify(p, lut, trilinear(&vol.norm, vol.dims, uvw)).w > 0.0 {
+                    cut_t = t;
+                }
                 k += 1;
                 continue;
             }
@@ -451,7 +465,8 @@ pub fn pixel(
                     rgba.w *= trilinear(m, vol.dims, uvw);
                 }
                 let len = dt.min(t_exit - t);
-                let rgb = shade(p, vol, rgba.truncate(), uvw, -dir);
+                let cut = t - cut_t <= CUT_SHELL * p.voxel_uvw[3];
+                let rgb = shade(p, vol, rgba.truncate(), uvw, -dir, cut);
                 if pending && t_surf < t + len {
                     let before = (t_surf - t).max(0.0);
                     acc = over(acc, rgb, 1.0 - (1.0 - rgba.w).powf(before / dt));
