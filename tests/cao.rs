@@ -1057,3 +1057,44 @@ fn a_carved_pocket_keeps_its_light_with_cao_gpu_and_cpu() {
     };
     check("twin_cao_pocket", &g, &twin, tolerance, &out).unwrap_or_else(|e| panic!("{e}"));
 }
+
+/// The viewer clips an image being dragged with a copy of CAO's maps posed for the
+/// image's shapes (`ClipMaps::posed`), so that CAO's update keeps its own pose: the copy
+/// clips as the maps moved to that pose do, leaves the maps' pose alone, and is refused
+/// where other maps would be needed.
+#[test]
+fn maps_posed_for_an_image_clip_like_the_maps_moved_there() {
+    use volao::clip::gpu::ClipMaps;
+    let v = engine();
+    let s = scene(&v, Preset::CaoSingleColor, RaySet::Six);
+    let reach = s.reach();
+    let radius = Vec3::from(s.vol.texels.extent()).length() * 0.5;
+    let at = |x: f32| ClipShape::new(Shape::Sphere, Vec3::new(x, 4.0, 6.0), 14.0);
+    let mut maps = ClipMaps::new(&s.gpu).unwrap_or_else(|e| panic!("{e}"));
+    let render = |maps: &ClipMaps| {
+        s.rc.render(&s.gpu, &s.vol, &s.frame, Some(maps))
+            .unwrap_or_else(|e| panic!("{e}"))
+            .pixels
+    };
+    let report = maps
+        .update(&s.gpu, &[at(-6.0)], radius, reach, MAP)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(report.errors.is_empty(), "{:?}", report.errors);
+    let before = render(&maps);
+    let posed = maps
+        .posed(&s.gpu, &[at(6.0)], radius, reach, MAP)
+        .expect("the same sphere elsewhere needs no new maps");
+    let copy = render(&posed);
+    assert_eq!(render(&maps), before, "the maps keep their pose");
+    maps.update(&s.gpu, &[at(6.0)], radius, reach, MAP)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let moved = render(&maps);
+    assert_ne!(moved, before, "the shape's move shows");
+    assert_eq!(copy, moved, "the copy clips as the maps moved there");
+    let resized = ClipShape::new(Shape::Sphere, Vec3::new(6.0, 4.0, 6.0), 18.0);
+    assert!(maps.posed(&s.gpu, &[resized], radius, reach, MAP).is_none());
+    assert!(
+        maps.posed(&s.gpu, &[at(6.0), at(-6.0)], radius, reach, MAP)
+            .is_none()
+    );
+}

@@ -374,6 +374,9 @@ pub(super) struct Want {
 #[derive(Debug)]
 pub(super) struct Work {
     key: ViewKey,
+    /// The image's own copy of CAO's clip maps, posed for its shapes
+    /// ([`ClipMaps::posed`]), when CAO's maps are posed for another update's.
+    clip: Option<ClipMaps>,
     target: Target,
     next_row: u32,
     /// The next column of a band of rows being made in tiles (0: none).

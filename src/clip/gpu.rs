@@ -164,6 +164,43 @@ fn array_view(texture: &wgpu::Texture) -> wgpu::TextureView {
     })
 }
 
+/// The shapes of `shapes` that can clip, with their geometry keys; the others go into
+/// `report`'s errors.
+fn usable<'a>(
+    shapes: &'a [ClipShape],
+    volume_radius: f32,
+    reach_mm: f32,
+    resolution: u32,
+    report: &mut ClipUpdate,
+) -> Vec<(&'a ClipShape, GeometryKey)> {
+    if shapes.len() > MAX_SHAPES {
+        report.errors.push(ClipError::TooMany {
+            count: shapes.len(),
+        });
+    }
+    let mut usable = Vec::new();
+    for (i, s) in shapes.iter().take(MAX_SHAPES).enumerate() {
+        if let Err(e) = s.check(i) {
+            report.errors.push(e);
+            continue;
+        }
+        let key = GeometryKey {
+            shape: s.shape.clone(),
+            scale: s.scale,
+            plane_reach: if s.shape == Shape::Plane {
+                s.plane_slab_size(volume_radius)
+            } else {
+                0.0
+            },
+            mode: s.mode,
+            reach_mm,
+            resolution,
+        };
+        usable.push((s, key));
+    }
+    usable
+}
+
 /// Block size f of the dilation (`clip_maps.wgsl`): the smallest power of two keeping
 /// the kernel within 24 blocks, so building the maps costs O((r_xy / f)²) per block.
 pub fn block_size(r_xy: f32) -> u32 {
@@ -272,32 +309,7 @@ impl ClipMaps {
         let device = &gpu.device;
         let resolution = resolution.clamp(16, device.limits().max_texture_dimension_2d);
         let mut report = ClipUpdate::default();
-        if shapes.len() > MAX_SHAPES {
-            report.errors.push(ClipError::TooMany {
-                count: shapes.len(),
-            });
-        }
-        // Shapes that can clip, with their geometry keys.
-        let mut usable: Vec<(&ClipShape, GeometryKey)> = Vec::new();
-        for (i, s) in shapes.iter().take(MAX_SHAPES).enumerate() {
-            if let Err(e) = s.check(i) {
-                report.errors.push(e);
-                continue;
-            }
-            let key = GeometryKey {
-                shape: s.shape.clone(),
-                scale: s.scale,
-                plane_reach: if s.shape == Shape::Plane {
-                    s.plane_slab_size(volume_radius)
-                } else {
-                    0.0
-                },
-                mode: s.mode,
-                reach_mm,
-                resolution,
-            };
-            usable.push((s, key));
-        }
+        let usable = usable(shapes, volume_radius, reach_mm, resolution, &mut report);
         let layers = (usable.len().max(1) as u32) * ARRAY_LAYERS_PER_SHAPE;
         if resolution != self.resolution || layers > self.maps.depth_or_array_layers() {
             self.maps = validated(device, "ClipMaps::allocate", || {
@@ -342,6 +354,58 @@ impl ClipMaps {
         gpu.queue
             .write_buffer(&self.uniform_buffer, 0, bytemuck::bytes_of(&uniforms));
         Ok(report)
+    }
+
+    /// A copy of these maps posed for `shapes` (its own uniforms, the same textures), so
+    /// that an image can be clipped at one pose while these maps move to another; `None`
+    /// when `shapes` need other maps than those built (a shape added, removed or
+    /// resized, or one that cannot clip): then only [`Self::update`] will do. Posed for
+    /// the shapes [`Self::update`] was given, the copy clips every point alike.
+    pub fn posed(
+        &self,
+        gpu: &Gpu,
+        shapes: &[ClipShape],
+        volume_radius: f32,
+        reach_mm: f32,
+        resolution: u32,
+    ) -> Option<ClipMaps> {
+        let resolution = resolution.clamp(16, gpu.device.limits().max_texture_dimension_2d);
+        let mut report = ClipUpdate::default();
+        let usable = usable(shapes, volume_radius, reach_mm, resolution, &mut report);
+        let same = report.errors.is_empty()
+            && resolution == self.resolution
+            && usable.len() == self.slots.len()
+            && usable
+                .iter()
+                .zip(&self.slots)
+                .all(|((_, k), s)| *k == s.key);
+        if !same {
+            return None;
+        }
+        let mut uniforms: ClipUniforms = bytemuck::Zeroable::zeroed();
+        uniforms.counts[0] = usable.len() as u32;
+        uniforms.counts[1] = usable
+            .iter()
+            .filter(|(s, _)| s.mode == ClipMode::Probe)
+            .count() as u32;
+        for (i, ((shape, _), slot)) in usable.iter().zip(&self.slots).enumerate() {
+            uniforms.shapes[i] = shape_uniform(shape, &slot.camera, i);
+        }
+        Some(ClipMaps {
+            pipelines: std::sync::Arc::clone(&self.pipelines),
+            maps: self.maps.clone(),
+            maps_view: self.maps_view.clone(),
+            dummy_depth: self.dummy_depth.clone(),
+            resolution,
+            slots: self.slots.clone(),
+            uniforms,
+            uniform_buffer: uniform_buffer(
+                &gpu.device,
+                &gpu.queue,
+                "ClipMaps::posed",
+                bytemuck::bytes_of(&uniforms),
+            ),
+        })
     }
 
     /// The clipping cameras of the shapes now in use, in order.

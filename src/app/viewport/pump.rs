@@ -142,7 +142,7 @@ impl ViewportGpu {
             if self
                 .work
                 .as_ref()
-                .is_some_and(|w| w.key.ao_exact || w.key.clip != key.clip)
+                .is_some_and(|w| w.key.ao_exact || (w.clip.is_none() && w.key.clip != key.clip))
             {
                 self.work = None;
             }
@@ -289,7 +289,20 @@ impl ViewportGpu {
             vol.prepare_step(gpu, key.frame.settings.step_voxels);
         }
         let mut errors = Vec::new();
-        if self.synced_clip.as_ref() != Some(&key.clip) {
+        // With CAO, an image of other shapes than CAO's maps are posed for gets its own
+        // copy of the maps posed for them: CAO's update keeps its pose (and stays exact),
+        // and its next one does not drop the image.
+        let mut own_clip = None;
+        if self.synced_clip.as_ref() != Some(&key.clip)
+            && let (Some(cao), Some(vol)) = (&self.cao, &self.volume)
+        {
+            let setup = want.setup;
+            let reach = cao.reach_mm(&vol.texels);
+            own_clip = cao
+                .clip
+                .posed(gpu, &key.clip, setup.radius, reach, setup.resolution);
+        }
+        if own_clip.is_none() && self.synced_clip.as_ref() != Some(&key.clip) {
             // Whatever happens, these shapes are done with (an error is not retried).
             self.synced_clip = Some(key.clip.clone());
             let Some(vol) = &self.volume else {
@@ -339,6 +352,7 @@ impl ViewportGpu {
         let target = self.target(&gpu.device, (width, height));
         self.work = Some(Work {
             key,
+            clip: own_clip,
             target,
             next_row: 0,
             next_column: 0,
@@ -366,7 +380,11 @@ impl ViewportGpu {
         let (Some(w), Some(vol)) = (work.as_mut(), volume.as_ref()) else {
             return Ok(false);
         };
-        let clip = cao.as_ref().map(|c| &c.clip).or(clip.as_ref());
+        let clip = w
+            .clip
+            .as_ref()
+            .or(cao.as_ref().map(|c| &c.clip))
+            .or(clip.as_ref());
         let (width, height) = (w.key.frame.width, w.key.frame.height);
         // A pipeline variant not built yet compiles on a worker thread (~0.1 s on
         // lavapipe), not in the UI's frame; the image waits for it.
