@@ -325,8 +325,9 @@ fn inside_surface(origin: vec3<f32>, dir: vec3<f32>, t: f32) -> bool {
 const ISO_REFINE: u32 = 6u;
 
 // The first point of the ray inside the isosurface (value ≥ iso, unclipped), refined
-// between the last sample outside and the first inside; -1 when there is none.
-fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset: f32, max_steps: u32) -> f32 {
+// between the last sample outside and the first inside, and the last point before it
+// found outside (x: -1 when there is none).
+fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset: f32, max_steps: u32) -> vec2<f32> {
     var before = t_enter;
     var after = t_enter;
     var found = false;
@@ -354,7 +355,7 @@ fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
         before = t;
     }
     if !found {
-        return -1.0;
+        return vec2<f32>(-1.0, 0.0);
     }
     // Refined after the loop, not inside it: on SIMD drivers that run branches masked
     // (lavapipe) the bisection's fetches would otherwise cost every step.
@@ -368,7 +369,7 @@ fn iso_hit(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
             lo = mid;
         }
     }
-    return hi;
+    return vec2<f32>(hi, lo);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -415,11 +416,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var front = 3.0e38;  // surfaces nearer than this are drawn over the result
         var result = vec4<f32>(0.0);
         if mode == MODE_ISO {
-            let t_hit = iso_hit(origin, dir, t_enter, t_exit, offset, max_steps);
+            let hit = iso_hit(origin, dir, t_enter, t_exit, offset, max_steps);
+            let t_hit = hit.x;
             if t_hit >= 0.0 {
                 front = t_hit;
                 let uvw = (origin + dir * t_hit) / (2.0 * half) + 0.5;
-                result = vec4<f32>(shade(classify(sample_norm(uvw)).rgb, uvw, -dir, false), 1.0);
+                // Just before the hit the ray was inside the material but clipped: the
+                // hit is on a cut face.
+                let lo = origin + dir * hit.y;
+                let cut = !visible(lo) && mode_value(lo / (2.0 * half) + 0.5) >= 0.0;
+                result = vec4<f32>(shade(classify(sample_norm(uvw)).rgb, uvw, -dir, cut), 1.0);
             }
         } else {
             result = project(origin, dir, t_enter, t_exit, offset, max_steps, mode);

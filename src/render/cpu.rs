@@ -309,8 +309,9 @@ impl Ray<'_> {
         self.visible(pos) && self.mode_value(pos) >= 0.0
     }
 
-    /// The first point inside the isosurface, refined (raycast.wgsl's `iso_hit`).
-    fn iso_hit(&self) -> Option<f32> {
+    /// The first point inside the isosurface, refined, and the last point before it found
+    /// outside (raycast.wgsl's `iso_hit`).
+    fn iso_hit(&self) -> Option<(f32, f32)> {
         let mut before = self.t_enter;
         let mut after = None;
         let mut k = 0u32;
@@ -345,7 +346,7 @@ impl Ray<'_> {
                 lo = mid;
             }
         }
-        Some(hi)
+        Some((hi, lo))
     }
 }
 
@@ -394,10 +395,14 @@ pub fn pixel(
         };
         let (front, result) = if mode == MODE_ISO {
             match ray.iso_hit() {
-                Some(t_hit) => {
+                Some((t_hit, t_lo)) => {
                     let uvw = (origin + dir * t_hit) / (2.0 * half) + Vec3::splat(0.5);
                     let norm = trilinear(&vol.norm, vol.dims, uvw);
-                    let rgb = shade(p, vol, classify(p, lut, norm).truncate(), uvw, -dir, false);
+                    // Just before the hit the ray was inside the material but clipped:
+                    // the hit is on a cut face.
+                    let lo = origin + dir * t_lo;
+                    let cut = !ray.visible(lo) && ray.mode_value(lo) >= 0.0;
+                    let rgb = shade(p, vol, classify(p, lut, norm).truncate(), uvw, -dir, cut);
                     (t_hit, rgb.extend(1.0))
                 }
                 None => (3.0e38, Vec4::ZERO),
