@@ -88,11 +88,7 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3, c
     // Where the AO is read: p.ao[2] voxels out of the material along the normal
     // (raycast.wgsl's `ao_at`).
     let mut ao_at = uvw;
-    if cut {
-        // A cut face: out of the material is back towards the eye, through what was carved.
-        let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
-        ao_at = uvw + view * (p.ao[2] * p.voxel_uvw[3]) / (2.0 * half);
-    } else if phong || ((vol.ao.is_some() || vol.live_vao.is_some()) && p.ao[2] > 0.0) {
+    if phong || ((vol.ao.is_some() || vol.live_vao.is_some()) && p.ao[2] > 0.0) {
         let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
         let s = |o: Vec3| trilinear(&vol.norm, vol.dims, uvw + o);
         let g = Vec3::new(
@@ -123,6 +119,13 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3, c
             diffuse = 1.0 + (n_dot_v - 1.0) * edge;
             specular = p.shading[1] * n_dot_v.powf(p.shading[2]) * edge;
         }
+    }
+    if cut {
+        // A cut face: lit without a direction; out of the material is back towards the
+        // eye, through what was carved.
+        let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
+        (diffuse, specular, lit) = (1.0, 0.0, None);
+        ao_at = uvw + view * (p.ao[2] * p.voxel_uvw[3]) / (2.0 * half);
     }
     let mut ao = vol
         .ao
@@ -184,8 +187,8 @@ fn past_block(
 /// edge (raycast.wgsl's `AO_EDGE_GAIN`).
 const AO_EDGE_GAIN: f32 = 8.0;
 
-/// A sample within this many voxels (of the smallest spacing) behind a carved sample
-/// that had opacity lies on a cut face: lit without a direction, its AO read back along
+/// A sample within this many voxels (of the smallest spacing) behind a carved sample in
+/// a block that may have opacity lies on a cut face: lit without a direction, its AO read back along
 /// the ray (raycast.wgsl's `CUT_SHELL`; docs/algorithms.md, "Cut faces").
 pub const CUT_SHELL: f32 = 2.0;
 
@@ -428,7 +431,8 @@ pub fn pixel(
         // One loop over the samples; the shader nests three around the same steps (skip,
         // fetch, shade) for SIMD drivers that run every branch masked.
         let mut k = 0u32;
-        // The last carved sample that had opacity (cut faces lie just behind it).
+        // The last carved sample in a block that may have opacity (cut faces lie just
+        // behind it).
         let mut cut_t = -3.0e38f32;
         while k < max_steps {
             let t = t_enter + (k as f32 + offset) * dt;
@@ -457,7 +461,8 @@ pub fn pixel(
                 && c.uniforms.counts[0] > 0
                 && !c.classify(pos).0
             {
-                if classify(p, lut, trilinear(&vol.norm, vol.dims, uvw)).w > 0.0 {
+                // In a block that may have opacity (with skipping, every sample here).
+                if p.step[3] != 0.0 || occupancy[block_at(p, dims, uvw).1] != 0 {
                     cut_t = t;
                 }
                 k += 1;
