@@ -1127,7 +1127,14 @@ fn maps_posed_for_an_image_clip_like_the_maps_moved_there() {
     assert_ne!(moved, before, "the shape's move shows");
     assert_eq!(copy, moved, "the copy clips as the maps moved there");
     let resized = ClipShape::new(Shape::Sphere, Vec3::new(6.0, 4.0, 6.0), 18.0);
-    assert!(maps.posed(&s.gpu, &[resized], radius, reach, MAP).is_none());
+    assert!(
+        maps.posed(&s.gpu, &[resized.clone()], radius, reach, MAP)
+            .is_none()
+    );
+    // Whether an update would keep the copy valid (only re-pose the maps).
+    assert!(maps.fits(&s.gpu, &[at(-20.0)], radius, reach, MAP));
+    assert!(!maps.fits(&s.gpu, &[resized], radius, reach, MAP));
+    assert!(!maps.fits(&s.gpu, &[at(6.0)], radius, reach, 2 * MAP));
     assert!(
         maps.posed(&s.gpu, &[at(6.0), at(-6.0)], radius, reach, MAP)
             .is_none()

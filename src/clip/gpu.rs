@@ -408,6 +408,27 @@ impl ClipMaps {
         })
     }
 
+    /// Whether [`Self::update`] to `shapes` would only re-pose the maps built (no map
+    /// rebuilt: a copy from [`Self::posed`] stays valid across it).
+    pub fn fits(
+        &self,
+        gpu: &Gpu,
+        shapes: &[ClipShape],
+        volume_radius: f32,
+        reach_mm: f32,
+        resolution: u32,
+    ) -> bool {
+        let resolution = resolution.clamp(16, gpu.device.limits().max_texture_dimension_2d);
+        let mut report = ClipUpdate::default();
+        let usable = usable(shapes, volume_radius, reach_mm, resolution, &mut report);
+        resolution == self.resolution
+            && usable.len() <= self.slots.len()
+            && usable
+                .iter()
+                .zip(&self.slots)
+                .all(|((_, k), s)| *k == s.key)
+    }
+
     /// The clipping cameras of the shapes now in use, in order.
     pub fn cameras(&self) -> Vec<ClipCamera> {
         self.slots.iter().map(|s| s.camera).collect()

@@ -139,11 +139,23 @@ impl ViewportGpu {
             // The update poses the clip maps for these shapes and rewrites V_AO: an image
             // being made for other shapes, or reading V_AO, would mix two poses. It is
             // dropped, and one that reads V_PAO takes its place if the view moves.
-            if self
-                .work
-                .as_ref()
-                .is_some_and(|w| w.key.ao_exact || (w.clip.is_none() && w.key.clip != key.clip))
-            {
+            // An image with its own copy of the maps goes on unless the update rebuilds
+            // them (a shape added or resized): the copy shares their textures.
+            let rebuilds = match (&self.cao, &self.volume) {
+                (Some(cao), Some(vol)) => !cao.clip.fits(
+                    gpu,
+                    &key.clip,
+                    glam::Vec3::from(vol.texels.extent()).length() * 0.5,
+                    cao.reach_mm(&vol.texels),
+                    want.setup.resolution,
+                ),
+                _ => true,
+            };
+            if self.work.as_ref().is_some_and(|w| {
+                w.key.ao_exact
+                    || (w.clip.is_none() && w.key.clip != key.clip)
+                    || (w.clip.is_some() && rebuilds)
+            }) {
                 self.work = None;
             }
             match self.begin_cao(gpu, &key.clip, want.setup) {
