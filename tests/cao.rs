@@ -1128,7 +1128,7 @@ fn maps_posed_for_an_image_clip_like_the_maps_moved_there() {
     assert_eq!(copy, moved, "the copy clips as the maps moved there");
     let resized = ClipShape::new(Shape::Sphere, Vec3::new(6.0, 4.0, 6.0), 18.0);
     assert!(
-        maps.posed(&s.gpu, &[resized.clone()], radius, reach, MAP)
+        maps.posed(&s.gpu, std::slice::from_ref(&resized), radius, reach, MAP)
             .is_none()
     );
     // Whether an update would keep the copy valid (only re-pose the maps).
