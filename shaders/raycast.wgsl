@@ -501,10 +501,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
                 // Shadow-test clipping (CAO step VI): clipped samples are empty.
                 if CLIP && clip.counts.x > 0u && !clip_visible(origin + dir * t) {
-                    // Only shading looks at cut faces: a carved sample in a block that may
-                    // have opacity (with skipping, every sample tested here).
-                    if (PHONG || AO_VOLUME || LIVE_VAO || SHADOWS)
-                        && ((SKIPPING && p.step.w != 0.0) || textureLoad(occupancy, block_at(uvw), 0).r != 0u) {
+                    // Only shading that fetches (FIND) looks at cut faces: a carved sample
+                    // in a block that may have opacity (with skipping, every sample here).
+                    if FIND && ((SKIPPING && p.step.w != 0.0) || textureLoad(occupancy, block_at(uvw), 0).r != 0u) {
                         cut_t = t;
                     }
                     k = k + 1u;

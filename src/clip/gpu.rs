@@ -164,6 +164,22 @@ fn array_view(texture: &wgpu::Texture) -> wgpu::TextureView {
     })
 }
 
+/// The maps' resolution for `resolution` asked: what the device allows, at least 16.
+fn map_resolution(gpu: &Gpu, resolution: u32) -> u32 {
+    resolution.clamp(16, gpu.device.limits().max_texture_dimension_2d)
+}
+
+/// The uniforms posing `shapes` with the clipping cameras of `slots`, in order.
+fn posed_uniforms<'a>(shapes: impl Iterator<Item = &'a ClipShape>, slots: &[Slot]) -> ClipUniforms {
+    let mut uniforms: ClipUniforms = bytemuck::Zeroable::zeroed();
+    for (i, (shape, slot)) in shapes.zip(slots).enumerate() {
+        uniforms.shapes[i] = shape_uniform(shape, &slot.camera, i);
+        uniforms.counts[0] += 1;
+        uniforms.counts[1] += u32::from(shape.mode == ClipMode::Probe);
+    }
+    uniforms
+}
+
 /// The shapes of `shapes` that can clip, with their geometry keys; the others go into
 /// `report`'s errors.
 fn usable<'a>(
@@ -307,7 +323,7 @@ impl ClipMaps {
         resolution: u32,
     ) -> Result<ClipUpdate, GpuError> {
         let device = &gpu.device;
-        let resolution = resolution.clamp(16, device.limits().max_texture_dimension_2d);
+        let resolution = map_resolution(gpu, resolution);
         let mut report = ClipUpdate::default();
         let usable = usable(shapes, volume_radius, reach_mm, resolution, &mut report);
         let layers = (usable.len().max(1) as u32) * ARRAY_LAYERS_PER_SHAPE;
@@ -344,12 +360,7 @@ impl ClipMaps {
             slots.push(built);
         }
         self.slots = slots;
-        let mut uniforms: ClipUniforms = bytemuck::Zeroable::zeroed();
-        uniforms.counts[0] = kept.len() as u32;
-        uniforms.counts[1] = kept.iter().filter(|s| s.mode == ClipMode::Probe).count() as u32;
-        for (i, (shape, slot)) in kept.iter().zip(&self.slots).enumerate() {
-            uniforms.shapes[i] = shape_uniform(shape, &slot.camera, i);
-        }
+        let uniforms = posed_uniforms(kept.iter(), &self.slots);
         self.uniforms = uniforms;
         gpu.queue
             .write_buffer(&self.uniform_buffer, 0, bytemuck::bytes_of(&uniforms));
@@ -369,28 +380,16 @@ impl ClipMaps {
         reach_mm: f32,
         resolution: u32,
     ) -> Option<ClipMaps> {
-        let resolution = resolution.clamp(16, gpu.device.limits().max_texture_dimension_2d);
+        let resolution = map_resolution(gpu, resolution);
         let mut report = ClipUpdate::default();
         let usable = usable(shapes, volume_radius, reach_mm, resolution, &mut report);
         let same = report.errors.is_empty()
-            && resolution == self.resolution
             && usable.len() == self.slots.len()
-            && usable
-                .iter()
-                .zip(&self.slots)
-                .all(|((_, k), s)| *k == s.key);
+            && self.built_for(&usable, resolution);
         if !same {
             return None;
         }
-        let mut uniforms: ClipUniforms = bytemuck::Zeroable::zeroed();
-        uniforms.counts[0] = usable.len() as u32;
-        uniforms.counts[1] = usable
-            .iter()
-            .filter(|(s, _)| s.mode == ClipMode::Probe)
-            .count() as u32;
-        for (i, ((shape, _), slot)) in usable.iter().zip(&self.slots).enumerate() {
-            uniforms.shapes[i] = shape_uniform(shape, &slot.camera, i);
-        }
+        let uniforms = posed_uniforms(usable.iter().map(|(s, _)| *s), &self.slots);
         Some(ClipMaps {
             pipelines: std::sync::Arc::clone(&self.pipelines),
             maps: self.maps.clone(),
@@ -418,9 +417,15 @@ impl ClipMaps {
         reach_mm: f32,
         resolution: u32,
     ) -> bool {
-        let resolution = resolution.clamp(16, gpu.device.limits().max_texture_dimension_2d);
+        let resolution = map_resolution(gpu, resolution);
         let mut report = ClipUpdate::default();
         let usable = usable(shapes, volume_radius, reach_mm, resolution, &mut report);
+        self.built_for(&usable, resolution)
+    }
+
+    /// Whether every one of `usable` finds its maps built at `resolution`: the same
+    /// geometry key in the same slot.
+    fn built_for(&self, usable: &[(&ClipShape, GeometryKey)], resolution: u32) -> bool {
         resolution == self.resolution
             && usable.len() <= self.slots.len()
             && usable

@@ -141,11 +141,11 @@ impl ViewportGpu {
             // dropped, and one that reads V_PAO takes its place if the view moves.
             // An image with its own copy of the maps goes on unless the update rebuilds
             // them (a shape added or resized): the copy shares their textures.
-            let rebuilds = match (&self.cao, &self.volume) {
+            let rebuilds = || match (&self.cao, &self.volume) {
                 (Some(cao), Some(vol)) => !cao.clip.fits(
                     gpu,
                     &key.clip,
-                    glam::Vec3::from(vol.texels.extent()).length() * 0.5,
+                    want.setup.radius,
                     cao.reach_mm(&vol.texels),
                     want.setup.resolution,
                 ),
@@ -153,8 +153,10 @@ impl ViewportGpu {
             };
             if self.work.as_ref().is_some_and(|w| {
                 w.key.ao_exact
-                    || (w.clip.is_none() && w.key.clip != key.clip)
-                    || (w.clip.is_some() && rebuilds)
+                    || match w.clip {
+                        None => w.key.clip != key.clip,
+                        Some(_) => rebuilds(),
+                    }
             }) {
                 self.work = None;
             }
@@ -304,17 +306,16 @@ impl ViewportGpu {
         // With CAO, an image of other shapes than CAO's maps are posed for gets its own
         // copy of the maps posed for them: CAO's update keeps its pose (and stays exact),
         // and its next one does not drop the image.
+        let moved = self.synced_clip.as_ref() != Some(&key.clip);
         let mut own_clip = None;
-        if self.synced_clip.as_ref() != Some(&key.clip)
-            && let (Some(cao), Some(vol)) = (&self.cao, &self.volume)
-        {
+        if moved && let (Some(cao), Some(vol)) = (&self.cao, &self.volume) {
             let setup = want.setup;
             let reach = cao.reach_mm(&vol.texels);
             own_clip = cao
                 .clip
                 .posed(gpu, &key.clip, setup.radius, reach, setup.resolution);
         }
-        if own_clip.is_none() && self.synced_clip.as_ref() != Some(&key.clip) {
+        if moved && own_clip.is_none() {
             // Whatever happens, these shapes are done with (an error is not retried).
             self.synced_clip = Some(key.clip.clone());
             let Some(vol) = &self.volume else {
