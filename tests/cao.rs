@@ -950,7 +950,6 @@ fn clipped_rendering_matches_the_cpu_twin() {
 fn a_carved_pocket_keeps_its_light_with_cao_gpu_and_cpu() {
     use volao::render::cpu;
     use volao::render::image::{Image, Tolerance, check};
-    use volao::tf::{ColorStop, OpacityPoint};
     let n = 40;
     let v = common::u8_volume([n; 3], |x, y, z| {
         let inside = |c: usize| (4..36).contains(&c);
@@ -960,23 +959,7 @@ fn a_carved_pocket_keeps_its_light_with_cao_gpu_and_cpu() {
             0
         }
     });
-    let tf = TransferFunction {
-        name: "block".into(),
-        opacity: vec![
-            OpacityPoint {
-                value: 30.0,
-                alpha: 0.0,
-            },
-            OpacityPoint {
-                value: 50.0,
-                alpha: 0.9,
-            },
-        ],
-        color: vec![ColorStop {
-            value: 0.0,
-            rgb: [1.0; 3],
-        }],
-    };
+    let tf = common::ramp_tf(30.0, 50.0, 0.9);
     let gpu = device();
     let settings = RenderSettings::default();
     let mut vol = GpuVolume::from_texels(&gpu, texels(&v), &tf, settings.step_voxels)

@@ -13,28 +13,12 @@ use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::image::{Tolerance, check, compare};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
-use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
+use volao::tf::TransferFunction;
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
 
 /// Opacity rising linearly from 0 at value 0 to `top` at 255 (u8 data).
 fn ramp_tf(top: f32) -> TransferFunction {
-    TransferFunction {
-        name: "ramp".into(),
-        opacity: vec![
-            OpacityPoint {
-                value: 0.0,
-                alpha: 0.0,
-            },
-            OpacityPoint {
-                value: 255.0,
-                alpha: top,
-            },
-        ],
-        color: vec![ColorStop {
-            value: 0.0,
-            rgb: [1.0; 3],
-        }],
-    }
+    common::ramp_tf(0.0, 255.0, top)
 }
 
 /// Texture coordinates of the centre of voxel `v`.
@@ -601,23 +585,7 @@ fn float_volumes_beyond_the_f16_range_give_the_same_ao_and_light() {
         VoxelData::F32(bytes.iter().map(|&b| b as f32 * 1000.0).collect()),
     )
     .expect("valid");
-    let ramp = |top: f64| TransferFunction {
-        name: "ramp".into(),
-        opacity: vec![
-            OpacityPoint {
-                value: 0.0,
-                alpha: 0.0,
-            },
-            OpacityPoint {
-                value: top,
-                alpha: 0.9,
-            },
-        ],
-        color: vec![ColorStop {
-            value: 0.0,
-            rgb: [1.0; 3],
-        }],
-    };
+    let ramp = |top: f64| common::ramp_tf(0.0, top, 0.9);
     let gpu = device();
     let s = VaoSettings::default();
     let a8 = gpu_vao(&gpu, &small, &ramp(255.0), &s);

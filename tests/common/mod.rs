@@ -184,6 +184,26 @@ pub fn flat_tf(alpha: f32) -> volao::tf::TransferFunction {
     }
 }
 
+/// White, transparent up to `from` and rising linearly to opacity `alpha` at `to` (data
+/// units), that opacity beyond.
+pub fn ramp_tf(from: f64, to: f64, alpha: f32) -> volao::tf::TransferFunction {
+    use volao::tf::{ColorStop, OpacityPoint};
+    volao::tf::TransferFunction {
+        name: "ramp".into(),
+        opacity: vec![
+            OpacityPoint {
+                value: from,
+                alpha: 0.0,
+            },
+            OpacityPoint { value: to, alpha },
+        ],
+        color: vec![ColorStop {
+            value: 0.0,
+            rgb: [1.0; 3],
+        }],
+    }
+}
+
 /// A real volume's texels shrunk (by the renderer's own downsampling) to ≤ 64 voxels per
 /// axis, so CPU twins stay fast in CI.
 pub fn small_texels(volume: &volao::volume::Volume) -> volao::render::texels::VolumeTexels {
