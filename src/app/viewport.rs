@@ -126,8 +126,9 @@ pub(super) struct CaoWork {
     tainted: bool,
     /// When it began.
     began: Instant,
-    /// An image was shown since it began: from then on it keeps its share of each slice.
-    imaged: bool,
+    /// It keeps its share of each slice from now on: an image was on its way when it
+    /// began (a drag's images keep coming), or one has been shown since.
+    holds: bool,
 }
 
 /// A complete image.

@@ -23,8 +23,9 @@
 use super::*;
 
 /// The share of a frame's slice kept for CAO's update once an image has been shown
-/// since it began, or it has waited [`CAO_PATIENCE`] behind the images (which come first
-/// until then: the image of a shape moved shows before the update for it).
+/// since it began (from the start when one was on its way then), or it has waited
+/// [`CAO_PATIENCE`] behind the images, which come first until then: the image of a shape
+/// moved from rest shows before the update for it.
 const CAO_SHARE: f64 = 0.5;
 const CAO_PATIENCE: std::time::Duration = std::time::Duration::from_millis(500);
 
@@ -192,9 +193,10 @@ impl ViewportGpu {
         }
         // The image first (the view follows the mouse), then CAO with what is left of
         // the slice, and at least CAO_SHARE of it once an image came since the update
-        // began (or it waited CAO_PATIENCE): interactive images come every frame while
-        // a shape is dragged, and would otherwise leave CAO nothing until the drag stops.
-        let waited = |c: &CaoWork| c.imaged || c.began.elapsed() > CAO_PATIENCE;
+        // began, or from the start if one was on its way then (or once it waited
+        // CAO_PATIENCE): interactive images come every frame while a shape is dragged,
+        // and would otherwise leave CAO nothing until the drag stops.
+        let waited = |c: &CaoWork| c.holds || c.began.elapsed() > CAO_PATIENCE;
         let held = match self.cao_work.as_ref().is_some_and(waited) {
             true => pacer.hold(CAO_SHARE),
             false => 0.0,
@@ -216,7 +218,7 @@ impl ViewportGpu {
                     self.frames_rendered += 1;
                     self.last_error = None;
                     if let Some(c) = &mut self.cao_work {
-                        c.imaged = true;
+                        c.holds = true;
                     }
                 }
             }
@@ -280,7 +282,7 @@ impl ViewportGpu {
             frame,
             tainted: false,
             began: Instant::now(),
-            imaged: false,
+            holds: self.work.is_some(),
         });
         Ok(errors)
     }
