@@ -196,8 +196,8 @@ impl ViewportGpu {
         // began, or from the start if one was on its way then (or once it waited
         // CAO_PATIENCE): interactive images come every frame while a shape is dragged,
         // and would otherwise leave CAO nothing until the drag stops.
-        let waited = |c: &CaoWork| c.holds || c.began.elapsed() > CAO_PATIENCE;
-        let held = match self.cao_work.as_ref().is_some_and(waited) {
+        let keeps_share = |c: &CaoWork| c.holds || c.began.elapsed() > CAO_PATIENCE;
+        let held = match self.cao_work.as_ref().is_some_and(keeps_share) {
             true => pacer.hold(CAO_SHARE),
             false => 0.0,
         };
