@@ -126,9 +126,6 @@ pub(super) struct CaoWork {
     tainted: bool,
     /// When it began.
     began: Instant,
-    /// It keeps its share of each slice from now on: an image was on its way when it
-    /// began (a drag's images keep coming), or one has been shown since.
-    holds: bool,
 }
 
 /// A complete image.

@@ -22,10 +22,8 @@
 
 use super::*;
 
-/// The share of a frame's slice kept for CAO's update once an image has been shown
-/// since it began (from the start when one was on its way then), or it has waited
-/// [`CAO_PATIENCE`] behind the images, which come first until then: the image of a shape
-/// moved from rest shows before the update for it.
+/// The share of a frame's slice kept for CAO's update once it has waited [`CAO_PATIENCE`]
+/// behind the images, which come first until then.
 const CAO_SHARE: f64 = 0.5;
 const CAO_PATIENCE: std::time::Duration = std::time::Duration::from_millis(500);
 
@@ -192,12 +190,11 @@ impl ViewportGpu {
             }
         }
         // The image first (the view follows the mouse), then CAO with what is left of
-        // the slice, and at least CAO_SHARE of it once an image came since the update
-        // began, or from the start if one was on its way then (or once it waited
-        // CAO_PATIENCE): interactive images come every frame while a shape is dragged,
+        // the slice, and at least CAO_SHARE of it once the update has waited
+        // CAO_PATIENCE: interactive images come every frame while a shape is dragged,
         // and would otherwise leave CAO nothing until the drag stops.
-        let keeps_share = |c: &CaoWork| c.holds || c.began.elapsed() > CAO_PATIENCE;
-        let held = match self.cao_work.as_ref().is_some_and(keeps_share) {
+        let waited = |c: &CaoWork| c.began.elapsed() > CAO_PATIENCE;
+        let held = match self.cao_work.as_ref().is_some_and(waited) {
             true => pacer.hold(CAO_SHARE),
             false => 0.0,
         };
@@ -217,9 +214,6 @@ impl ViewportGpu {
                     });
                     self.frames_rendered += 1;
                     self.last_error = None;
-                    if let Some(c) = &mut self.cao_work {
-                        c.holds = true;
-                    }
                 }
             }
             Err(e) => {
@@ -282,7 +276,6 @@ impl ViewportGpu {
             frame,
             tainted: false,
             began: Instant::now(),
-            holds: self.work.is_some(),
         });
         Ok(errors)
     }
