@@ -180,15 +180,25 @@ fn posed_uniforms<'a>(shapes: impl Iterator<Item = &'a ClipShape>, slots: &[Slot
     uniforms
 }
 
-/// The shapes of `shapes` that can clip, with their geometry keys; the others go into
-/// `report`'s errors.
+/// What a request for the maps of some shapes asks for: the resolution, clamped to what
+/// the adapter allows; the shapes that can clip, with their geometry keys; and the
+/// report of those that cannot.
+struct Usable<'a> {
+    resolution: u32,
+    shapes: Vec<(&'a ClipShape, GeometryKey)>,
+    report: ClipUpdate,
+}
+
+/// The request of [`ClipMaps::update`], [`ClipMaps::posed`] and [`ClipMaps::fits`].
 fn usable<'a>(
+    gpu: &Gpu,
     shapes: &'a [ClipShape],
     volume_radius: f32,
     reach_mm: f32,
     resolution: u32,
-    report: &mut ClipUpdate,
-) -> Vec<(&'a ClipShape, GeometryKey)> {
+) -> Usable<'a> {
+    let resolution = map_resolution(gpu, resolution);
+    let mut report = ClipUpdate::default();
     if shapes.len() > MAX_SHAPES {
         report.errors.push(ClipError::TooMany {
             count: shapes.len(),
@@ -214,7 +224,11 @@ fn usable<'a>(
         };
         usable.push((s, key));
     }
-    usable
+    Usable {
+        resolution,
+        shapes: usable,
+        report,
+    }
 }
 
 /// Block size f of the dilation (`clip_maps.wgsl`): the smallest power of two keeping
@@ -323,9 +337,11 @@ impl ClipMaps {
         resolution: u32,
     ) -> Result<ClipUpdate, GpuError> {
         let device = &gpu.device;
-        let resolution = map_resolution(gpu, resolution);
-        let mut report = ClipUpdate::default();
-        let usable = usable(shapes, volume_radius, reach_mm, resolution, &mut report);
+        let Usable {
+            resolution,
+            shapes: usable,
+            mut report,
+        } = usable(gpu, shapes, volume_radius, reach_mm, resolution);
         let layers = (usable.len().max(1) as u32) * ARRAY_LAYERS_PER_SHAPE;
         if resolution != self.resolution || layers > self.maps.depth_or_array_layers() {
             self.maps = validated(device, "ClipMaps::allocate", || {
@@ -380,9 +396,11 @@ impl ClipMaps {
         reach_mm: f32,
         resolution: u32,
     ) -> Option<ClipMaps> {
-        let resolution = map_resolution(gpu, resolution);
-        let mut report = ClipUpdate::default();
-        let usable = usable(shapes, volume_radius, reach_mm, resolution, &mut report);
+        let Usable {
+            resolution,
+            shapes: usable,
+            report,
+        } = usable(gpu, shapes, volume_radius, reach_mm, resolution);
         let same = report.errors.is_empty()
             && usable.len() == self.slots.len()
             && self.built_for(&usable, resolution);
@@ -417,10 +435,8 @@ impl ClipMaps {
         reach_mm: f32,
         resolution: u32,
     ) -> bool {
-        let resolution = map_resolution(gpu, resolution);
-        let mut report = ClipUpdate::default();
-        let usable = usable(shapes, volume_radius, reach_mm, resolution, &mut report);
-        self.built_for(&usable, resolution)
+        let request = usable(gpu, shapes, volume_radius, reach_mm, resolution);
+        self.built_for(&request.shapes, request.resolution)
     }
 
     /// Whether every one of `usable` finds its maps built at `resolution`: the same
