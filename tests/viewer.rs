@@ -1088,6 +1088,7 @@ fn a_shape_dragged_away_and_back_while_cao_catches_up_comes_to_rest_exact() {
             steps += 1;
             assert!(steps < 2000, "no image of the moved shape");
         }
+        eprintln!("an image of the shape at x = {x} came after {steps} UI frames");
     };
     move_to(&mut h, x0 + 6.0);
     assert!(

@@ -126,6 +126,8 @@ pub(super) struct CaoWork {
     tainted: bool,
     /// When it began.
     began: Instant,
+    /// An image was shown since it began: from then on it keeps its share of each slice.
+    imaged: bool,
 }
 
 /// A complete image.

@@ -22,8 +22,9 @@
 
 use super::*;
 
-/// The share of a frame's slice kept for CAO's update once it has waited [`CAO_PATIENCE`]
-/// behind the images, which come first until then.
+/// The share of a frame's slice kept for CAO's update once an image has been shown
+/// since it began, or it has waited [`CAO_PATIENCE`] behind the images (which come first
+/// until then: the image of a shape moved shows before the update for it).
 const CAO_SHARE: f64 = 0.5;
 const CAO_PATIENCE: std::time::Duration = std::time::Duration::from_millis(500);
 
@@ -190,19 +191,31 @@ impl ViewportGpu {
             }
         }
         // The image first (the view follows the mouse), then CAO with what is left of
-        // the slice, and at least CAO_SHARE of it once the update has waited
-        // CAO_PATIENCE: interactive images come every frame while a shape is dragged,
-        // and would otherwise leave CAO nothing until the drag stops.
-        let waited = |c: &CaoWork| c.began.elapsed() > CAO_PATIENCE;
-        let held = match self.cao_work.as_ref().is_some_and(waited) {
+        // the slice, and at least CAO_SHARE of it once an image came since the update
+        // began (or it waited CAO_PATIENCE): interactive images come every frame while
+        // a shape is dragged, and would otherwise leave CAO nothing until the drag stops.
+        let keeps_share = |c: &CaoWork| c.imaged || c.began.elapsed() > CAO_PATIENCE;
+        let mut held = match self.cao_work.as_ref().is_some_and(keeps_share) {
             true => pacer.hold(CAO_SHARE),
             false => 0.0,
         };
-        let advanced = self.advance(gpu, pacer);
+        let mut advanced = self.advance(gpu, pacer);
+        if matches!(advanced, Ok(Advanced::Starved)) && held > 0.0 {
+            // Not one piece of the image fitted in its share: it takes the whole of
+            // what is left.
+            pacer.release(held);
+            held = 0.0;
+            advanced = self.advance(gpu, pacer);
+        }
         pacer.release(held);
+        // An image that got nothing at all this frame goes first in the next: CAO submits
+        // nothing now, so the queue drains and the image's piece fits (or goes alone).
+        // Else CAO's small pieces would fill every slice, and an image whose least piece
+        // costs more than what they leave would wait for the whole update.
+        let image_starved = matches!(advanced, Ok(Advanced::Starved));
         match advanced {
-            Ok(false) => {}
-            Ok(true) => {
+            Ok(Advanced::Going | Advanced::Starved) => {}
+            Ok(Advanced::Done) => {
                 if let Some(w) = self.work.take() {
                     out.completed = Some(w.started.elapsed().as_secs_f64());
                     if let Some(old) = self.shown.take() {
@@ -214,6 +227,9 @@ impl ViewportGpu {
                     });
                     self.frames_rendered += 1;
                     self.last_error = None;
+                    if let Some(c) = &mut self.cao_work {
+                        c.imaged = true;
+                    }
                 }
             }
             Err(e) => {
@@ -222,7 +238,7 @@ impl ViewportGpu {
                 out.error = Some(e.to_string());
             }
         }
-        if let Err(e) = self.advance_cao(gpu, pacer) {
+        if !image_starved && let Err(e) = self.advance_cao(gpu, pacer) {
             self.cao_work = None;
             self.synced_clip = None;
             self.last_error = Some(e.to_string());
@@ -276,6 +292,7 @@ impl ViewportGpu {
             frame,
             tainted: false,
             began: Instant::now(),
+            imaged: false,
         });
         Ok(errors)
     }
@@ -375,8 +392,8 @@ impl ViewportGpu {
     }
 
     /// Submits what fits of the image being made, in the pieces [`next_tile`] cuts (each
-    /// costed by [`TileCosts`], else the pacer's mean rate); true once all is submitted.
-    fn advance(&mut self, gpu: &Gpu, pacer: &mut Pacer) -> Result<bool, crate::gpu::GpuError> {
+    /// costed by [`TileCosts`], else the pacer's mean rate).
+    fn advance(&mut self, gpu: &Gpu, pacer: &mut Pacer) -> Result<Advanced, crate::gpu::GpuError> {
         let ViewportGpu {
             work,
             cao,
@@ -391,7 +408,7 @@ impl ViewportGpu {
             ..
         } = self;
         let (Some(w), Some(vol)) = (work.as_mut(), volume.as_ref()) else {
-            return Ok(false);
+            return Ok(Advanced::Going);
         };
         let clip = w
             .clip
@@ -409,7 +426,7 @@ impl ViewportGpu {
                     let failed = state.lock().ok().and_then(|s| s.clone());
                     match failed {
                         // Still compiling.
-                        None => return Ok(false),
+                        None => return Ok(Advanced::Going),
                         // It failed there: the ray cast below builds it again and
                         // reports the error.
                         Some(_) => *compiling = None,
@@ -432,7 +449,7 @@ impl ViewportGpu {
                         });
                     if spawned.is_ok() {
                         *compiling = Some((variant, state));
-                        return Ok(false);
+                        return Ok(Advanced::Going);
                     }
                 }
             }
@@ -451,12 +468,16 @@ impl ViewportGpu {
                     ((t.2.min(width - t.0) * t.3.min(height - t.1)) as f64) / pixel_rate
                 })
         };
+        let mut submitted = false;
         while w.next_row < height {
             let (x0, y0) = (w.next_column, w.next_row);
             let idle = pacer.has_time() && !pacer.busy();
             let slice = (pacer.slice.as_secs_f64(), pacer.left());
             let Some(tile) = next_tile((width, (x0, y0)), slice, idle, estimate) else {
-                return Ok(false);
+                return Ok(match submitted {
+                    true => Advanced::Going,
+                    false => Advanced::Starved,
+                });
             };
             let (tx, ty, tw, th) = tile;
             let strip = strip_texture(strips, &gpu.device, ((tw, th), IMAGE_FORMAT));
@@ -495,6 +516,7 @@ impl ViewportGpu {
                     Ok(())
                 },
             )?;
+            submitted = true;
             tiles_in_flight.push((tag, (width, height), step, tile));
             if tiles_in_flight.len() > 4 * RECENT_TILES {
                 // Never timed (the pacer was replaced): forgotten.
@@ -507,6 +529,18 @@ impl ViewportGpu {
                 w.next_column = tx + tw;
             }
         }
-        Ok(true)
+        Ok(Advanced::Done)
     }
+}
+
+/// How far [`ViewportGpu::advance`] moved the image being made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Advanced {
+    /// Pieces went, or it waits for something other than the queue (a pipeline
+    /// compiling), or there is no image to make.
+    Going,
+    /// Not one piece fitted in what was left of the slice.
+    Starved,
+    /// All of it is submitted.
+    Done,
 }
