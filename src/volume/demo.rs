@@ -1,10 +1,13 @@
 //! The built-in demo volume: a CT-like head phantom in Hounsfield units, generated in
 //! code so `volao` has something worth looking at without a file.
 //!
-//! It has what makes ambient occlusion and clipping interesting: a thick bone shell with
-//! a spongy middle layer (diploë), openings (orbits, foramen magnum), soft tissue over
-//! it, a brain with folded cortex and fluid-filled ventricles, eyes with lenses,
-//! contrast-filled vessels and a stack of vertebrae.
+//! It has what makes ambient occlusion and clipping interesting, shaped so that its
+//! bone reads as a skull: a cranium with a spongy middle layer (diploë) and sutures,
+//! cone-shaped orbits with rims, a facial plate with the nasal aperture, nasal bones and
+//! septum, cheekbones and zygomatic arches, teeth in two arches, the mandible, mastoid
+//! processes, the skull base with the foramen magnum and cervical vertebrae; soft tissue
+//! over it, a brain with folded cortex and fluid-filled ventricles, eyes with lenses,
+//! sinuses and contrast-filled vessels.
 
 use super::orient::{AffineSource, Orientation};
 use super::{Volume, VoxelData};
@@ -25,6 +28,7 @@ mod hu {
     pub const EYE: f32 = 12.0;
     pub const LENS: f32 = 110.0;
     pub const CONTRAST: f32 = 320.0;
+    pub const ENAMEL: f32 = 2400.0;
 }
 
 /// Builds the demo volume (`n`³ voxels over a 192 mm cube, i16 Hounsfield units).
@@ -117,138 +121,311 @@ fn seg_dist(p: Vec3, a: Vec3, b: Vec3) -> f32 {
     (p - (a + ab * t)).length()
 }
 
+/// Hermite step from 0 at `a` to 1 at `b`.
+fn smoothstep(a: f32, b: f32, x: f32) -> f32 {
+    let t = ((x - a) / (b - a)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// The cranium's centre (mm).
+const CRANIUM: Vec3 = Vec3::new(0.0, -6.0, 20.0);
+
+/// Normalised radius of the cranium's outer surface: an egg, wider behind the ears than
+/// at the temples, with a few shallow bumps.
+fn cranium_q(p: Vec3) -> f32 {
+    let d = p - CRANIUM;
+    let widen = 1.0 - 0.1 * (d.y / 80.0);
+    let bumps = 0.008 * ((p.x * 0.21).sin() * (p.y * 0.17).cos() + (p.z * 0.23).sin());
+    (d / Vec3::new(66.0 * widen, 80.0, 64.0)).length() - bumps
+}
+
+/// The height (mm) of the skull base under `p`: low at the back and sides, rising to
+/// the orbits' roofs at the front.
+fn skull_base(p: Vec3) -> f32 {
+    -20.0 + 22.0 * smoothstep(20.0, 58.0, p.y)
+}
+
+/// The face's envelope (soft tissue over the facial skeleton), normalised radius.
+fn face_q(p: Vec3) -> f32 {
+    ell(p, Vec3::new(0.0, 24.0, -24.0), Vec3::new(60.0, 64.0, 62.0))
+}
+
+/// The inner cranium's fraction where the bone begins (the outer surface is at 1).
+const INNER_TABLE: f32 = 0.9;
+
+/// Centres of the orbits (x for the right one; the left mirrors it).
+const ORBIT: Vec3 = Vec3::new(29.0, 54.0, -6.0);
+
 /// Tissue value at `p` (mm, RAS: +x right, +y anterior, +z superior, origin at the centre).
 fn tissue(p: Vec3) -> f32 {
-    let head_c = Vec3::new(0.0, 0.0, 18.0);
-    let head_r = Vec3::new(66.0, 80.0, 72.0);
-    let q = ell(p, head_c, head_r);
+    let q = cranium_q(p);
+    let f = face_q(p);
     // Neck: a soft cylinder below the head holding the vertebrae.
-    let neck_r = ((p.x / 34.0).powi(2) + ((p.y + 12.0) / 38.0).powi(2)).sqrt();
-    let in_neck = p.z < -20.0 && neck_r < 1.0;
-    if q > 1.0 && !in_neck {
+    let neck_r = ((p.x / 36.0).powi(2) + ((p.y + 14.0) / 42.0).powi(2)).sqrt();
+    let in_neck = p.z < -10.0 && neck_r < 1.0;
+    // The skin's envelope: the cranium 7 mm out, the face and the neck.
+    let envelope = (q / 1.1).min(f).min(if p.z < -10.0 { neck_r } else { 2.0 });
+    if envelope > 1.0 {
         return hu::AIR;
     }
-    // Vertebrae: bone discs alternating with intervertebral discs along z.
-    let spine_r = ((p.x / 11.0).powi(2) + ((p.y + 22.0) / 10.0).powi(2)).sqrt();
-    if p.z < -38.0 && spine_r < 1.0 {
-        let phase = (p.z + 200.0) % 14.0;
-        return if phase < 10.5 {
-            hu::VERTEBRA * (0.75 + 0.25 * spine_r)
-        } else {
-            hu::DISC
-        };
-    }
-    // Spinous processes behind the vertebral bodies.
-    if p.z < -38.0
-        && (p.z + 200.0) % 14.0 < 8.0
-        && seg_dist(
-            p,
-            Vec3::new(0.0, -30.0, p.z),
-            Vec3::new(0.0, -44.0, p.z - 4.0),
-        ) < 3.0
-    {
-        return hu::VERTEBRA;
-    }
-    if in_neck && q > 1.0 {
-        return if neck_r > 0.93 { hu::FAT } else { hu::SOFT };
-    }
-    // Carotid arteries rising through the neck into the skull base.
-    for side in [-1.0f32, 1.0] {
-        let a = Vec3::new(side * 18.0, -2.0, -100.0);
-        let b = Vec3::new(side * 14.0, 6.0, -4.0);
-        if seg_dist(p, a, b) < 3.2 {
-            return hu::CONTRAST;
-        }
+    if let Some(bone) = skeleton(p, q) {
+        return bone;
     }
     // Skin and subcutaneous fat.
-    if q > 0.965 {
-        return if q > 0.985 { hu::SOFT } else { hu::FAT };
-    }
-    // Skull: outer table, diploë, inner table — a cap above the skull base.
-    let skull_base = -14.0 + 6.0 * (p.y / 40.0).sin();
-    let bumpy = 0.012 * ((p.x * 0.21).sin() * (p.y * 0.17).cos() + (p.z * 0.23).sin());
-    if q > 0.86 + bumpy && p.z > skull_base {
-        // Orbits: two openings at the front.
-        for side in [-1.0f32, 1.0] {
-            let oc = Vec3::new(side * 26.0, 62.0, 12.0);
-            if ell(p, oc, Vec3::new(17.0, 30.0, 15.0)) < 1.0 {
-                return orbit(p, side);
-            }
-        }
-        let depth = (q - 0.86 - bumpy) / (0.965 - 0.86 - bumpy);
-        return if (0.3..0.7).contains(&depth) {
-            hu::DIPLOE + 120.0 * (p.x * 0.9).sin() * (p.y * 0.8).cos()
-        } else {
-            hu::CORTICAL
-        };
-    }
-    if p.z <= skull_base {
-        // Skull base: a floor plate with the foramen magnum, soft tissue below it.
-        if p.z > skull_base - 6.0 {
-            let foramen = ((p.x / 14.0).powi(2) + ((p.y + 18.0) / 17.0).powi(2)).sqrt() < 1.0;
-            return if foramen {
-                hu::CSF
-            } else {
-                hu::CORTICAL * 0.85
-            };
-        }
-        for side in [-1.0f32, 1.0] {
-            if ell(
-                p,
-                Vec3::new(side * 26.0, 58.0, 12.0),
-                Vec3::new(15.0, 24.0, 14.0),
-            ) < 1.0
-            {
-                return orbit(p, side);
-            }
-        }
-        // Jaw: a U-shaped bone band at the front of the lower face.
-        let jaw = ((p.x / 46.0).powi(2) + ((p.y - 8.0) / 62.0).powi(2)).sqrt();
-        if (0.86..1.0).contains(&jaw) && p.y > 0.0 && (-44.0..-30.0).contains(&p.z) {
-            return hu::CORTICAL;
-        }
+    if envelope > 0.975 {
         return hu::SOFT;
     }
-    // Inside the skull: brain with ventricles, vessels and a folded cortex.
+    if envelope > 0.95 {
+        return hu::FAT;
+    }
+    if in_neck && q > 1.0 {
+        return hu::SOFT;
+    }
+    if q < INNER_TABLE && p.z > skull_base(p) {
+        return brain(p, q);
+    }
+    // The face's air spaces: nasal cavity and maxillary sinuses.
+    if p.x.abs() < 9.0 && (36.0..80.0).contains(&p.y) && (-34.0..-2.0).contains(&p.z) {
+        return hu::AIR;
+    }
     for side in [-1.0f32, 1.0] {
-        let c = Vec3::new(side * 7.0, 4.0, 30.0);
-        let r = Vec3::new(5.0, 26.0, 9.0 + 3.0 * ((p.y - 4.0) / 12.0).cos());
+        if ell(
+            p,
+            Vec3::new(side * 22.0, 54.0, -24.0),
+            Vec3::new(13.0, 15.0, 11.0),
+        ) < 1.0
+        {
+            return hu::AIR;
+        }
+    }
+    hu::SOFT
+}
+
+/// The bones at `p`, if any (`q`: [`cranium_q`] there): cranium and skull base, the
+/// orbits, the facial skeleton with its teeth, the jaw, and the cervical spine.
+fn skeleton(p: Vec3, q: f32) -> Option<f32> {
+    let base = skull_base(p);
+    let m = Vec3::new(p.x.abs(), p.y, p.z); // mirrored onto the right side
+    // The orbits: cone-shaped cavities (eye, fat) with thin walls and a rim in front.
+    let apex = Vec3::new(12.0, 24.0, -9.0);
+    let axis = (ORBIT + Vec3::new(2.0, 14.0, 1.0) - apex).normalize();
+    let t = (m - apex).dot(axis);
+    let radial = (m - apex - axis * t).length();
+    let cone = 3.0 + t * 0.32; // 17 mm at the opening
+    // The plane of the orbital rim, set back towards the temple.
+    let rim_plane = ORBIT.y + 12.0 - 0.2 * (m.x - 18.0);
+    if t > 0.0 && m.y < rim_plane {
+        if radial < cone - 2.5 {
+            return Some(orbit(m));
+        }
+        if radial < cone && t > 8.0 {
+            return Some(hu::CORTICAL * 0.8);
+        }
+    }
+    // Orbital rims and brow ridges.
+    let rim = ((m.x - ORBIT.x) / 17.0).hypot((m.z - ORBIT.z) / 15.0);
+    if (0.95..1.25).contains(&rim) && (m.y - rim_plane).abs() < 3.5 {
+        return Some(hu::CORTICAL);
+    }
+    // Cranium: outer table, diploë, inner table, above the skull base; the sutures are
+    // thin seams in the outer table.
+    if q > INNER_TABLE && q < 1.0 && p.z > base {
+        let depth = (q - INNER_TABLE) / (1.0 - INNER_TABLE);
+        if (0.3..0.7).contains(&depth) {
+            return Some(hu::DIPLOE + 120.0 * (p.x * 0.9).sin() * (p.y * 0.8).cos());
+        }
+        let seam = 0.7;
+        let sagittal = (p.x - 1.5 * (p.y * 0.9).sin()).abs() < seam && p.y < 16.0 && p.y > -60.0;
+        let coronal = (p.y - 16.0 - 1.5 * (p.x * 0.8).sin()).abs() < seam && p.z > 18.0;
+        let lambdoid =
+            p.y < -40.0 && (p.z - 30.0 - 0.55 * (p.y + 40.0) + 0.5 * p.x.abs()).abs() < seam;
+        if depth > 0.7 && (sagittal || coronal || lambdoid) {
+            return Some(hu::SOFT);
+        }
+        return Some(hu::CORTICAL);
+    }
+    // Skull base: a plate under the brain with the foramen magnum.
+    if q < 1.0 && p.z <= base && p.z > base - 5.0 {
+        let foramen = ((p.x / 14.0).powi(2) + ((p.y + 26.0) / 17.0).powi(2)).sqrt() < 1.0;
+        return Some(if foramen {
+            hu::CSF
+        } else {
+            hu::CORTICAL * 0.85
+        });
+    }
+    // Mastoid processes behind the ears, zygomatic arches and cheekbones.
+    if ell(m, Vec3::new(54.0, -10.0, -24.0), Vec3::new(8.0, 9.0, 13.0)) < 1.0 {
+        return Some(hu::DIPLOE);
+    }
+    if seg_dist(
+        m,
+        Vec3::new(46.0, 52.0, -16.0),
+        Vec3::new(56.0, 10.0, -14.0),
+    ) < 3.2
+    {
+        return Some(hu::CORTICAL);
+    }
+    if ell(m, Vec3::new(42.0, 56.0, -16.0), Vec3::new(9.0, 10.0, 12.0)) < 1.0 {
+        return Some(hu::CORTICAL * 0.9);
+    }
+    // Facial skeleton: a curved plate from the brows to the upper teeth, open at the
+    // orbits and the pear-shaped nasal aperture; nasal bones over it.
+    let fq = ell(p, Vec3::new(0.0, 26.0, -16.0), Vec3::new(48.0, 44.0, 46.0));
+    if (0.88..1.0).contains(&fq) && p.y > 36.0 && (-36.0..base + 2.0).contains(&p.z) {
+        let aperture =
+            p.x.abs() < 5.0 + 0.3 * (-6.0 - p.z).max(0.0) && (-30.0..-4.0).contains(&p.z);
+        if !aperture {
+            return Some(hu::CORTICAL * 0.9);
+        }
+    }
+    // The nasal bones: a bridge 12 mm wide over the aperture; the septum behind it.
+    let bridge = Vec3::new(m.x - m.x.min(6.0), m.y, m.z);
+    if seg_dist(
+        bridge,
+        Vec3::new(0.0, 64.0, 4.0),
+        Vec3::new(0.0, 71.0, -6.0),
+    ) < 2.0
+    {
+        return Some(hu::CORTICAL);
+    }
+    if m.x < 1.2 && (40.0..66.0).contains(&p.y) && (-32.0..-2.0).contains(&p.z) {
+        return Some(hu::CORTICAL * 0.7);
+    }
+    // Teeth: upper and lower rows along their arches, with gaps between them.
+    if let Some(tooth) = teeth(p) {
+        return Some(tooth);
+    }
+    // Upper alveolar ridge under the plate, holding the upper teeth.
+    let upper = arch_dist(p, 70.0, 40.0);
+    if upper < 5.0 && (-40.0..-34.0).contains(&p.z) && p.y > 44.0 {
+        return Some(hu::CORTICAL * 0.9);
+    }
+    // Mandible: a U-shaped body, thickest at the chin, and the rami up to the joints in
+    // front of the ears.
+    let lower = arch_dist(p, 68.0, 60.0);
+    let chin = 1.0 + 1.5 * (1.0 - (p.x.abs() / 14.0).min(1.0));
+    if lower < 4.0 * chin && (-74.0..-55.0).contains(&p.z) && p.y > 28.0 {
+        return Some(if lower < 2.0 {
+            hu::DIPLOE
+        } else {
+            hu::CORTICAL
+        });
+    }
+    if seg_dist(m, Vec3::new(44.0, 34.0, -68.0), Vec3::new(50.0, 8.0, -26.0)) < 4.5
+        || seg_dist(
+            m,
+            Vec3::new(44.0, 40.0, -60.0),
+            Vec3::new(44.0, 36.0, -36.0),
+        ) < 3.5
+    {
+        return Some(hu::CORTICAL);
+    }
+    // Cervical vertebrae: bodies, arches round the spinal canal, spinous processes.
+    if p.z < -30.0 {
+        let phase = (p.z + 200.0) % 14.0;
+        let body = ((p.x / 11.0).powi(2) + ((p.y + 12.0) / 9.0).powi(2)).sqrt();
+        if body < 1.0 {
+            return Some(if phase < 10.5 {
+                hu::VERTEBRA * (0.75 + 0.25 * body)
+            } else {
+                hu::DISC
+            });
+        }
+        let canal = (p.x.hypot(p.y + 30.0) - 9.5).abs();
+        if phase < 8.0 && canal < 2.5 && p.y < -22.0 {
+            return Some(hu::VERTEBRA);
+        }
+        if phase < 8.0
+            && seg_dist(
+                p,
+                Vec3::new(0.0, -40.0, p.z),
+                Vec3::new(0.0, -52.0, p.z - 4.0),
+            ) < 3.0
+        {
+            return Some(hu::VERTEBRA);
+        }
+    }
+    // Carotid arteries rising through the neck into the skull base.
+    for s in [-1.0f32, 1.0] {
+        if seg_dist(
+            p,
+            Vec3::new(s * 18.0, 0.0, -100.0),
+            Vec3::new(s * 14.0, 2.0, -12.0),
+        ) < 3.2
+        {
+            return Some(hu::CONTRAST);
+        }
+    }
+    None
+}
+
+/// Distance (mm, in the axial plane) from `p` to a dental arch `y = front − x²/curve`.
+fn arch_dist(p: Vec3, front: f32, curve: f32) -> f32 {
+    let g = p.y - front + p.x * p.x / curve;
+    g.abs() / (1.0 + (2.0 * p.x / curve).powi(2)).sqrt()
+}
+
+/// A tooth at `p`, if any: 16 to a row, upper crowns above the bite at z = −47 mm,
+/// lower ones below it.
+fn teeth(p: Vec3) -> Option<f32> {
+    let (front, curve, z) = if p.z > -47.0 {
+        (70.0, 40.0, -47.0..-40.0)
+    } else {
+        (68.0, 60.0, -54.0..-47.0)
+    };
+    if !z.contains(&p.z) || p.x.abs() > 30.0 || arch_dist(p, front, curve) > 3.6 {
+        return None;
+    }
+    // Arc length along the arch from the middle, about; a gap every 7 mm.
+    let slope = 2.0 * p.x.abs() / curve;
+    let s = p.x.abs() * (1.0 + slope * slope / 3.0).sqrt();
+    let gap = ((s / 7.0).fract() - 0.5).abs() > 0.42;
+    (!gap).then_some(hu::ENAMEL)
+}
+
+/// Inside the cranium, above the skull base: brain with ventricles, vessels and a
+/// folded cortex under a layer of fluid.
+fn brain(p: Vec3, q: f32) -> f32 {
+    for side in [-1.0f32, 1.0] {
+        let c = Vec3::new(side * 7.0, -6.0, 30.0);
+        let r = Vec3::new(5.0, 26.0, 9.0 + 3.0 * ((p.y + 6.0) / 12.0).cos());
         if ell(p, c, r) < 1.0 {
             return hu::CSF;
         }
     }
     // Circle of Willis: a ring of vessels at the skull base, and middle cerebral branches.
-    let ring = ((p.x.powi(2) + (p.y - 6.0).powi(2)).sqrt() - 16.0).hypot(p.z - (-6.0));
+    let ring = ((p.x.powi(2) + (p.y + 2.0).powi(2)).sqrt() - 16.0).hypot(p.z + 8.0);
     if ring < 2.4 {
         return hu::CONTRAST;
     }
     for side in [-1.0f32, 1.0] {
         if seg_dist(
             p,
-            Vec3::new(side * 16.0, 6.0, -6.0),
-            Vec3::new(side * 48.0, 10.0, 22.0),
+            Vec3::new(side * 16.0, -2.0, -8.0),
+            Vec3::new(side * 48.0, 2.0, 20.0),
         ) < 1.8
         {
             return hu::CONTRAST;
         }
     }
     let folds = (p.x * 0.35).sin() * (p.y * 0.31).sin() * (p.z * 0.33).cos();
-    if q > 0.80 && folds > 0.25 {
+    if q > 0.82 && folds > 0.25 {
         return hu::CSF; // sulci near the surface
     }
-    if q > 0.84 {
+    if q > 0.86 {
         return hu::CSF;
     }
     hu::BRAIN + 6.0 * folds
 }
 
-/// Inside an orbit: the eyeball with its lens, fat around it.
-fn orbit(p: Vec3, side: f32) -> f32 {
-    let eye = Vec3::new(side * 28.0, 64.0, 10.0);
-    if ell(p, eye + Vec3::new(0.0, 10.0, 0.0), Vec3::new(5.0, 2.5, 5.0)) < 1.0 {
+/// Inside an orbit (`m`: mirrored onto the right side): the eyeball with its lens, fat
+/// behind it.
+fn orbit(m: Vec3) -> f32 {
+    let eye = ORBIT + Vec3::new(0.0, 6.0, 0.0);
+    if ell(m, eye + Vec3::new(0.0, 10.0, 0.0), Vec3::new(5.0, 2.5, 5.0)) < 1.0 {
         return hu::LENS;
     }
-    if (p - eye).length() < 12.5 {
+    if (m - eye).length() < 12.0 {
         return hu::EYE;
     }
     hu::FAT
@@ -296,6 +473,46 @@ mod tests {
         let bone = d.iter().filter(|&&x| x > 400).count();
         assert!(bone * 100 > d.len(), "bone fraction {bone}/{}", d.len());
         assert_eq!(h.counts.iter().sum::<u64>(), d.len() as u64);
+    }
+
+    #[test]
+    fn the_bone_is_shaped_like_a_skull() {
+        let bone = |x: f32, y: f32, z: f32| tissue(Vec3::new(x, y, z)) > 400.0;
+        for side in [-1.0, 1.0] {
+            // Open orbits: soft inside, a rim of bone round the opening.
+            assert!(
+                !bone(side * ORBIT.x, ORBIT.y, ORBIT.z),
+                "orbit {side} is closed"
+            );
+            let rim_plane = ORBIT.y + 12.0 - 0.2 * (ORBIT.x - 18.0);
+            assert!(
+                bone(side * ORBIT.x, rim_plane, ORBIT.z - 17.0),
+                "no rim under orbit {side}"
+            );
+        }
+        // Teeth (enamel) in the upper arch, with gaps between them.
+        let row: Vec<f32> = (0..60)
+            .map(|i| {
+                tissue(Vec3::new(
+                    i as f32 * 0.5,
+                    70.0 - (i as f32 * 0.5).powi(2) / 40.0,
+                    -44.0,
+                ))
+            })
+            .collect();
+        assert!(row.iter().any(|&v| v == hu::ENAMEL), "no upper teeth");
+        assert!(row.iter().any(|&v| v < 400.0), "the teeth have no gaps");
+        // The chin, the nasal aperture, the foramen magnum, the cranium's top.
+        assert!(bone(0.0, 68.0, -64.0), "no mandible at the chin");
+        assert!(
+            !bone(0.0 + 4.0, 70.0, -20.0),
+            "the nasal aperture is closed"
+        );
+        assert!(
+            !bone(0.0, -26.0, skull_base(Vec3::new(0.0, -26.0, 0.0)) - 2.0),
+            "no foramen magnum"
+        );
+        assert!(bone(10.0, -6.0, 20.0 + 64.0 * 0.97), "no cranium on top");
     }
 
     #[test]
