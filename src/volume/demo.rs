@@ -500,7 +500,7 @@ mod tests {
                 ))
             })
             .collect();
-        assert!(row.iter().any(|&v| v == hu::ENAMEL), "no upper teeth");
+        assert!(row.contains(&hu::ENAMEL), "no upper teeth");
         assert!(row.iter().any(|&v| v < 400.0), "the teeth have no gaps");
         // The chin, the nasal aperture, the foramen magnum, the cranium's top.
         assert!(bone(0.0, 68.0, -64.0), "no mandible at the chin");
