@@ -16,6 +16,8 @@ struct Params {
     grid: vec4<u32>,      // occupancy grid dims, block edge (voxels)
     mode: vec4<f32>,      // render mode (0 composite … 4 iso), u = norm · y + z
     ao: vec4<f32>,        // AO strength, AO on the ambient term only (0/1), AO read offset (voxels), A_open
+    reuse: vec4<u32>,     // x: balls holding every change since the image in the target (0: cast every pixel)
+    balls: array<vec4<f32>, 8>, // centre (mm), radius
 }
 
 // Pipeline-overridable constants: render::gpu::Variant builds one pipeline per
@@ -127,6 +129,24 @@ fn intersect_box(origin: vec3<f32>, dir: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>
     let t_near = min(a, b);
     let t_far = max(a, b);
     return vec2<f32>(max(max(t_near.x, t_near.y), t_near.z), min(min(t_far.x, t_far.y), t_far.z));
+}
+
+// Whether the ray over [t_enter, t_exit] meets a ball where something changed since the
+// image the target holds (render::reuse; CPU twin: reuse::meets_change). A ray that
+// meets none would cast that image's pixel again.
+fn meets_change(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32) -> bool {
+    if t_exit <= t_enter {
+        return false;
+    }
+    for (var i = 0u; i < p.reuse.x; i = i + 1u) {
+        let b = p.balls[i];
+        let t = clamp(dot(b.xyz - origin, dir), t_enter, t_exit);
+        let d = origin + dir * t - b.xyz;
+        if dot(d, d) <= b.w * b.w {
+            return true;
+        }
+    }
+    return false;
 }
 
 // Transfer function: linear interpolation between the two nearest LUT entries.
@@ -396,6 +416,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let hit = intersect_box(origin, dir, -half, half);
     let t_enter = max(hit.x, 0.0);
     let t_exit = hit.y;
+    if p.reuse.x > 0u && !meets_change(origin, dir, t_enter, t_exit) {
+        return;  // the target already holds this pixel
+    }
     let dt = p.step.x;
     var acc = vec4<f32>(0.0);
     // A surface inside the view (render::surface): the valid sampling path ends there.

@@ -28,7 +28,8 @@
 //!    (compositing with the AO factor on ambient and diffuse light, shadows from
 //!    `render::shadow`'s filtered light volume and surfaces; MIP, MinIP, average;
 //!    isosurface); [`render::offscreen`] does one frame for the CLI and tests on the
-//!    device it is given.
+//!    device it is given. [`render::reuse`] says where clip shapes that moved can change
+//!    an image, so a frame of the same view casts only the rays that pass there.
 //! 7. [`app`] is the eframe viewer: the same texels, stages and ray caster behind a UI
 //!    whose background jobs compute AO (shown first as an ambient-map preview),
 //!    modulation and light volumes; the demo opens carved, with AO. Its viewport image
@@ -36,7 +37,9 @@
 //!    last time) and CAO's per-frame update behind it are submitted in slices between
 //!    UI frames ([`gpu::pacer::Pacer`]), so the UI thread never waits for the GPU; a
 //!    dragged shape's images read CAO's `V_PAO` while its `V_AO` is updated (never a
-//!    `V_AO` of another pose), and at rest the image waits for the exact one.
+//!    `V_AO` of another pose), each starting as a copy of the last image of its view and
+//!    casting only the rays near what changed, and at rest the image waits for the
+//!    exact one.
 //!
 //! The command-line interface and the benchmarks live in the binary (`src/bin/volao`);
 //! [`process`] holds the few process-wide settings it makes at start.

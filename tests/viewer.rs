@@ -1113,6 +1113,14 @@ fn a_shape_dragged_away_and_back_while_cao_catches_up_comes_to_rest_exact() {
     h.state_mut().show_outlines = false;
     h.run_steps(2);
     settle(&mut h);
+    // The drag's images after the first, and the full-quality image at rest (from the
+    // one before the drag), cast only the rays near the shape and kept the rest.
+    let reused = h.state().viewport_images_reused();
+    eprintln!(
+        "{reused} of {} images reused an earlier one's pixels",
+        h.state().viewport_images()
+    );
+    assert!(reused >= 2, "{reused} images reused pixels");
     viewport_is_volao_render(&mut h, &dir.path().join("back.json"), "dragged_back_cao");
 }
 

@@ -418,6 +418,12 @@ impl Viewer {
         self.with_viewport(|v| v.frames_rendered).unwrap_or(0)
     }
 
+    /// Of those, images that cast only the rays near a change since an earlier image
+    /// of the same view and kept its other pixels ([`crate::render::reuse`]).
+    pub fn viewport_images_reused(&self) -> u64 {
+        self.with_viewport(|v| v.frames_reused).unwrap_or(0)
+    }
+
     /// Voxels CAO recomputed in its last frame, in percent (`None` without CAO).
     pub fn cao_percent_recomputed(&self) -> Option<f64> {
         self.derived
@@ -684,6 +690,7 @@ impl Viewer {
         let ready = self.load_job.is_none() && self.derived_ready() && self.viewport_current;
         let share = self.cao_percent_recomputed();
         let cao = share.is_some();
+        let (reused, rendered) = (self.viewport_images_reused(), self.viewport_images());
         let b = &mut self.scripted;
         if b.bench_start.is_none() {
             // Start once the first full-quality image with AO is on screen.
@@ -750,6 +757,10 @@ impl Viewer {
                 ui.len(),
                 between.len() as f64 / elapsed,
                 since.elapsed().as_secs_f64()
+            );
+            println!(
+                "images that cast only the rays near a change and kept the rest: {reused} of \
+                 {rendered}"
             );
             if cao {
                 let apart: Vec<f64> = updates

@@ -185,6 +185,7 @@ impl PendingShot {
                 &self.frame,
                 clip,
                 (&texture, (x0, y0)),
+                &[],
                 &mut encoder,
             )
             .map_err(|e| e.to_string())?;

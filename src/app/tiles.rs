@@ -165,7 +165,11 @@ pub(super) fn strip_texture<'a>(
                 "Viewport::strip",
                 size,
                 format,
-                wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+                // COPY_DST: a strip that re-casts only some pixels starts with the
+                // image's own (render::reuse).
+                wgpu::TextureUsages::STORAGE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC
+                    | wgpu::TextureUsages::COPY_DST,
             ));
             &strips[strips.len() - 1]
         }

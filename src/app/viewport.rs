@@ -17,6 +17,7 @@ use crate::gpu::pacer::Pacer;
 use crate::gpu::{Gpu, GpuError, shaders, validated};
 use crate::render::Frame;
 use crate::render::gpu::{GpuVolume, RayCaster, Variant};
+use crate::render::reuse::{Ball, ImageInputs};
 use std::time::Instant;
 
 mod paint;
@@ -42,6 +43,10 @@ pub struct ViewportGpu {
     sampler: wgpu::Sampler,
     /// The last complete image and what it shows.
     pub(super) shown: Option<Shown>,
+    /// The last complete image of another scale than [`Self::shown`] (the full-quality
+    /// one while a drag's interactive images are shown): the next image at its scale
+    /// re-casts only what changed since ([`crate::render::reuse`]).
+    pub(super) kept: Option<Shown>,
     /// The image being made.
     pub(super) work: Option<Work>,
     /// A texture to reuse for the next image.
@@ -79,6 +84,9 @@ pub struct ViewportGpu {
     pub last_error: Option<String>,
     /// Images completed so far (for `--exit-after-frames` and statistics).
     pub frames_rendered: u64,
+    /// Of those, images that started as a copy of an earlier one and cast only the rays
+    /// near a change ([`crate::render::reuse`]).
+    pub frames_reused: u64,
 }
 
 /// A texture the ray cast's strips are copied into, and its bind group for drawing.
@@ -135,6 +143,9 @@ pub(super) struct CaoWork {
 pub(super) struct Shown {
     pub(super) target: Target,
     pub(super) key: ViewKey,
+    /// What its pixels depend on beyond the view (`None`: they may depend on the shapes
+    /// anywhere, so no later image reuses them).
+    pub(super) inputs: Option<ImageInputs>,
 }
 
 impl ViewportGpu {
@@ -202,6 +213,7 @@ impl ViewportGpu {
                 layout,
                 sampler: crate::gpu::linear_sampler(device, "Viewport::sampler"),
                 shown: None,
+                kept: None,
                 work: None,
                 spare: None,
                 strips: Vec::new(),
@@ -219,6 +231,7 @@ impl ViewportGpu {
                 revision: 0,
                 last_error: None,
                 frames_rendered: 0,
+                frames_reused: 0,
             }
         })
     }
@@ -283,7 +296,10 @@ impl ViewportGpu {
             "Viewport::image",
             size,
             IMAGE_FORMAT,
-            wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::TEXTURE_BINDING,
+            // COPY_SRC: the next image starts as a copy of this one where it reuses it.
+            wgpu::TextureUsages::COPY_DST
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
         );
         let view = texture.create_view(&Default::default());
         let bind_group = crate::gpu::bind_group(
@@ -376,6 +392,17 @@ pub(super) struct Want {
 #[derive(Debug)]
 pub(super) struct Work {
     key: ViewKey,
+    /// What its pixels depend on beyond the view ([`Shown::inputs`]).
+    inputs: Option<ImageInputs>,
+    /// Where it changed since the image it started as a copy of: only pixels whose rays
+    /// meet these balls are cast (empty: every pixel).
+    changed: Vec<Ball>,
+    /// The rows to cast (the balls' rectangle on screen; every row without `changed`).
+    rows: std::ops::Range<u32>,
+    /// The columns whose pixels may be cast, for the pieces' estimates.
+    columns: std::ops::Range<u32>,
+    /// It started as a copy of an earlier image.
+    reused: bool,
     /// The image's own copy of CAO's clip maps, posed for its shapes
     /// ([`ClipMaps::posed`]), when CAO's maps are posed for another update's.
     clip: Option<ClipMaps>,
@@ -389,7 +416,8 @@ pub(super) struct Work {
 impl Work {
     /// Fraction of the rows submitted, in [0, 1].
     pub(super) fn fraction(&self) -> f32 {
-        (self.next_row as f32 / self.key.frame.height.max(1) as f32).min(1.0)
+        let done = self.next_row.saturating_sub(self.rows.start) as f32;
+        (done / self.rows.len().max(1) as f32).min(1.0)
     }
 }
 

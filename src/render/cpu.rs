@@ -353,15 +353,10 @@ impl Ray<'_> {
     }
 }
 
-/// One pixel, exactly as `main` in raycast.wgsl computes it (before 8-bit quantisation).
-pub fn pixel(
-    p: &RaycastParams,
-    vol: &CpuVolume,
-    lut: &Lut,
-    occupancy: &[u8],
-    px: u32,
-    py: u32,
-) -> Vec4 {
+/// The ray through the centre of pixel `(px, py)` (of the whole frame) as `main` in
+/// raycast.wgsl casts it: origin on the near plane, unit direction, and where it enters
+/// (not before its origin) and leaves the volume's box (`t_exit <= t_enter`: it misses).
+pub fn ray(p: &RaycastParams, px: u32, py: u32) -> (Vec3, Vec3, f32, f32) {
     let inv = Mat4::from_cols_array_2d(&p.inv_view_proj);
     let ndc_x = (px as f32 + 0.5) / p.image[0] as f32 * 2.0 - 1.0;
     let ndc_y = 1.0 - (py as f32 + 0.5) / p.image[1] as f32 * 2.0;
@@ -371,8 +366,25 @@ pub fn pixel(
     let dir = (far.truncate() / far.w - origin).normalize();
     let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
     let (t0, t1) = intersect_box(origin, dir, -half, half);
-    let t_enter = t0.max(0.0);
-    let t_exit = t1;
+    (origin, dir, t0.max(0.0), t1)
+}
+
+/// One pixel, exactly as `main` in raycast.wgsl computes it (before 8-bit quantisation);
+/// `None` where it would leave the target's pixel as it is (its ray meets none of the
+/// balls of [`super::reuse`]).
+pub fn pixel(
+    p: &RaycastParams,
+    vol: &CpuVolume,
+    lut: &Lut,
+    occupancy: &[u8],
+    px: u32,
+    py: u32,
+) -> Option<Vec4> {
+    let (origin, dir, t_enter, t_exit) = ray(p, px, py);
+    let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
+    if p.reuse[0] > 0 && !super::reuse::meets_change(p, origin, dir, t_enter, t_exit) {
+        return None;
+    }
     let dt = p.step[0];
     let mut acc = Vec4::ZERO;
     let hit = vol
@@ -509,7 +521,7 @@ pub fn pixel(
     if alpha > 0.0 {
         rgb /= alpha;
     }
-    rgb.clamp(Vec3::ZERO, Vec3::ONE).extend(alpha)
+    Some(rgb.clamp(Vec3::ZERO, Vec3::ONE).extend(alpha))
 }
 
 /// Renders a whole frame on the CPU. `occupancy` comes from [`BlockRanges::occupancy`].
@@ -520,14 +532,34 @@ pub fn render(
     occupancy: &[u8],
     frame: &Frame,
 ) -> Image {
-    let p = frame.params(texels, lut, 0, 0);
+    render_reusing(texels, vol, lut, occupancy, frame, None)
+}
+
+/// [`render`] over `previous`, an image of the same view whose inputs differ from this
+/// frame's only inside `balls` ([`super::reuse`]): the pixels whose rays meet none of them
+/// are `previous`'s, as `RayCaster::render_reusing` leaves them.
+pub fn render_reusing(
+    texels: &VolumeTexels,
+    vol: &CpuVolume,
+    lut: &Lut,
+    occupancy: &[u8],
+    frame: &Frame,
+    previous: Option<(&Image, &[super::reuse::Ball])>,
+) -> Image {
+    let mut p = frame.params(texels, lut, 0, 0);
+    if let Some((old, balls)) = previous {
+        if balls.is_empty() {
+            return old.clone();
+        }
+        super::reuse::set_balls(&mut p, balls);
+    }
     let (w, h) = (frame.width, frame.height);
     let pixels: Vec<[u8; 4]> = (0..w * h)
         .into_par_iter()
-        .map(|i| {
-            let c = pixel(&p, vol, lut, occupancy, i % w, i / w);
+        .map(|i| match pixel(&p, vol, lut, occupancy, i % w, i / w) {
             // Round to nearest, as the GPU's unorm8 store does.
-            c.to_array().map(|x| (x * 255.0).round() as u8)
+            Some(c) => c.to_array().map(|x| (x * 255.0).round() as u8),
+            None => previous.map_or([0; 4], |(old, _)| old.pixels[i as usize]),
         })
         .collect();
     Image {
@@ -537,7 +569,6 @@ pub fn render(
     }
 }
 
-/// Convenience: texels, CPU volume and occupancy for a TF in one go (tests, fallback).
 pub fn prepare(texels: &VolumeTexels, lut: &Lut) -> (CpuVolume, Vec<u8>) {
     let ranges = BlockRanges::new(texels);
     let occupancy = ranges.occupancy(texels, lut);

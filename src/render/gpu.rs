@@ -3,6 +3,7 @@
 //! a [`Frame`] is all that changes per frame.
 
 pub use super::gpu_volume::GpuVolume;
+use super::reuse::Ball;
 pub use super::variant::Variant;
 use super::{Frame, Image};
 use crate::gpu::{
@@ -116,6 +117,12 @@ impl RayCaster {
     /// it sits in the frame), with no readback, clipped by `clip`'s shapes. The viewer
     /// draws `target` through a paint callback and copies screenshot tiles out of it
     /// asynchronously; the pixels are those [`Self::render`] reads back for the same frame.
+    /// With `changed` balls ([`super::reuse`]) only pixels whose rays meet one are cast;
+    /// the others keep what `target` holds (empty: every pixel is cast).
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "one tile of one frame: every argument is a different input"
+    )]
     pub fn encode_tile(
         &self,
         (device, queue): (&wgpu::Device, &wgpu::Queue),
@@ -123,6 +130,7 @@ impl RayCaster {
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         (target, origin): (&wgpu::Texture, (u32, u32)),
+        changed: &[Ball],
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
         // The surfaces, rasterised for the whole frame (submitted before the caller's
@@ -143,7 +151,7 @@ impl RayCaster {
             frame,
             clip,
             layer.as_ref(),
-            (target, origin),
+            (target, origin, changed),
             encoder,
         )
     }
@@ -216,10 +224,11 @@ impl RayCaster {
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         layer: Option<&super::surface::SurfaceLayer>,
-        (target, origin): (&wgpu::Texture, (u32, u32)),
+        (target, origin, changed): (&wgpu::Texture, (u32, u32), &[Ball]),
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
-        let params = frame.params(&vol.texels, &vol.lut, origin.0, origin.1);
+        let mut params = frame.params(&vol.texels, &vol.lut, origin.0, origin.1);
+        super::reuse::set_balls(&mut params, changed);
         let pipeline = self.pipeline(device, variant)?;
         let clip_group = clip.map(|c| c.bind_group(device, &self.clip_layout));
         let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
@@ -356,12 +365,52 @@ impl RayCaster {
         clip: Option<&crate::clip::gpu::ClipMaps>,
         variant: Option<Variant>,
     ) -> Result<Image, GpuError> {
+        self.render_tiles(gpu, (vol, variant), frame, clip, None)
+    }
+
+    /// [`Self::render`] over `previous`, an image of the same view (camera, size,
+    /// settings, volume, transfer function, AO settings) whose inputs differ from this
+    /// frame's only inside `changed` ([`super::reuse::ImageInputs::changed`]): only the
+    /// pixels whose rays meet one of the balls are cast, within the balls' rectangle on
+    /// screen; the others are `previous`'s. The same image as [`Self::render`], bit for
+    /// bit (tests/reuse.rs).
+    pub fn render_reusing(
+        &self,
+        gpu: &Gpu,
+        vol: &GpuVolume,
+        frame: &Frame,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        (previous, changed): (&Image, &[Ball]),
+    ) -> Result<Image, GpuError> {
+        self.render_tiles(gpu, (vol, None), frame, clip, Some((previous, changed)))
+    }
+
+    fn render_tiles(
+        &self,
+        gpu: &Gpu,
+        (vol, variant): (&GpuVolume, Option<Variant>),
+        frame: &Frame,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        previous: Option<(&Image, &[Ball])>,
+    ) -> Result<Image, GpuError> {
         let device = &gpu.device;
         let (w, h) = (frame.width.max(1), frame.height.max(1));
-        let mut image = Image {
-            width: w,
-            height: h,
-            pixels: vec![[0; 4]; (w * h) as usize],
+        let (mut image, rect, changed) = match previous {
+            Some((old, changed)) if (old.width, old.height) == (w, h) => {
+                let rect = super::reuse::screen_rect(frame, &vol.texels, changed);
+                (old.clone(), rect, changed)
+            }
+            _ => {
+                let blank = Image {
+                    width: w,
+                    height: h,
+                    pixels: vec![[0; 4]; (w * h) as usize],
+                };
+                (blank, Some((0, 0, w, h)), &[][..])
+            }
+        };
+        let Some((rx0, ry0, rx1, ry1)) = rect else {
+            return Ok(image);
         };
         let layer = match vol.extras.surfaces.is_empty() {
             true => None,
@@ -372,12 +421,25 @@ impl RayCaster {
                 &vol.texels,
             )?),
         };
-        let mut y0 = 0;
-        while y0 < h {
-            let mut x0 = 0;
-            while x0 < w {
-                let (tw, th) = ((w - x0).min(TILE), (h - y0).min(TILE));
+        let mut y0 = ry0;
+        while y0 < ry1 {
+            let mut x0 = rx0;
+            while x0 < rx1 {
+                let (tw, th) = ((rx1 - x0).min(TILE), (ry1 - y0).min(TILE));
                 let target = self.tile_target(device, tw, th)?;
+                if !changed.is_empty() {
+                    // The pixels no ray meeting a change will overwrite.
+                    gpu.queue.write_texture(
+                        target.as_image_copy(),
+                        bytemuck::cast_slice(&image.crop(x0, y0, tw, th).pixels),
+                        wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(tw * 4),
+                            rows_per_image: Some(th),
+                        },
+                        crate::gpu::extent([tw, th, 1]),
+                    );
+                }
                 let (readback, row) =
                     texture_readback(device, "RayCaster::readback", [tw, th, 1], 4);
                 let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -391,7 +453,7 @@ impl RayCaster {
                     frame,
                     clip,
                     layer.as_ref(),
-                    (&target, (x0, y0)),
+                    (&target, (x0, y0), changed),
                     &mut encoder,
                 )?;
                 copy_texture_out(&mut encoder, &target, &readback, row, [tw, th, 1]);
@@ -429,7 +491,9 @@ impl RayCaster {
                 "RayCaster::tile",
                 (tw, th),
                 wgpu::TextureFormat::Rgba8Unorm,
-                wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+                wgpu::TextureUsages::STORAGE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC
+                    | wgpu::TextureUsages::COPY_DST,
             )
         })?;
         if tiles.len() >= BOUND_TARGETS - 1 {

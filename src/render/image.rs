@@ -51,6 +51,25 @@ impl Image {
         })
     }
 
+    /// The `width × height` pixels from `(x0, y0)` (clipped to the image).
+    pub fn crop(&self, x0: u32, y0: u32, width: u32, height: u32) -> Image {
+        let (w, h) = (
+            width.min(self.width.saturating_sub(x0)),
+            height.min(self.height.saturating_sub(y0)),
+        );
+        let pixels = (0..h)
+            .flat_map(|y| {
+                let row = ((y0 + y) * self.width + x0) as usize;
+                self.pixels[row..row + w as usize].iter().copied()
+            })
+            .collect();
+        Image {
+            width: w,
+            height: h,
+            pixels,
+        }
+    }
+
     /// Copies `tile` into this image at `(x0, y0)` (clipped to the image).
     pub fn blit(&mut self, tile: &Image, x0: u32, y0: u32) {
         for y in 0..tile.height.min(self.height.saturating_sub(y0)) {

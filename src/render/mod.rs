@@ -18,6 +18,7 @@ pub mod gpu;
 mod gpu_volume;
 pub mod image;
 pub mod offscreen;
+pub mod reuse;
 pub mod shadow;
 pub mod surface;
 pub mod texels;
@@ -300,9 +301,14 @@ pub struct RaycastParams {
     /// AO strength, AO on the ambient term only (0/1), AO read offset (voxels of the
     /// smallest spacing), `A_open` ([`AoReference::open_plane`] at that offset).
     pub ao: [f32; 4],
+    /// x: how many of `balls` hold every change since the image the target holds
+    /// ([`reuse`]): only pixels whose rays meet one are cast. 0: every pixel.
+    pub reuse: [u32; 4],
+    /// Centre (volume-centred mm) and radius of each ball of `reuse`.
+    pub balls: [[f32; 4]; reuse::MAX_BALLS],
 }
 
-const _: () = assert!(std::mem::size_of::<RaycastParams>() == 64 + 10 * 16);
+const _: () = assert!(std::mem::size_of::<RaycastParams>() == 64 + 11 * 16 + reuse::MAX_BALLS * 16);
 
 /// Everything a frame needs besides the volume and the LUT data.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -362,6 +368,8 @@ impl Frame {
                 ao_offset,
                 s.ao_reference.open_plane(ao_offset * min_spacing),
             ],
+            reuse: [0; 4],
+            balls: [[0.0; 4]; reuse::MAX_BALLS],
         }
     }
 }

@@ -21,6 +21,11 @@
 //! its transfer function or AO during a ray cast starts the strips again.
 
 use super::*;
+use crate::render::reuse::screen_rect;
+
+/// Pass label of strips that cast only the pixels near a change (their times say nothing
+/// of what a full strip costs: kept apart from [`STRIP`]'s rate and tile costs).
+const STRIP_REUSING: &str = "Viewport::strip_reusing";
 
 /// The share of a frame's slice kept for CAO's update once an image has been shown
 /// since it began, or it has waited [`CAO_PATIENCE`] behind the images (which come first
@@ -128,8 +133,14 @@ impl ViewportGpu {
                 // The view moves again: an interactive image comes sooner.
                 self.work = None;
             } else if w.key.revision != self.revision {
+                // The view changed under it: every pixel is cast again, none reused.
                 w.key.revision = self.revision;
+                w.changed.clear();
+                w.rows = 0..w.key.frame.height;
+                w.columns = 0..w.key.frame.width;
                 w.next_row = 0;
+                w.next_column = 0;
+                w.reused = false;
             }
         }
         // CAO's update for the shapes wanted, unless its V_AO is exact for them already.
@@ -181,6 +192,9 @@ impl ViewportGpu {
                 self.tile_costs.record(size, step, tile, took.as_secs_f64());
             }
         }
+        // A strip that cast only the pixels near a change says nothing of what its
+        // part of the picture costs.
+        pacer.timed(STRIP_REUSING);
         if self.work.is_none() && self.should_start(&key) {
             match self.start(gpu, key, want) {
                 Ok(errors) => out.clip_errors.extend(errors),
@@ -218,14 +232,25 @@ impl ViewportGpu {
             Ok(Advanced::Done) => {
                 if let Some(w) = self.work.take() {
                     out.completed = Some(w.started.elapsed().as_secs_f64());
+                    let reused = w.reused;
                     if let Some(old) = self.shown.take() {
-                        self.spare = Some(old.target);
+                        if old.key.scale != w.key.scale {
+                            // Kept for the next image at its scale (the full-quality one
+                            // after a drag), which then casts only what changed.
+                            if let Some(older) = self.kept.replace(old) {
+                                self.spare = Some(older.target);
+                            }
+                        } else {
+                            self.spare = Some(old.target);
+                        }
                     }
                     self.shown = Some(Shown {
                         target: w.target,
                         key: w.key,
+                        inputs: w.inputs,
                     });
                     self.frames_rendered += 1;
+                    self.frames_reused += u64::from(reused);
                     self.last_error = None;
                     if let Some(c) = &mut self.cao_work {
                         c.imaged = true;
@@ -379,16 +404,67 @@ impl ViewportGpu {
             vol.read_stand_in(!key.ao_exact);
         }
         let (width, height) = (key.frame.width, key.frame.height);
+        let inputs = self.inputs_of(&key, own_clip.as_ref());
         let target = self.target(&gpu.device, (width, height));
+        // An image of the same view shown or kept: this one starts as its copy and casts
+        // only the pixels whose rays pass near a change (render::reuse).
+        let base = [self.shown.as_ref(), self.kept.as_ref()]
+            .into_iter()
+            .flatten()
+            .find(|s| {
+                s.key.frame == key.frame
+                    && s.key.revision == key.revision
+                    && s.key.scale == key.scale
+            });
+        let reusable = self
+            .volume
+            .as_ref()
+            .is_some_and(|v| crate::render::reuse::reusable(&key.frame, &v.extras));
+        let mut changed = Vec::new();
+        let (mut rows, mut columns) = (0..height, 0..width);
+        let mut reused = false;
+        if let (Some(base), Some(new), true) = (base, &inputs, reusable)
+            && let Some(old) = &base.inputs
+            && let Some(vol) = &self.volume
+        {
+            changed = old.changed(new);
+            (rows, columns) = match screen_rect(&key.frame, &vol.texels, &changed) {
+                Some((x0, y0, x1, y1)) => (y0..y1, x0..x1),
+                None => (0..0, 0..0),
+            };
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            encoder.copy_texture_to_texture(
+                base.target.texture.as_image_copy(),
+                target.texture.as_image_copy(),
+                crate::gpu::extent([width, height, 1]),
+            );
+            gpu.queue.submit([encoder.finish()]);
+            reused = true;
+        }
         self.work = Some(Work {
             key,
+            inputs,
+            next_row: rows.start,
+            changed,
+            rows,
+            columns,
+            reused,
             clip: own_clip,
             target,
-            next_row: 0,
             next_column: 0,
             started: Instant::now(),
         });
         Ok(errors)
+    }
+
+    /// What an image of `key` clipped by `own_clip` (else the viewport's maps) depends on
+    /// beyond its view ([`ImageInputs`]); `None` when it may depend on the shapes anywhere.
+    fn inputs_of(&self, key: &ViewKey, own_clip: Option<&ClipMaps>) -> Option<ImageInputs> {
+        let vol = self.volume.as_ref()?;
+        let maps = own_clip.or(self.clip_maps());
+        let reach = self.cao.as_ref().map_or(0.0, |c| c.reach_mm(&vol.texels));
+        let cut_ao = self.cao.is_some() && key.ao_exact;
+        ImageInputs::of(maps, &key.clip, &vol.texels, reach, cut_ao)
     }
 
     /// Submits what fits of the image being made, in the pieces [`next_tile`] cuts (each
@@ -461,7 +537,18 @@ impl ViewportGpu {
         );
         let pixel_rate = pacer.rate(STRIP).unwrap_or_else(|| first_pixel_rate(gpu));
         let step = w.key.frame.settings.step_voxels;
+        let reusing = !w.changed.is_empty();
+        let columns = w.columns.clone();
         let estimate = |t: Tile| {
+            // Reusing, only the columns near a change may be cast.
+            let t = match reusing {
+                true => {
+                    let x0 = t.0.clamp(columns.start, columns.end);
+                    let x1 = (t.0 + t.2).clamp(columns.start, columns.end);
+                    (x0, t.1, x1 - x0, t.3)
+                }
+                false => t,
+            };
             tile_costs
                 .estimate((width, height), step, t)
                 .unwrap_or_else(|| {
@@ -469,7 +556,7 @@ impl ViewportGpu {
                 })
         };
         let mut submitted = false;
-        while w.next_row < height {
+        while w.next_row < w.rows.end {
             let (x0, y0) = (w.next_column, w.next_row);
             let idle = pacer.has_time() && !pacer.busy();
             let slice = (pacer.slice.as_secs_f64(), pacer.left());
@@ -484,18 +571,35 @@ impl ViewportGpu {
             let tag = *next_strip_tag;
             *next_strip_tag += 1;
             let (cw, ch) = (tw.min(width - tx), th.min(height - ty));
+            let label = if reusing { STRIP_REUSING } else { STRIP };
             pacer.submit_estimated(
                 gpu,
-                (STRIP, (cw * ch) as u64),
+                (label, (cw * ch) as u64),
                 (estimate(tile), tag),
                 || -> Result<(), crate::gpu::GpuError> {
                     let mut encoder = gpu.device.create_command_encoder(&Default::default());
+                    let extent = crate::gpu::extent([cw, ch, 1]);
+                    if reusing {
+                        // The strip starts as the image's pixels: those whose rays meet
+                        // no change are not cast.
+                        encoder.copy_texture_to_texture(
+                            wgpu::TexelCopyTextureInfo {
+                                texture: &w.target.texture,
+                                mip_level: 0,
+                                origin: wgpu::Origin3d { x: tx, y: ty, z: 0 },
+                                aspect: wgpu::TextureAspect::All,
+                            },
+                            strip.as_image_copy(),
+                            extent,
+                        );
+                    }
                     ray_caster.encode_tile(
                         (&gpu.device, &gpu.queue),
                         vol,
                         &w.key.frame,
                         clip,
                         (strip, (tx, ty)),
+                        &w.changed,
                         &mut encoder,
                     )?;
                     encoder.copy_texture_to_texture(
@@ -506,18 +610,16 @@ impl ViewportGpu {
                             origin: wgpu::Origin3d { x: tx, y: ty, z: 0 },
                             aspect: wgpu::TextureAspect::All,
                         },
-                        wgpu::Extent3d {
-                            width: cw,
-                            height: ch,
-                            depth_or_array_layers: 1,
-                        },
+                        extent,
                     );
                     gpu.queue.submit([encoder.finish()]);
                     Ok(())
                 },
             )?;
             submitted = true;
-            tiles_in_flight.push((tag, (width, height), step, tile));
+            if !reusing {
+                tiles_in_flight.push((tag, (width, height), step, tile));
+            }
             if tiles_in_flight.len() > 4 * RECENT_TILES {
                 // Never timed (the pacer was replaced): forgotten.
                 tiles_in_flight.remove(0);

@@ -19,6 +19,7 @@ use volao::ao::rays::RaySet;
 use volao::ao::sparse::Coverage;
 use volao::clip::{ClipShape, Shape};
 use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::reuse::{ImageInputs, reusable};
 use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Frame, RenderSettings, Shading};
 use volao::tf::{Preset, TransferFunction};
@@ -186,6 +187,14 @@ struct Timed {
     list_bytes: u64,
     render_seconds: f64,
     pixels: Vec<[u8; 4]>,
+    /// The image and what it shows, for the next frame to reuse.
+    shown: Option<Shown>,
+}
+
+/// An image and the inputs it was rendered with.
+struct Shown {
+    image: volao::render::Image,
+    inputs: ImageInputs,
 }
 
 impl Timed {
@@ -240,8 +249,16 @@ impl Bench {
         )?)
     }
 
-    /// One frame: AO update and render.
-    fn frame(&mut self, cao: &mut CaoGpu, shapes: &[ClipShape], mode: CaoMode) -> Result<Timed> {
+    /// One frame: AO update and render. With `previous` (the sparse method's last
+    /// image), only the pixels whose rays pass near a shape that moved are cast
+    /// (`volao::render::reuse`).
+    fn frame(
+        &mut self,
+        cao: &mut CaoGpu,
+        shapes: &[ClipShape],
+        mode: CaoMode,
+        previous: Option<&Shown>,
+    ) -> Result<Timed> {
         let reach = cao.reach_mm(&self.vol.texels);
         let stats = cao.update(
             &self.gpu,
@@ -252,14 +269,31 @@ impl Bench {
             mode,
         )?;
         self.vol.set_ambient_occlusion_view(cao.ao_view());
+        let inputs = ImageInputs::of(Some(&cao.clip), shapes, &self.vol.texels, reach, true);
         let start = Instant::now();
-        let image = self
-            .rc
-            .render(&self.gpu, &self.vol, &self.frame, Some(&cao.clip))?;
+        let image = match (previous, &inputs) {
+            (Some(old), Some(new)) if reusable(&self.frame, &self.vol.extras) => {
+                let changed = old.inputs.changed(new);
+                self.rc.render_reusing(
+                    &self.gpu,
+                    &self.vol,
+                    &self.frame,
+                    Some(&cao.clip),
+                    (&old.image, &changed),
+                )?
+            }
+            _ => self
+                .rc
+                .render(&self.gpu, &self.vol, &self.frame, Some(&cao.clip))?,
+        };
         Ok(Timed {
             stats,
             list_bytes: cao.list_bytes(),
             render_seconds: start.elapsed().as_secs_f64(),
+            shown: inputs.map(|inputs| Shown {
+                image: image.clone(),
+                inputs,
+            }),
             pixels: image.pixels,
         })
     }
@@ -342,11 +376,15 @@ fn compare(
     shapes_at: &dyn Fn(usize) -> Vec<ClipShape>,
 ) -> Result<Vec<Run>> {
     let mut caos = Vec::new();
+    // The sparse method's last image, which its next frame reuses where nothing changed.
+    let mut last = Vec::new();
     for &m in methods {
         let mut cao = b.cao(set, samples, m.coverage())?;
-        // A warm-up frame compiles pipelines and builds the clip maps.
-        b.frame(&mut cao, &shapes_at(0), m.mode())?;
+        // A warm-up frame compiles pipelines and builds the clip maps, at a pose other
+        // than the first frame's (every timed frame moves the shape).
+        let t = b.frame(&mut cao, &shapes_at(frames), m.mode(), None)?;
         caos.push(cao);
+        last.push(t.shown.filter(|_| m == Method::Cao));
     }
     let mut runs: Vec<Run> = methods
         .iter()
@@ -359,8 +397,11 @@ fn compare(
     for k in 0..frames {
         let shapes = shapes_at(k);
         let mut reference: Option<Vec<[u8; 4]>> = None;
-        for (run, cao) in runs.iter_mut().zip(&mut caos) {
-            let t = b.frame(cao, &shapes, run.method.mode())?;
+        for ((run, cao), last) in runs.iter_mut().zip(&mut caos).zip(&mut last) {
+            let mut t = b.frame(cao, &shapes, run.method.mode(), last.as_ref())?;
+            if run.method == Method::Cao {
+                *last = t.shown.take();
+            }
             match &reference {
                 None => reference = Some(t.pixels.clone()),
                 Some(r) => run.differing_pixels += differing(r, &t.pixels),
