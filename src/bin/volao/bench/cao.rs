@@ -2,9 +2,13 @@
 //! with a clip shape moving along a fixed path every frame, for three methods measured
 //! side by side in one run:
 //!
-//! - `lao-every-frame`: the paper's baseline, dense (every voxel and sample);
-//! - `cao-paper`: the paper's CAO, dense step IV and V;
-//! - `cao`: sparse CAO (issue #15, `volao::ao::sparse`), what rendering runs.
+//! - `lao-every-frame`: the paper's baseline, dense (every voxel and sample), every
+//!   pixel cast;
+//! - `cao-paper`: the paper's CAO, dense step IV and V, every pixel cast;
+//! - `cao`: sparse CAO (issue #15, `volao::ao::sparse`), what rendering runs, whose
+//!   render casts only the rays near the shape's last and new pose and keeps its last
+//!   image's other pixels (`volao::render::reuse`), as the viewer does while a shape is
+//!   dragged.
 //!
 //! Every frame of every method is rendered and compared with `lao-every-frame`'s image
 //! of the same pose: `differing_pixels` must be 0.
@@ -664,7 +668,9 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
         }
         println!(
             "Times are wall-clock per stage with a wait after each, on {adapter}; differing pixels \
-             compare every frame's image with lao-every-frame's."
+             compare every frame's image with lao-every-frame's. The sparse cao's render casts \
+             only the rays near the shape's last and new pose and keeps its last image's other \
+             pixels; the others cast every pixel."
         );
     }
     Ok(())
