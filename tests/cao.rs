@@ -1123,3 +1123,21 @@ fn maps_posed_for_an_image_clip_like_the_maps_moved_there() {
             .is_none()
     );
 }
+
+/// Read back, the voxels no sample reads hold 1 in `V_PAO` and `V_AO` (what `volao ao
+/// --visible-only` writes), never the GPU's `UNREAD` marker (2), including the voxels
+/// the per-voxel test leaves out in bricks a frame did not visit.
+#[test]
+fn unread_voxels_read_back_as_one() {
+    let mut s = scene(&engine(), Preset::CaoSingleColor, RaySet::Six);
+    let reach = s.reach();
+    let shape = ClipShape::new(Shape::Sphere, Vec3::new(-12.0, -12.0, 0.0), 5.0);
+    s.update(std::slice::from_ref(&shape), reach);
+    let readable = s.cao.bricks().readable_mask(&s.vol.texels);
+    assert!(readable.contains(&false), "the test needs unread voxels");
+    for which in [CaoVolume::Precomputed, CaoVolume::Ambient] {
+        let values = s.cao.read(&s.gpu, which).unwrap_or_else(|e| panic!("{e}"));
+        let above = values.iter().filter(|&&v| v > 1.0).count();
+        assert_eq!(above, 0, "{which:?}: {above} voxels above 1");
+    }
+}

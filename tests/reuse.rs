@@ -279,8 +279,7 @@ fn the_cut_changes_the_ao_only_within_its_reach_and_up_to_it() {
     let bound = reach.ao.radius - read_margin;
     let mut farthest = 0.0f32;
     for (i, (x, y)) in ao.iter().zip(&pao).enumerate() {
-        // 2 in V_PAO: a voxel no sample weights (V_AO holds 1 there).
-        if x.to_bits() == y.to_bits() || *y == 2.0 {
+        if x.to_bits() == y.to_bits() {
             continue;
         }
         let v = volao::volume::voxel_of(i, texels.dims);

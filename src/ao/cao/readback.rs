@@ -5,9 +5,15 @@ use super::{CaoGpu, CaoMode, CaoVolume, Lists};
 use crate::ao::sparse::{NEAR, brick_voxels};
 use crate::gpu::{Gpu, GpuError, read_texture_f32};
 
+/// What `cao_lao.wgsl` writes into `V_PAO` where no sample reads the voxel (above any
+/// ambient factor).
+const UNREAD: f32 = 2.0;
+
 impl CaoGpu {
-    /// Reads one of the CAO volumes back, x fastest. `V_PAO` and `V_AO` hold 1 in the
-    /// bricks the ray caster cannot read (which were never computed).
+    /// Reads one of the CAO volumes back, x fastest. `V_PAO` and `V_AO` hold 1 where the
+    /// ray caster cannot read them: in unreadable bricks (never computed) and at the
+    /// voxels `V_PAO`'s per-voxel test left out (`UNREAD` on the GPU, which `V_AO` holds
+    /// too until a frame's step IV visits the voxel and writes 1).
     pub fn read(&self, gpu: &Gpu, which: CaoVolume) -> Result<Vec<f32>, GpuError> {
         let t = match which {
             CaoVolume::ClippedOpacity => &self.v_o,
@@ -24,6 +30,11 @@ impl CaoGpu {
                 if !self.bricks.voxel_readable(crate::volume::voxel_of(i, dims)) {
                     *v = 1.0;
                 }
+            }
+        }
+        if matches!(which, CaoVolume::Precomputed | CaoVolume::Ambient) {
+            for v in values.iter_mut().filter(|v| **v == UNREAD) {
+                *v = 1.0;
             }
         }
         Ok(values)
