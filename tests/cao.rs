@@ -108,16 +108,7 @@ fn scene_with(v: &Volume, preset: Preset, set: RaySet, samples: u32) -> Scene {
     let cao = make(sparse);
     let dense = make(Coverage::Dense.bricks(&vol.texels, vol.ranges(), &tf));
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
-    let frame = Frame {
-        camera: Camera {
-            azimuth_deg: 30.0,
-            elevation_deg: 20.0,
-            ..Camera::default()
-        },
-        settings,
-        width: 48,
-        height: 48,
-    };
+    let frame = common::oblique_frame(settings, 48);
     Scene {
         gpu,
         vol,

@@ -16,7 +16,7 @@ use volao::ao::sparse::Coverage;
 use volao::clip::{ClipShape, Shape};
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::reuse::{Ball, ImageInputs, set_balls};
-use volao::render::{Camera, Frame, Image, RenderSettings};
+use volao::render::{Frame, Image, RenderSettings};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions};
 
@@ -52,16 +52,7 @@ fn scene() -> Scene {
     let cao = CaoGpu::new(&gpu, &vol, &tf, &rays, SAMPLES, 32, bricks, &|_, _| {})
         .unwrap_or_else(|e| panic!("{e}"));
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
-    let frame = Frame {
-        camera: Camera {
-            azimuth_deg: 30.0,
-            elevation_deg: 20.0,
-            ..Camera::default()
-        },
-        settings,
-        width: 96,
-        height: 96,
-    };
+    let frame = common::oblique_frame(settings, 96);
     Scene {
         gpu,
         vol,

@@ -575,7 +575,7 @@ impl Bricks {
 
 /// A shape's clipping camera back in volume mm: map → volume, and the centre of the
 /// mesh's bounding sphere (the pose is rigid: the radius stays).
-fn bound_in_volume(s: &ShapeUniform, camera: &ClipCamera) -> (Mat4, Vec3) {
+pub(crate) fn bound_in_volume(s: &ShapeUniform, camera: &ClipCamera) -> (Mat4, Vec3) {
     let to_volume = Mat4::from_cols_array_2d(&s.volume_to_map).inverse();
     let centre = to_volume.transform_point3(camera.project(camera.bound_centre));
     (to_volume, centre)

@@ -15,10 +15,10 @@
 
 use crate::clip::ClipShape;
 use crate::clip::camera::ClipCamera;
-use crate::clip::gpu::{ClipMaps, ClipUniforms};
+use crate::clip::gpu::ClipMaps;
 use crate::render::texels::VolumeTexels;
 use crate::render::{AO_READ_REACH, Frame, RaycastParams};
-use glam::{Mat4, Vec3, Vec4};
+use glam::{Vec3, Vec4};
 
 /// The most balls a frame's uniforms hold; more are merged into one that holds them all.
 pub const MAX_BALLS: usize = 8;
@@ -107,7 +107,10 @@ impl ImageInputs {
         let min_spacing = spacing.min_element();
         let mut out = Vec::with_capacity(n);
         for (i, (shape, camera)) in shapes.iter().zip(&cameras).enumerate() {
-            let centre = shape_centre(u, i, camera)?;
+            let (_, centre) = crate::ao::sparse::bound_in_volume(&u.shapes[i], camera);
+            if !centre.is_finite() {
+                return None;
+            }
             let clip = camera.bound_radius + 3.0 / camera.pixels_per_mm + diag;
             let ao = clip + diag + reach_mm + AO_READ_REACH as f32 * min_spacing + diag;
             if !(clip.is_finite() && ao.is_finite()) {
@@ -165,14 +168,6 @@ impl ImageInputs {
         }
         kept
     }
-}
-
-/// A shape's bounding-sphere centre in volume mm (its clipping camera's, posed by the
-/// maps' uniforms: map → volume).
-fn shape_centre(u: &ClipUniforms, i: usize, camera: &ClipCamera) -> Option<Vec3> {
-    let to_volume = Mat4::from_cols_array_2d(&u.shapes[i].volume_to_map).inverse();
-    let c = to_volume.transform_point3(camera.project(camera.bound_centre));
-    c.is_finite().then_some(c)
 }
 
 /// Whether a frame may keep pixels of an earlier one: skipping on (`--no-skipping`

@@ -272,3 +272,17 @@ pub fn twin(
     );
     Ok(())
 }
+
+/// The tests' oblique view (azimuth 30°, elevation 20°) at `size`² with `settings`.
+pub fn oblique_frame(settings: volao::render::RenderSettings, size: u32) -> volao::render::Frame {
+    volao::render::Frame {
+        camera: volao::render::Camera {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            ..Default::default()
+        },
+        settings,
+        width: size,
+        height: size,
+    }
+}
