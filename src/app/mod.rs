@@ -156,8 +156,8 @@ const VIEWPORT_SLICE: std::time::Duration = std::time::Duration::from_millis(25)
 const JOB_SLICE: std::time::Duration = std::time::Duration::from_millis(60);
 
 /// CAO updates `--bench-clip-drag` waits for while dragging (besides its images), so that
-/// it can say how far apart they came.
-const MIN_CAO_UPDATES: usize = 3;
+/// it can say how far apart they came (four intervals: one slow one moves the mean less).
+const MIN_CAO_UPDATES: usize = 5;
 
 /// Where a scripted run stands: `--exit-after-frames` and `--bench-clip-drag`.
 #[derive(Debug, Default)]
@@ -698,6 +698,7 @@ impl Viewer {
                 return;
             }
             b.bench_start = Some((now, b.images.len() as u64));
+            self.pacer.take_spent();
             b.bench_last = Some(now);
         }
         let Some((since, images_before)) = b.bench_start else {
@@ -762,15 +763,40 @@ impl Viewer {
                 "images that cast only the rays near a change and kept the rest: {reused} of \
                  {rendered}"
             );
+            // Where the GPU's time went: each label's pieces, timed alone.
+            let wall = since.elapsed().as_secs_f64();
+            let mut spent: Vec<_> = self.pacer.take_spent().into_iter().collect();
+            spent.sort_by_key(|s| std::cmp::Reverse(s.1.1));
+            let busy: f64 = spent.iter().map(|s| s.1.1.as_secs_f64()).sum();
+            let parts: Vec<String> = spent
+                .iter()
+                .map(|(label, (n, t))| {
+                    let t = t.as_secs_f64();
+                    format!(
+                        "{label} {:.1} % ({n} pieces, {:.1} ms each)",
+                        100.0 * t / wall,
+                        1e3 * t / *n as f64
+                    )
+                })
+                .collect();
+            println!(
+                "GPU time while dragging, pieces timed alone: {}; the rest ({:.1} %) the UI's drawing and idle",
+                parts.join(", "),
+                100.0 * (1.0 - busy / wall).max(0.0)
+            );
             if cao {
-                let apart: Vec<f64> = updates
+                let mut apart: Vec<f64> = updates
                     .windows(2)
                     .map(|w| (w[1] - w[0]).as_secs_f64() * 1e3)
                     .collect();
+                apart.sort_by(f64::total_cmp);
                 println!(
-                    "CAO updates while dragging: {}, mean {:.0} ms apart",
+                    "CAO updates while dragging: {}, mean {:.0} ms apart (median {:.0}, {:.0} to {:.0})",
                     updates.len(),
-                    apart.iter().sum::<f64>() / apart.len().max(1) as f64
+                    apart.iter().sum::<f64>() / apart.len().max(1) as f64,
+                    apart.get(apart.len() / 2).copied().unwrap_or(0.0),
+                    apart.first().copied().unwrap_or(0.0),
+                    apart.last().copied().unwrap_or(0.0),
                 );
             }
             self.scripted.exit_requested = true;

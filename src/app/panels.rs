@@ -637,6 +637,11 @@ fn interactive_controls(ui: &mut egui::Ui, q: &mut super::viewport::Interactive)
         egui::Slider::new(&mut q.target_fps, 1.0..=60.0)
             .logarithmic(true)
             .text("Target rate (images/s)"),
+    )
+    .on_hover_text(
+        "Images per second wanted while the view moves. While Contextual AO catches up \
+         with a dragged clip shape, images come at most this often and the rest of the \
+         GPU's time goes to the AO.",
     );
     ui.add_enabled(
         q.on,

@@ -472,6 +472,7 @@ impl Viewer {
             },
             scale: 1,
             step_factor: 1.0,
+            image_interval: None,
         })
     }
 
@@ -497,6 +498,9 @@ impl Viewer {
         if moving && self.interactive.on {
             want.scale = self.interactive_scale(&want.frame);
             want.step_factor = self.interactive.step_factor;
+            want.image_interval = Some(std::time::Duration::from_secs_f32(
+                1.0 / self.interactive.target_fps.max(0.5),
+            ));
         }
         let gpu = Arc::clone(&self.gpu);
         let pacer = &mut self.pacer;

@@ -87,6 +87,8 @@ pub struct ViewportGpu {
     /// Of those, images that started as a copy of an earlier one and cast only the rays
     /// near a change ([`crate::render::reuse`]).
     pub frames_reused: u64,
+    /// When the last image was started.
+    pub(super) last_start: Option<Instant>,
 }
 
 /// A texture the ray cast's strips are copied into, and its bind group for drawing.
@@ -232,6 +234,7 @@ impl ViewportGpu {
                 last_error: None,
                 frames_rendered: 0,
                 frames_reused: 0,
+                last_start: None,
             }
         })
     }
@@ -386,6 +389,10 @@ pub(super) struct Want {
     pub scale: u32,
     /// The step of a reduced image (`scale` > 1), in steps of the full-quality one.
     pub step_factor: f32,
+    /// While CAO's update is on its way, interactive images start at most this often
+    /// (the interactive target rate): the GPU's other time goes to the update, which
+    /// brings the cut's AO. `None`: as often as they can.
+    pub image_interval: Option<std::time::Duration>,
 }
 
 /// An image being made.

@@ -118,6 +118,9 @@ pub struct Pacer {
     /// Tagged pieces that finished since [`Pacer::timed`] last took them: label, tag and
     /// the time each took alone.
     timed: Vec<(String, u64, Duration)>,
+    /// GPU time of the pieces that finished, per pass label, since [`Self::take_spent`]
+    /// last took it (where a benchmark says the GPU's time went).
+    spent: HashMap<String, (u64, Duration)>,
     poller: Poller,
 }
 
@@ -130,6 +133,7 @@ impl Pacer {
             measured: HashMap::new(),
             queued: Vec::new(),
             timed: Vec::new(),
+            spent: HashMap::new(),
             poller: Poller::start(gpu.device.clone()),
         }
     }
@@ -157,6 +161,8 @@ impl Pacer {
             }
         });
         for (label, units, took) in finished {
+            let spent = self.spent.entry(label.clone()).or_default();
+            *spent = (spent.0 + 1, spent.1 + took);
             self.learn(&label, units, took);
         }
         self.left = self.slice.as_secs_f64() - outstanding;
@@ -178,6 +184,12 @@ impl Pacer {
             None => fresh,
         };
         self.rates.insert(label.to_owned(), rate.max(1.0));
+    }
+
+    /// Per pass label, the pieces that finished and the GPU time they took alone since
+    /// the last call (what is left of the wall-clock time is the UI's drawing and idle).
+    pub fn take_spent(&mut self) -> HashMap<String, (u64, Duration)> {
+        std::mem::take(&mut self.spent)
     }
 
     /// Whether any of this frame's slice is left.

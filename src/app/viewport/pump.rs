@@ -195,7 +195,7 @@ impl ViewportGpu {
         // A strip that cast only the pixels near a change says nothing of what its
         // part of the picture costs.
         pacer.timed(STRIP_REUSING);
-        if self.work.is_none() && self.should_start(&key) {
+        if self.work.is_none() && self.should_start(&key, want.image_interval) {
             match self.start(gpu, key, want) {
                 Ok(errors) => out.clip_errors.extend(errors),
                 Err(e) => {
@@ -273,10 +273,12 @@ impl ViewportGpu {
     }
 
     /// Whether to start an image for `key` now. Not while CAO's update is on its way,
-    /// unless the view moves (an interactive image, `key.scale > 1`) and the image drawn
-    /// shows another view: dragging a shape, the clipping follows the mouse with
-    /// `V_PAO` for AO; at rest the image waits for the exact AO.
-    fn should_start(&self, key: &ViewKey) -> bool {
+    /// unless the view moves (an interactive image, `key.scale > 1`), the image drawn
+    /// shows another view and the last image started at least `interval` ago: dragging
+    /// a shape, the clipping follows the mouse at the interactive target rate with
+    /// `V_PAO` for AO, and the rest of the GPU's time goes to the update; at rest the
+    /// image waits for the exact AO.
+    fn should_start(&self, key: &ViewKey, interval: Option<std::time::Duration>) -> bool {
         let shown = self.shown.as_ref().map(|s| &s.key);
         if shown == Some(key) {
             return false;
@@ -284,7 +286,9 @@ impl ViewportGpu {
         if self.cao_work.is_none() {
             return true;
         }
-        key.scale > 1 && !shown.is_some_and(|s| s.same_view(key))
+        key.scale > 1
+            && !shown.is_some_and(|s| s.same_view(key))
+            && due(self.last_start, interval, Instant::now())
     }
 
     /// Begins CAO's update for `clip` (posing the clip maps for it). Returns the shapes
@@ -441,6 +445,7 @@ impl ViewportGpu {
             gpu.queue.submit([encoder.finish()]);
             reused = true;
         }
+        self.last_start = Some(Instant::now());
         self.work = Some(Work {
             key,
             inputs,
@@ -635,6 +640,15 @@ impl ViewportGpu {
     }
 }
 
+/// Whether an image may start at `now` if the last one started at `last` and images
+/// start at most every `interval`.
+fn due(last: Option<Instant>, interval: Option<std::time::Duration>, now: Instant) -> bool {
+    match (last, interval) {
+        (Some(last), Some(interval)) => now.saturating_duration_since(last) >= interval,
+        _ => true,
+    }
+}
+
 /// How far [`ViewportGpu::advance`] moved the image being made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Advanced {
@@ -645,4 +659,22 @@ enum Advanced {
     Starved,
     /// All of it is submitted.
     Done,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    #[test]
+    fn images_start_at_most_once_per_interval() {
+        let t0 = Instant::now();
+        let tenth = Some(Duration::from_millis(100));
+        // Nothing started yet, or no limit: now.
+        assert!(due(None, tenth, t0));
+        assert!(due(Some(t0), None, t0));
+        // Within the interval: not yet; once it has passed: yes.
+        assert!(!due(Some(t0), tenth, t0 + Duration::from_millis(99)));
+        assert!(due(Some(t0), tenth, t0 + Duration::from_millis(100)));
+    }
 }
