@@ -15,7 +15,9 @@ struct Params {
     half: vec4<f32>,      // half the volume's extent (mm)
     lut_map: vec4<f32>,   // a, b, entries − 1
     mode: vec4<u32>,      // full (0/1), V_PAO marks unreadable voxels (0/1), clipped → 1 (0/1),
-                          // unused
+                          // per-ray test (0 off, else 1 + balls)
+    lao: vec4<f32>,       // LAO rays K, samples M, step (mm), the longest ray step (mm)
+    balls: array<vec4<f32>, 8>,  // per carving shape: centre (volume mm), radius (ao::sparse::Bricks::cut_balls)
 }
 
 // Marks in V_AO between steps IV and V (an ambient factor is never negative).
@@ -31,6 +33,7 @@ const CLIPPED: f32 = -2.0;
 @group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>; // recompute, clipped
 @group(0) @binding(7) var<storage, read> bricks: array<u32>;
 @group(0) @binding(8) var v_pao: texture_3d<f32>;
+@group(0) @binding(9) var<storage, read> rays: array<vec4<f32>>;  // LAO rays: xyz direction, w weight
 
 // TF_o: the transfer function's opacity (for a 1 mm step) of the voxel itself.
 fn voxel_opacity(v: vec3<u32>) -> f32 {
@@ -145,6 +148,7 @@ fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
         dilated = u32(t.y);
     }
     var ao = RECOMPUTE;
+
     // With p.mode.y, V_PAO holds UNREAD (cao_lao.wgsl) where the ray caster cannot read
     // the voxel: V_AO = 1 there, what step V would write, and step V leaves it alone.
     let pao = textureLoad(v_pao, v, 0).r;
@@ -157,7 +161,7 @@ fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
         atomicAdd(&affected, 1u);
         if unread {
             ao = 1.0;
-        } else if !reached {
+        } else if !reached || !rays_meet_cut(position_mm(v, vec3<f32>(0.0))) {
             ao = min(pao, 1.0);
         }
     } else {
@@ -169,4 +173,48 @@ fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
     let at = vec3<i32>(v);
     textureStore(v_o, at, vec4<f32>(opacity, 0.0, 0.0, 1.0));
     textureStore(v_ao, at, vec4<f32>(ao, 0.0, 0.0, 1.0));
+}
+
+// Step IV's per-ray test (ao::sparse::Bricks::cut_balls): whether some LAO ray of the
+// voxel centred at `x` (mm) may read a texel whose V_o a cut changed, that is, whether
+// the segment its fetched samples lie on (1 ..= M − 1 steps from x) meets a carving
+// shape's ball. A voxel whose rays all miss reads V_o = α along every ray, as V_PAO's
+// ray cast did, and keeps V_PAO's bits. True with the test off (p.mode.w = 0).
+fn rays_meet_cut(x: vec3<f32>) -> bool {
+    if p.mode.w == 0u {
+        return true;
+    }
+    let balls = p.mode.w - 1u;
+    let last = p.lao.y - 1.0;
+    if last < 1.0 {
+        return false;  // no sample is fetched
+    }
+    // A ball that holds every ray's first sample (p.lao.w: the longest step, mm) is met;
+    // one that none of the samples can reach is not.
+    var far = 0u;
+    for (var b = 0u; b < balls; b = b + 1u) {
+        let d = distance(x, p.balls[b].xyz);
+        if d + p.lao.w <= p.balls[b].w {
+            return true;
+        }
+        if d - last * p.lao.w > p.balls[b].w {
+            far = far | (1u << b);
+        }
+    }
+    for (var k = 0u; k < u32(p.lao.x); k = k + 1u) {
+        let step = rays[k].xyz * p.lao.z;
+        let along = max(dot(step, step), 1e-12);
+        for (var b = 0u; b < balls; b = b + 1u) {
+            if (far & (1u << b)) != 0u {
+                continue;
+            }
+            let ball = p.balls[b];
+            let t = clamp(dot(ball.xyz - x, step) / along, 1.0, last);
+            let off = x + step * t - ball.xyz;
+            if dot(off, off) <= ball.w * ball.w {
+                return true;
+            }
+        }
+    }
+    return false;
 }

@@ -1132,3 +1132,38 @@ fn unread_voxels_read_back_as_one() {
         assert_eq!(above, 0, "{which:?}: {above} voxels above 1");
     }
 }
+
+/// Step IV's per-ray test (ao::sparse::Bricks::cut_balls): a voxel in a cut's dilation
+/// none of whose LAO rays passes near the cut keeps `V_PAO`'s bits instead of being ray
+/// cast. It leaves voxels out (fewer ray cast than with balls so wide that every ray
+/// meets one), the frame stays exact, and without its margin (the texel's cell and the
+/// sample's trilinear read, 1.5 voxel diagonals) it does not.
+#[test]
+fn rays_that_miss_every_cut_keep_v_pao() {
+    let v = engine();
+    let mut s = scene(&v, Preset::CaoSingleColor, RaySet::Six);
+    let reach = s.reach();
+    let diag = Vec3::from(s.vol.texels.spacing).length();
+    let margin = s.cao.ray_test_margin_mm;
+    assert_eq!(margin, volao::ao::sparse::RAY_TEST_MARGIN * diag);
+    let shape = ClipShape::new(Shape::Sphere, Vec3::new(2.0, -3.0, 1.0), 9.0);
+    let shapes = std::slice::from_ref(&shape);
+    let tested = s.update(shapes, reach).recomputed;
+    s.cao.ray_test_margin_mm = 1e4;
+    let every_ray_meets = s.update(shapes, reach).recomputed;
+    assert!(
+        tested * 10 < every_ray_meets * 9,
+        "the per-ray test should leave out voxels: {tested} ray cast against {every_ray_meets}"
+    );
+    s.cao.ray_test_margin_mm = margin;
+    assert_exact(&mut s, shapes, reach, "the per-ray test");
+    let (full, _, _) = s.frame(shapes, CaoMode::Full, reach);
+    s.cao.ray_test_margin_mm = 0.0;
+    let (tight, _, _) = s.frame(shapes, CaoMode::Selective, reach);
+    let readable = readable_voxels(&s.vol.texels, &s.tf);
+    let wrong = differing_readable(&tight, &full, &readable);
+    assert!(
+        wrong > 0,
+        "the per-ray test without its margin must break exactness"
+    );
+}

@@ -517,8 +517,8 @@ impl Bricks {
         let mut changed = Vec::new();
         let shapes = clip.counts[0] as usize;
         for (s, camera) in clip.shapes[..shapes].iter().zip(cameras) {
-            let (_, centre) = bound_in_volume(s, camera);
-            let radius = camera.bound_radius + 3.0 / camera.pixels_per_mm + spacing.length();
+            let (centre, carved) = carved_ball(s, camera);
+            let radius = carved + spacing.length();
             if !(centre.is_finite() && radius.is_finite()) {
                 return vec![true; self.count()];
             }
@@ -566,6 +566,37 @@ impl Bricks {
         reached
     }
 
+    /// The balls of step IV's per-ray test (`rays_meet_cut` in `cao_clip.wgsl`), in
+    /// volume mm: per carving shape, where a sample can read a texel whose clipped
+    /// opacity its cut changed — its [`carved_ball`] widened by `margin_mm` (normally
+    /// [`RAY_TEST_MARGIN`] voxel diagonals: half a diagonal for the clip samples of the
+    /// texel's cell, one for the sample's trilinear read), 1 % and 0.01 mm more against
+    /// rounding. An LAO ray none of whose samples lies in one reads `V_o = α` throughout,
+    /// as `V_PAO`'s did, so its voxel keeps `V_PAO`'s bits. `None` where every affected
+    /// voxel must be ray cast: skipping off, a probing shape, cameras that do not match
+    /// the shapes, or more than [`MAX_CUT_BALLS`] shapes.
+    pub fn cut_balls(
+        &self,
+        clip: &ClipUniforms,
+        cameras: &[ClipCamera],
+        margin_mm: f32,
+    ) -> Option<Vec<[f32; 4]>> {
+        let shapes = clip.counts[0] as usize;
+        if self.every_brick(clip, cameras) || shapes > MAX_CUT_BALLS {
+            return None;
+        }
+        clip.shapes[..shapes]
+            .iter()
+            .zip(cameras)
+            .map(|(s, camera)| {
+                let (centre, carved) = carved_ball(s, camera);
+                let radius = (carved + margin_mm) * 1.01 + 0.01;
+                (centre.is_finite() && radius.is_finite())
+                    .then_some([centre.x, centre.y, centre.z, radius])
+            })
+            .collect()
+    }
+
     /// Whether the shape tests leave every brick in: skipping off, a probing shape
     /// (it clips everything outside it) or cameras that do not match the shapes.
     fn every_brick(&self, clip: &ClipUniforms, cameras: &[ClipCamera]) -> bool {
@@ -573,9 +604,25 @@ impl Bricks {
     }
 }
 
+/// The most carving shapes step IV's per-ray test takes ([`Bricks::cut_balls`]); with
+/// more, every affected voxel is ray cast.
+pub const MAX_CUT_BALLS: usize = 8;
+
+/// The margin of step IV's per-ray test beyond where a shape can carve, in voxel
+/// diagonals ([`Bricks::cut_balls`]).
+pub const RAY_TEST_MARGIN: f32 = 1.5;
+
+/// Where shape `s`'s maps can say "carved", in volume mm: the centre of the mesh's
+/// bounding sphere and its radius with three map pixels for the maps' quantisation
+/// ([`ClipCamera::reach_bound`] without the dilation).
+pub(crate) fn carved_ball(s: &ShapeUniform, camera: &ClipCamera) -> (Vec3, f32) {
+    let (_, centre) = bound_in_volume(s, camera);
+    (centre, camera.bound_radius + 3.0 / camera.pixels_per_mm)
+}
+
 /// A shape's clipping camera back in volume mm: map → volume, and the centre of the
 /// mesh's bounding sphere (the pose is rigid: the radius stays).
-pub(crate) fn bound_in_volume(s: &ShapeUniform, camera: &ClipCamera) -> (Mat4, Vec3) {
+fn bound_in_volume(s: &ShapeUniform, camera: &ClipCamera) -> (Mat4, Vec3) {
     let to_volume = Mat4::from_cols_array_2d(&s.volume_to_map).inverse();
     let centre = to_volume.transform_point3(camera.project(camera.bound_centre));
     (to_volume, centre)

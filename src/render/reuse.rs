@@ -107,11 +107,11 @@ impl ImageInputs {
         let min_spacing = spacing.min_element();
         let mut out = Vec::with_capacity(n);
         for (i, (shape, camera)) in shapes.iter().zip(&cameras).enumerate() {
-            let (_, centre) = crate::ao::sparse::bound_in_volume(&u.shapes[i], camera);
+            let (centre, carved) = crate::ao::sparse::carved_ball(&u.shapes[i], camera);
             if !centre.is_finite() {
                 return None;
             }
-            let clip = camera.bound_radius + 3.0 / camera.pixels_per_mm + diag;
+            let clip = carved + diag;
             let ao = clip + diag + reach_mm + AO_READ_REACH as f32 * min_spacing + diag;
             if !(clip.is_finite() && ao.is_finite()) {
                 return None;

@@ -28,7 +28,7 @@
 //! unreadable voxels keep whatever they hold, which no pixel uses. [`Bricks::dense`] turns all of it off.
 
 use super::lao::{Rays, STEP_MM, lao_lut};
-use super::sparse::{Bricks, VoxelTest};
+use super::sparse::{Bricks, MAX_CUT_BALLS, RAY_TEST_MARGIN, VoxelTest};
 use crate::clip::ClipShape;
 use crate::clip::gpu::{ClipMaps, ClipUpdate};
 use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
@@ -111,12 +111,22 @@ struct ClipParams {
     /// frame whose step V runs over the voxel list, which holds only voxels to ray
     /// cast), 0: they are marked CLIPPED.
     clipped_one: u32,
-    /// Unused. Whether a voxel's centre alone decides if a dilation reaches it is the
-    /// pipeline's (`CENTRE_REACH` in `cao_clip.wgsl`: with skipping).
-    _pad2: u32,
+    /// Step IV's per-ray test (`rays_meet_cut` in `cao_clip.wgsl`): 0 off (every
+    /// affected voxel is ray cast: the baseline, `--no-skipping`, a probing shape),
+    /// else 1 + the number of balls in [`Self::balls`]. Whether a voxel's centre alone
+    /// decides if a dilation reaches it is the pipeline's (`CENTRE_REACH`).
+    ray_test: u32,
+    /// LAO rays K, samples M, the step (mm) and the longest ray's step (mm), for the
+    /// per-ray test.
+    rays: f32,
+    samples: f32,
+    step_mm: f32,
+    longest_step_mm: f32,
+    /// Centre (volume mm) and radius of each carving shape's ball ([`Bricks::cut_balls`]).
+    balls: [[f32; 4]; MAX_CUT_BALLS],
 }
 
-const _: () = assert!(std::mem::size_of::<ClipParams>() == 96);
+const _: () = assert!(std::mem::size_of::<ClipParams>() == 240);
 
 chunk_fields!(ClipParams);
 
@@ -249,6 +259,11 @@ pub struct CaoGpu {
     /// `V_PAO` is made: with skipping it marks the voxels the ray caster cannot read
     /// (`UNREAD` in `cao_lao.wgsl`), and each frame's step IV resolves them.
     pao_ready: bool,
+    /// This frame's balls for step IV's per-ray test (`None`: off).
+    cut_balls: Option<Vec<[f32; 4]>>,
+    /// The per-ray test's margin beyond where a shape can carve (mm): normally
+    /// [`RAY_TEST_MARGIN`] voxel diagonals; tests narrow it to show exactness rests on it.
+    pub ray_test_margin_mm: f32,
 }
 
 /// What one frame's steps IV and V visit.
@@ -315,7 +330,16 @@ impl CaoGpu {
             full: 0,
             unread_marked: 0,
             clipped_one: 0,
-            _pad2: 0,
+            ray_test: 0,
+            rays: rays.directions.len() as f32,
+            samples: samples.max(1) as f32,
+            step_mm: STEP_MM,
+            longest_step_mm: rays
+                .directions
+                .iter()
+                .map(|d| d.length() * STEP_MM)
+                .fold(0.0, f32::max),
+            balls: [[0.0; 4]; MAX_CUT_BALLS],
         };
         let lao_params = LaoParams {
             bricks: BrickChunk::of(dims),
@@ -370,6 +394,7 @@ impl CaoGpu {
                     counters.as_entire_binding(),
                     lists.as_entire_binding(),
                     wgpu::BindingResource::TextureView(&views[1]),
+                    ray_buffer.as_entire_binding(),
                 ],
             );
             let lao_group = |frame: bool| {
@@ -421,6 +446,8 @@ impl CaoGpu {
                 bricks,
                 precompute_seconds: 0.0,
                 pao_ready: false,
+                cut_balls: None,
+                ray_test_margin_mm: RAY_TEST_MARGIN * Vec3::from(texels.spacing).length(),
             }
         })?;
         let start = Instant::now();
@@ -529,6 +556,12 @@ impl CaoGpu {
             },
         };
         self.was_near = near;
+        self.cut_balls = match mode {
+            CaoMode::Selective => {
+                b.cut_balls(&self.clip.uniforms, &cameras, self.ray_test_margin_mm)
+            }
+            CaoMode::Full => None,
+        };
         let listing = self.lists_voxels(mode);
         if listing {
             self.reserve_list(gpu, &lists)?;
@@ -640,6 +673,10 @@ impl CaoGpu {
         params.full = u32::from(mode == CaoMode::Full);
         params.unread_marked = u32::from(self.pao_ready);
         params.clipped_one = u32::from(self.lists_voxels(mode));
+        if let (CaoMode::Selective, Some(balls)) = (mode, &self.cut_balls) {
+            params.ray_test = 1 + balls.len() as u32;
+            params.balls[..balls.len()].copy_from_slice(balls);
+        }
         (chunks, params)
     }
 

@@ -53,6 +53,7 @@ impl ClipPipelines {
                 entry::storage(6, c, false),
                 entry::storage(7, c, true),
                 entry::texture(8, c, D3, Some(false)),
+                entry::storage(9, c, true),
             ],
         });
         let group_1 = crate::clip::gpu::bind_group_layout(device);

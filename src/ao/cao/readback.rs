@@ -55,6 +55,7 @@ impl CaoGpu {
         let (chunks, mut params) = self.iv_dispatch(lists, CaoMode::Selective);
         params.unread_marked = 0;
         params.clipped_one = 0;
+        params.ray_test = 0;
         // The dense pipeline: any of a voxel's clip samples in a dilation marks it.
         let dense = self.pipelines.clip_dense();
         self.step_iv_with(
