@@ -20,8 +20,9 @@
 //!    (LAO, CAO, positional AO, filter maps, cone tracing; each a GPU pass with its CPU
 //!    twin beside it) and the GPU or the twin; [`ao::sparse`] says which bricks and voxels LAO
 //!    and CAO visit (those the ray caster can read, near a shape) and which 4³ cells
-//!    their rays step over; a CAO frame lists the voxels its step IV marked and ray
-//!    casts only those ([`ao::cao`]'s voxel list). [`clip`] turns clip shapes into the depth and dilation maps CAO and the ray
+//!    their rays step over; a CAO frame's step IV marks a voxel only if one of its rays
+//!    passes near a cut, lists the voxels it marked and ray casts only those
+//!    ([`ao::cao`]'s voxel list). [`clip`] turns clip shapes into the depth and dilation maps CAO and the ray
 //!    caster clip with.
 //! 6. [`render`] ray-casts the volume into an image in one of its [`render::RenderMode`]s,
 //!    stepping over 4³ blocks that cannot change the pixel
@@ -38,8 +39,8 @@
 //!    UI frames ([`gpu::pacer::Pacer`]), so the UI thread never waits for the GPU; a
 //!    dragged shape's images read CAO's `V_PAO` while its `V_AO` is updated (never a
 //!    `V_AO` of another pose), each starting as a copy of the last image of its view and
-//!    casting only the rays near what changed, and at rest the image waits for the
-//!    exact one.
+//!    casting only the rays near what changed, at most at the interactive target rate
+//!    while the update runs, and at rest the image waits for the exact one.
 //!
 //! The command-line interface and the benchmarks live in the binary (`src/bin/volao`);
 //! [`process`] holds the few process-wide settings it makes at start.
