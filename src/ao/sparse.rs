@@ -568,10 +568,10 @@ impl Bricks {
 
     /// The balls of step IV's per-ray test (`rays_meet_cut` in `cao_clip.wgsl`), in
     /// volume mm: per carving shape, where a sample can read a texel whose clipped
-    /// opacity its cut changed — its [`carved_ball`] widened by `margin_mm` (normally
-    /// [`RAY_TEST_MARGIN`] voxel diagonals: half a diagonal for the clip samples of the
-    /// texel's cell, one for the sample's trilinear read), 1 % and 0.01 mm more against
-    /// rounding. An LAO ray none of whose samples lies in one reads `V_o = α` throughout,
+    /// opacity its cut changed — its carved ball (`carved_ball`) widened by
+    /// `margin_mm` (normally [`RAY_TEST_MARGIN`] voxel diagonals: half a diagonal for
+    /// the clip samples of the texel's cell, one for the sample's trilinear read), 1 %
+    /// and 0.01 mm more against rounding. An LAO ray none of whose samples lies in one reads `V_o = α` throughout,
     /// as `V_PAO`'s did, so its voxel keeps `V_PAO`'s bits. `None` where every affected
     /// voxel must be ray cast: skipping off, a probing shape, cameras that do not match
     /// the shapes, or more than [`MAX_CUT_BALLS`] shapes.
