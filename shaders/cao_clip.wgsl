@@ -124,7 +124,8 @@ fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
     var visible = 0u;
     var dilated = 0u;
     // The centre and the 8 corners of the voxel.
-    let t = clip_classify(position_mm(v, vec3<f32>(0.0)));
+    let centre = position_mm(v, vec3<f32>(0.0));
+    let t = clip_classify(centre);
     visible = visible + u32(t.x);
     dilated = dilated + u32(t.y);
     for (var k = 0u; k < 8u; k = k + 1u) {
@@ -148,7 +149,6 @@ fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
         dilated = u32(t.y);
     }
     var ao = RECOMPUTE;
-
     // With p.mode.y, V_PAO holds UNREAD (cao_lao.wgsl) where the ray caster cannot read
     // the voxel: V_AO = 1 there, what step V would write, and step V leaves it alone.
     let pao = textureLoad(v_pao, v, 0).r;
@@ -161,7 +161,7 @@ fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
         atomicAdd(&affected, 1u);
         if unread {
             ao = 1.0;
-        } else if !reached || !rays_meet_cut(position_mm(v, vec3<f32>(0.0))) {
+        } else if !reached || !rays_meet_cut(centre) {
             ao = min(pao, 1.0);
         }
     } else {

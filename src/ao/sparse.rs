@@ -571,10 +571,11 @@ impl Bricks {
     /// opacity its cut changed — its carved ball (`carved_ball`) widened by
     /// `margin_mm` (normally [`RAY_TEST_MARGIN`] voxel diagonals: half a diagonal for
     /// the clip samples of the texel's cell, one for the sample's trilinear read), 1 %
-    /// and 0.01 mm more against rounding. An LAO ray none of whose samples lies in one reads `V_o = α` throughout,
-    /// as `V_PAO`'s did, so its voxel keeps `V_PAO`'s bits. `None` where every affected
-    /// voxel must be ray cast: skipping off, a probing shape, cameras that do not match
-    /// the shapes, or more than [`MAX_CUT_BALLS`] shapes.
+    /// and 0.01 mm more against rounding. An LAO ray none of whose samples lies in one
+    /// reads `V_o = α` throughout, as `V_PAO`'s did, so its voxel keeps `V_PAO`'s bits.
+    /// `None` where every affected voxel must be ray cast: skipping off, a probing
+    /// shape, cameras that do not match the shapes, or more than [`MAX_CUT_BALLS`]
+    /// shapes.
     pub fn cut_balls(
         &self,
         clip: &ClipUniforms,

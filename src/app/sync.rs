@@ -498,9 +498,9 @@ impl Viewer {
         if moving && self.interactive.on {
             want.scale = self.interactive_scale(&want.frame);
             want.step_factor = self.interactive.step_factor;
-            want.image_interval = Some(std::time::Duration::from_secs_f32(
-                1.0 / self.interactive.target_fps.max(0.5),
-            ));
+            want.image_interval = Some(std::time::Duration::from_secs_f64(seconds_per_image(
+                self.interactive.target_fps,
+            )));
         }
         let gpu = Arc::clone(&self.gpu);
         let pacer = &mut self.pacer;
@@ -561,6 +561,12 @@ impl Viewer {
     }
 }
 
+/// Seconds between images at the interactive target rate (at least half an image a
+/// second).
+fn seconds_per_image(target_fps: f32) -> f64 {
+    1.0 / target_fps.max(0.5) as f64
+}
+
 /// The smallest reduction (1 to [`MAX_INTERACTIVE_SCALE`] on each axis) at which an
 /// image of `pixels` is ray-cast at `target_fps` at the measured `rate` (pixels per
 /// second); 2 before anything was measured.
@@ -568,7 +574,7 @@ fn interactive_scale(pixels: f64, rate: Option<f64>, target_fps: f32) -> u32 {
     let Some(rate) = rate.filter(|r| *r > 0.0) else {
         return 2;
     };
-    let budget = 1.0 / target_fps.max(0.5) as f64;
+    let budget = seconds_per_image(target_fps);
     (1..=MAX_INTERACTIVE_SCALE)
         .find(|&s| pixels / (s * s) as f64 / rate <= budget)
         .unwrap_or(MAX_INTERACTIVE_SCALE)

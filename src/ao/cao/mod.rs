@@ -673,7 +673,8 @@ impl CaoGpu {
         params.full = u32::from(mode == CaoMode::Full);
         params.unread_marked = u32::from(self.pao_ready);
         params.clipped_one = u32::from(self.lists_voxels(mode));
-        if let (CaoMode::Selective, Some(balls)) = (mode, &self.cut_balls) {
+        // None in the baseline (`begin` asks for balls only in CAO mode).
+        if let Some(balls) = &self.cut_balls {
             params.ray_test = 1 + balls.len() as u32;
             params.balls[..balls.len()].copy_from_slice(balls);
         }
