@@ -43,6 +43,7 @@ pub use document::{
     load_document,
 };
 pub use screenshot::ShotSize;
+use scripted::Scripted;
 
 use crate::gpu::Gpu;
 use crate::render::Frame;
@@ -134,7 +135,7 @@ pub struct Viewer {
     motion: Motion,
     /// The viewport shows the full-quality image of what the document says.
     viewport_current: bool,
-    scripted: scripted::Scripted,
+    scripted: Scripted,
     /// Set when a `--screenshot` could not be written (the process exits non-zero).
     pub exit_error: Arc<Mutex<Option<String>>>,
     last_title: String,
@@ -292,7 +293,7 @@ impl Viewer {
                 changed_at: Instant::now(),
             },
             viewport_current: false,
-            scripted: scripted::Scripted::default(),
+            scripted: Scripted::default(),
             exit_error: Arc::default(),
             last_title: String::new(),
             options: options.clone(),

@@ -18,7 +18,7 @@ pub(super) struct Scripted {
     pub(super) ready_frames: u64,
     pub(super) exit_requested: bool,
     /// UI frame intervals (s) of `--bench-clip-drag`, while dragging.
-    pub(super) bench: Vec<(f64, f64)>,
+    pub(super) bench: Vec<f64>,
     pub(super) bench_last: Option<Instant>,
     /// When the counted frames began and the viewport's images by then.
     pub(super) bench_start: Option<(Instant, u64)>,
@@ -66,7 +66,7 @@ impl Viewer {
             return;
         };
         if let Some(last) = b.bench_last {
-            b.bench.push(((now - last).as_secs_f64(), 0.0));
+            b.bench.push((now - last).as_secs_f64());
         }
         b.bench_last = Some(now);
         // The first two images after the drag starts were begun before it: not counted.
@@ -92,7 +92,7 @@ impl Viewer {
                 .collect();
             between.sort_by(f64::total_cmp);
             let mean = between.iter().sum::<f64>() / between.len() as f64;
-            let mut ui: Vec<f64> = b.bench.iter().map(|x| x.0).collect();
+            let mut ui = b.bench.clone();
             ui.sort_by(f64::total_cmp);
             let pct = |p: usize| ui[((ui.len() * p).div_ceil(100)).clamp(1, ui.len()) - 1];
             let elapsed = (images[images.len() - 1] - images[0])
