@@ -43,7 +43,6 @@ pub use document::{
     load_document,
 };
 pub use screenshot::ShotSize;
-use scripted::Scripted;
 
 use crate::gpu::Gpu;
 use crate::render::Frame;
@@ -135,7 +134,7 @@ pub struct Viewer {
     motion: Motion,
     /// The viewport shows the full-quality image of what the document says.
     viewport_current: bool,
-    scripted: Scripted,
+    scripted: scripted::Scripted,
     /// Set when a `--screenshot` could not be written (the process exits non-zero).
     pub exit_error: Arc<Mutex<Option<String>>>,
     last_title: String,
@@ -293,7 +292,7 @@ impl Viewer {
                 changed_at: Instant::now(),
             },
             viewport_current: false,
-            scripted: Scripted::default(),
+            scripted: scripted::Scripted::default(),
             exit_error: Arc::default(),
             last_title: String::new(),
             options: options.clone(),
