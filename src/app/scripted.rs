@@ -38,17 +38,12 @@ impl Viewer {
             return;
         };
         ctx.request_repaint();
-        if let Some(e) = self.ao_error() {
-            let message = format!("ambient occlusion failed: {e}");
-            self.fail_exit(message);
-        }
-        if self.scripted.exit_requested {
-            self.quit_confirmed = true;
-            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        self.fail_on_ao_error();
+        if self.close_if_requested(ctx) {
             return;
         }
         let now = Instant::now();
-        let ready = self.load_job.is_none() && self.derived_ready() && self.viewport_current;
+        let ready = self.shows_ready_view();
         let share = self.cao_percent_recomputed();
         let cao = share.is_some();
         let (reused, rendered) = (self.viewport_images_reused(), self.viewport_images());
@@ -177,27 +172,20 @@ impl Viewer {
             self.fail_exit("--bench-clip-drag needs a scene with a clip shape".into());
         }
     }
+
     /// `--exit-after-frames N [--screenshot PNG]`: count frames that show the volume with
     /// its AO, then take the screenshot and close once it is written.
     pub(super) fn exit_logic(&mut self, ctx: &egui::Context) {
-        if self.scripted.exit_requested {
-            self.quit_confirmed = true;
-            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        if self.close_if_requested(ctx) {
             return;
         }
         let Some(n) = self.options.exit_after_frames else {
             return;
         };
-        if let Some(e) = self.ao_error() {
-            let message = format!("ambient occlusion failed: {e}");
-            self.fail_exit(message);
+        if self.fail_on_ao_error() {
             return;
         }
-        if self.doc.is_some()
-            && self.load_job.is_none()
-            && self.derived_ready()
-            && self.viewport_current
-        {
+        if self.shows_ready_view() {
             self.scripted.ready_frames += 1;
         }
         if self.scripted.ready_frames < n {
@@ -211,5 +199,33 @@ impl Viewer {
             }
         }
         ctx.request_repaint();
+    }
+
+    /// Closes the window once a scripted run has finished (or failed); true if it did.
+    fn close_if_requested(&mut self, ctx: &egui::Context) -> bool {
+        if self.scripted.exit_requested {
+            self.quit_confirmed = true;
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+        self.scripted.exit_requested
+    }
+
+    /// Ends a scripted run with the AO's error, if the AO failed; true if it did.
+    fn fail_on_ao_error(&mut self) -> bool {
+        let Some(e) = self.ao_error() else {
+            return false;
+        };
+        let message = format!("ambient occlusion failed: {e}");
+        self.fail_exit(message);
+        true
+    }
+
+    /// The volume, the volumes derived from it and the full-quality image of what the
+    /// document says are on screen.
+    fn shows_ready_view(&self) -> bool {
+        self.doc.is_some()
+            && self.load_job.is_none()
+            && self.derived_ready()
+            && self.viewport_current
     }
 }

@@ -445,7 +445,8 @@ impl ViewportGpu {
             gpu.queue.submit([encoder.finish()]);
             reused = true;
         }
-        self.last_start = Some(Instant::now());
+        let started = Instant::now();
+        self.last_start = Some(started);
         self.work = Some(Work {
             key,
             inputs,
@@ -457,7 +458,7 @@ impl ViewportGpu {
             clip: own_clip,
             target,
             next_column: 0,
-            started: Instant::now(),
+            started,
         });
         Ok(errors)
     }
