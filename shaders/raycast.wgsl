@@ -6,7 +6,7 @@
 
 struct Params {
     inv_view_proj: mat4x4<f32>,
-    box_half: vec4<f32>,
+    box_half: vec4<f32>,  // w: the gradient volume's scale M (0: none bound)
     background: vec4<f32>,
     shading: vec4<f32>,   // ambient k, specular, shininess, phong on
     voxel_uvw: vec4<f32>, // one voxel in uvw per axis, smallest spacing (mm)
@@ -35,6 +35,9 @@ override CLIP: bool = true;       // clip.counts.x may be > 0
 override MODULATION: bool = true; // an opacity-modulation volume is bound (else × 1)
 override SKIPPING: bool = true;   // step.w may be 1
 override FIND: bool = true;       // shading fetches: find a sample with opacity first
+// 1: a gradient volume is bound (one fetch per gradient), 0: six density samples,
+// 2: box_half.w decides (the general shader).
+override GRADIENT: u32 = 2u;
 
 // The AO is read the full offset out wherever the gradient is at least 1/AO_EDGE_GAIN
 // of a full edge: through the whole soft ramp of a CT surface, whose deeper samples
@@ -64,6 +67,9 @@ const MODE_ISO: u32 = 4u;
 @group(0) @binding(7) var opacity_modulation: texture_3d<f32>;
 // (min, max) of the texel values a trilinear sample in each occupancy block can read.
 @group(0) @binding(8) var block_range: texture_3d<f32>;
+// The density's central differences per voxel ÷ M, with a border of one voxel
+// (render::gradient); a single texel when there is none.
+@group(0) @binding(9) var gradient_volume: texture_3d<f32>;
 
 // Group 2 (src/render/shadow.rs): live positional AO (vao_common.wgsl, bindings 0–4)
 // and the light volume for shadows.
@@ -161,6 +167,25 @@ fn sample_norm(uvw: vec3<f32>) -> f32 {
     return textureSampleLevel(volume, linear_clamp, uvw, 0.0).r;
 }
 
+// The density's gradient by central differences one voxel either side, in texel units
+// per mm: from the gradient volume (the same differences interpolated, rounded to f16;
+// render::gradient) when one is bound, else from six samples (CPU twin:
+// render::cpu::shade, which takes the six).
+fn gradient(uvw: vec3<f32>) -> vec3<f32> {
+    if GRADIENT == 1u || (GRADIENT == 2u && p.box_half.w > 0.0) {
+        let n = vec3<f32>(textureDimensions(volume));
+        let at = (uvw * n + 1.0) / (n + 2.0);
+        let g = textureSampleLevel(gradient_volume, linear_clamp, at, 0.0).xyz;
+        return g * (p.box_half.w / (2.0 * p.voxel_uvw.w));
+    }
+    let d = p.voxel_uvw.xyz;
+    return vec3<f32>(
+        sample_norm(uvw + vec3<f32>(d.x, 0.0, 0.0)) - sample_norm(uvw - vec3<f32>(d.x, 0.0, 0.0)),
+        sample_norm(uvw + vec3<f32>(0.0, d.y, 0.0)) - sample_norm(uvw - vec3<f32>(0.0, d.y, 0.0)),
+        sample_norm(uvw + vec3<f32>(0.0, 0.0, d.z)) - sample_norm(uvw - vec3<f32>(0.0, 0.0, d.z)),
+    ) / (2.0 * p.voxel_uvw.w);
+}
+
 // The lit colour of a sample (CPU twin: render::cpu::light), docs/algorithms.md "Shading
 // with ambient occlusion". By default the AO factor A_s = clamp(1 − s(1 − min(A / A_open, 1)), 0, 1)
 // (A_open = ao.w: what the AO method gives an open flat surface, so such a surface keeps
@@ -193,13 +218,7 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>, cut: bool) -> vec3<f32
     // voxel is occluded.
     var ao_at = uvw;
     if phong || ((AO_VOLUME || (LIVE_VAO && extras.flags.x != 0u)) && p.ao.z > 0.0) {
-        let d = p.voxel_uvw.xyz;
-        // Central differences in texel units per mm.
-        let g = vec3<f32>(
-            sample_norm(uvw + vec3<f32>(d.x, 0.0, 0.0)) - sample_norm(uvw - vec3<f32>(d.x, 0.0, 0.0)),
-            sample_norm(uvw + vec3<f32>(0.0, d.y, 0.0)) - sample_norm(uvw - vec3<f32>(0.0, d.y, 0.0)),
-            sample_norm(uvw + vec3<f32>(0.0, 0.0, d.z)) - sample_norm(uvw - vec3<f32>(0.0, 0.0, d.z)),
-        ) / (2.0 * p.voxel_uvw.w);
+        let g = gradient(uvw);
         // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
         let strength = length(g) * abs(p.lut_map.x) * p.voxel_uvw.w * p.lut_map.w;
         var edge = clamp(strength, 0.0, 1.0);

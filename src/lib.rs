@@ -28,7 +28,8 @@
 //!    stepping over 4³ blocks that cannot change the pixel
 //!    (compositing with the AO factor on ambient and diffuse light, shadows from
 //!    `render::shadow`'s filtered light volume and surfaces; MIP, MinIP, average;
-//!    isosurface); [`render::offscreen`] does one frame for the CLI and tests on the
+//!    isosurface), shading from [`render::gradient`]'s precomputed central differences
+//!    (one fetch per gradient instead of six); [`render::offscreen`] does one frame for the CLI and tests on the
 //!    device it is given. [`render::reuse`] says where clip shapes that moved can change
 //!    an image, so a frame of the same view casts only the rays that pass there.
 //! 7. [`app`] is the eframe viewer: the same texels, stages and ray caster behind a UI

@@ -721,22 +721,153 @@ fn specialised_pipelines_draw_the_general_pixels() {
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
     let v = load("raw/engine.raw");
     let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
-    let vol = GpuVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let mut vol =
+        GpuVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     let mut failures = Vec::new();
-    for mode in MODES {
-        for shading in [Shading::None, Shading::Phong] {
-            let mut f = frame(48, shading);
-            f.settings.mode = mode;
-            let render = |variant| {
-                rc.render_variant(&gpu, &vol, &f, None, variant)
-                    .unwrap_or_else(|e| panic!("{e}"))
-            };
-            if render(None).pixels != render(Some(Variant::general(mode))).pixels {
-                failures.push(format!("{mode} {shading:?}"));
+    // With the gradient volume (the general shader's uniform says so) and without.
+    for gradient in [true, false] {
+        let bound = vol
+            .set_gradient_volume(&gpu, gradient)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(bound, gradient);
+        for mode in MODES {
+            for shading in [Shading::None, Shading::Phong] {
+                let mut f = frame(48, shading);
+                f.settings.mode = mode;
+                let render = |variant| {
+                    rc.render_variant(&gpu, &vol, &f, None, variant)
+                        .unwrap_or_else(|e| panic!("{e}"))
+                };
+                if render(None).pixels != render(Some(Variant::general(mode))).pixels {
+                    failures.push(format!("{mode} {shading:?} gradient volume {gradient}"));
+                }
             }
         }
     }
     assert!(failures.is_empty(), "differ: {}", failures.join(", "));
+}
+
+/// The gradient volume holds each voxel's central differences, with a border of one
+/// voxel: the known values around one bright voxel, and the CPU's differences of real
+/// crops (16-bit CT) and of float data (whose texels are scaled by their largest |value|
+/// to fit f16), rounded to f16.
+#[test]
+fn the_gradient_volume_holds_each_voxels_central_differences() {
+    use volao::render::gradient::{central_differences, padded};
+    let gpu = device();
+    let tf = common::flat_tf(0.5);
+    let one = common::u8_volume(
+        [8, 8, 8],
+        |x, y, z| if (x, y, z) == (3, 4, 5) { 255 } else { 0 },
+    );
+    let vol = GpuVolume::new(&gpu, &one, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let g = vol
+        .gradient_volume()
+        .expect("an 8³ volume's gradient volume fits")
+        .read_back(&gpu)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(g.len(), 10 * 10 * 10);
+    // Texel (x, y, z) of the padded volume is voxel (x − 1, y − 1, z − 1).
+    let at = |x: usize, y: usize, z: usize| g[(x + 1) + 10 * ((y + 1) + 10 * (z + 1))];
+    assert_eq!(at(2, 4, 5), [1.0, 0.0, 0.0]);
+    assert_eq!(at(4, 4, 5), [-1.0, 0.0, 0.0]);
+    assert_eq!(at(3, 3, 5), [0.0, 1.0, 0.0]);
+    assert_eq!(at(3, 5, 5), [0.0, -1.0, 0.0]);
+    assert_eq!(at(3, 4, 4), [0.0, 0.0, 1.0]);
+    assert_eq!(at(3, 4, 6), [0.0, 0.0, -1.0]);
+    assert_eq!(at(3, 4, 5), [0.0; 3]);
+    let nonzero = g.iter().filter(|v| v.iter().any(|&c| c != 0.0)).count();
+    assert_eq!(nonzero, 6, "only the six neighbours along the axes");
+
+    let wave = Volume::new(
+        [20, 18, 16],
+        [1.0, 1.2, 0.8],
+        volume::VoxelData::F32(
+            (0..20 * 18 * 16)
+                .map(|i| 3000.0 * ((i % 20) as f32 * 0.7).sin() + 0.25 * (i / 20) as f32)
+                .collect(),
+        ),
+    )
+    .expect("valid volume");
+    let mut cases: Vec<(&str, Volume)> = vec![("float wave", wave)];
+    cases.extend(
+        common::real_crops()
+            .into_iter()
+            .map(|(name, v, _)| (name, v)),
+    );
+    for (name, v) in cases {
+        let texels = common::texels(&v);
+        let vol = GpuVolume::from_texels(&gpu, texels.clone(), &tf, 0.5)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let gv = vol
+            .gradient_volume()
+            .expect("a small volume's gradient volume fits");
+        let gpu_g = gv.read_back(&gpu).unwrap_or_else(|e| panic!("{e}"));
+        let cpu_g = central_differences(&texels);
+        assert_eq!(gpu_g.len(), padded(texels.dims).iter().product::<usize>());
+        assert_eq!(gpu_g.len(), cpu_g.len());
+        // One step of f16 (11 significant bits; below 2⁻¹⁴ of M, steps of 2⁻²⁴): a
+        // driver may round the f32 → f16 conversion towards zero.
+        let worst = gpu_g
+            .iter()
+            .zip(&cpu_g)
+            .flat_map(|(a, b)| (0..3).map(move |c| (a[c], b[c])))
+            .map(|(a, b)| (a - b).abs() / (b.abs() * 2f32.powi(-10) + gv.scale * 2f32.powi(-24)))
+            .fold(0.0f32, f32::max);
+        eprintln!("{name}: worst {worst:.3} f16 steps");
+        assert!(worst <= 1.0, "{name}: {worst} f16 steps");
+        let changing = cpu_g.iter().filter(|v| v.iter().any(|&c| c != 0.0)).count();
+        assert!(
+            changing > cpu_g.len() / 4,
+            "{name}: a volume with gradients"
+        );
+    }
+}
+
+/// Phong frames shaded from the gradient volume are those shaded from six density
+/// samples per gradient, up to the gradient's f16 rounding, on real crops, with and
+/// without AO read off the surface along the gradient.
+#[test]
+fn shading_from_the_gradient_volume_matches_six_samples() {
+    let gpu = device();
+    let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+    let mut failures = Vec::new();
+    for (name, v, tf) in common::real_crops() {
+        let mut vol = GpuVolume::new(&gpu, &v, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+        for ao in [false, true] {
+            if ao {
+                // A stand-in AO volume: what matters is where along the gradient it is read.
+                let n: usize = vol.texels.dims.iter().product();
+                let a: Vec<f32> = (0..n).map(|i| 0.3 + 0.7 * ((i % 7) as f32 / 6.0)).collect();
+                vol.set_ambient_occlusion(&gpu, &a);
+            }
+            let f = frame(96, Shading::Phong);
+            let mut images = Vec::new();
+            for gradient in [true, false] {
+                vol.set_gradient_volume(&gpu, gradient)
+                    .unwrap_or_else(|e| panic!("{e}"));
+                images.push(
+                    rc.render(&gpu, &vol, &f, None)
+                        .unwrap_or_else(|e| panic!("{e}")),
+                );
+            }
+            let background = images[0].pixels[0];
+            let shown = images[0]
+                .pixels
+                .iter()
+                .filter(|&&p| p != background)
+                .count();
+            assert!(
+                shown * 10 > images[0].pixels.len(),
+                "{name}: the crop shows"
+            );
+            let label = format!("gradient_volume_{name}_ao_{ao}");
+            if let Err(e) = common::twin(&label, &images[0], &images[1], TWIN, &out_dir()) {
+                failures.push(e);
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 /// With clip shapes, a frame's pipeline is built for their number (`CLIP_SHAPES`, a
@@ -824,6 +955,7 @@ fn every_variant_draws_the_general_pixels() {
                 clip_shapes: 0,
                 modulation: on(5),
                 skipping: on(6),
+                gradient: Some(true),
             };
             // Never chosen: lavapipe crashes on it (see `Variant::of`).
             if variant.shadows && !variant.surfaces {

@@ -544,22 +544,23 @@ pub fn texture_readback(
     (buffer, row)
 }
 
-/// Reads an `R32Float`, `R16Float` or `Rgba32Float` texture (2-D array or 3-D; `size` =
-/// width, height, layers/depth) back as f32 values, channels fastest (RGBA), then x, then
-/// y, then layer.
+/// Reads an `R32Float`, `R16Float`, `Rgba32Float` or `Rgba16Float` texture (2-D array or
+/// 3-D; `size` = width, height, layers/depth) back as f32 values, channels fastest (RGBA),
+/// then x, then y, then layer.
 pub fn read_texture_f32(
     gpu: &Gpu,
     texture: &wgpu::Texture,
     size: [u32; 3],
     stage: &str,
 ) -> Result<Vec<f32>, GpuError> {
+    use wgpu::TextureFormat::{R16Float, Rgba16Float, Rgba32Float};
     let device = &gpu.device;
-    let half = texture.format() == wgpu::TextureFormat::R16Float;
+    let half = matches!(texture.format(), R16Float | Rgba16Float);
     let channels = match texture.format() {
-        wgpu::TextureFormat::Rgba32Float => 4,
+        Rgba32Float | Rgba16Float => 4,
         _ => 1,
     };
-    let texel = if half { 2 } else { 4 * channels };
+    let texel = if half { 2 * channels } else { 4 * channels };
     let (readback, row) = validated(device, stage, || {
         let (readback, row) = texture_readback(device, stage, size, texel);
         let mut encoder =
@@ -570,7 +571,7 @@ pub fn read_texture_f32(
     })?;
     let bytes = read_buffer(device, &readback, stage)?;
     Ok(if half {
-        unpad::<u16>(&bytes, row, size[0])
+        unpad::<u16>(&bytes, row, size[0] * channels)
             .into_iter()
             .map(|h| half::f16::from_bits(h).to_f32())
             .collect()

@@ -29,6 +29,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     shader!("clip_maps.wgsl"),
     shader!("common.wgsl"),
     shader!("cone.wgsl"),
+    shader!("gradient.wgsl"),
     shader!("lao.wgsl"),
     shader!("lao_ray.wgsl"),
     shader!("light.wgsl"),

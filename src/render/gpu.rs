@@ -81,6 +81,7 @@ impl RayCaster {
                     entry::storage_texture(6, c, wgpu::TextureFormat::Rgba8Unorm, D2),
                     entry::texture(7, c, D3, Some(true)),
                     entry::texture(8, c, D3, Some(false)),
+                    entry::texture(9, c, D3, Some(true)),
                 ],
             });
             let clip_layout = crate::clip::gpu::bind_group_layout(device);
@@ -228,6 +229,7 @@ impl RayCaster {
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
         let mut params = frame.params(&vol.texels, &vol.lut, origin.0, origin.1);
+        params.box_half[3] = vol.gradient_volume().map_or(0.0, |g| g.scale);
         super::reuse::set_balls(&mut params, changed);
         let pipeline = self.pipeline(device, variant)?;
         let clip_group = clip.map(|c| c.bind_group(device, &self.clip_layout));
@@ -302,8 +304,8 @@ impl RayCaster {
         })
     }
 
-    /// Bind groups 0 (volume, LUT, AO, occupancy, target, modulation, block ranges) and
-    /// 2 (extras).
+    /// Bind groups 0 (volume, LUT, AO, occupancy, target, modulation, block ranges,
+    /// gradient) and 2 (extras).
     fn bind_groups(
         &self,
         device: &wgpu::Device,
@@ -328,6 +330,7 @@ impl RayCaster {
                 wgpu::BindingResource::TextureView(&target_view),
                 wgpu::BindingResource::TextureView(&vol.modulation_view),
                 wgpu::BindingResource::TextureView(&vol.block_range_view),
+                wgpu::BindingResource::TextureView(&vol.gradient_view),
             ],
         );
         let group_2 = super::extras::bind_group_2(

@@ -5,6 +5,7 @@
 //! bind groups are stale.
 
 use super::extras::GpuLight;
+use super::gradient::GradientVolume;
 use super::shadow::LightVolume;
 use super::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use crate::gpu::{Gpu, GpuError, validated};
@@ -33,6 +34,11 @@ pub struct GpuVolume {
     pub(super) occupancy_view: wgpu::TextureView,
     /// (min, max) of `norm` per occupancy block: the projection and iso modes' skip test.
     pub(super) block_range_view: wgpu::TextureView,
+    /// The density's central differences per voxel ([`super::gradient`]), or `None`: the
+    /// ray caster then takes six density samples per gradient.
+    gradient: Option<GradientVolume>,
+    /// `gradient`'s view, or a 1×1×1 RGBA16F texel when there is none.
+    pub(super) gradient_view: wgpu::TextureView,
     pub(super) lut_buffer: wgpu::Buffer,
     /// The baked LUT currently on the GPU (alpha corrected for `lut_step`).
     pub lut: Lut,
@@ -124,7 +130,7 @@ impl GpuVolume {
         let lut = bake_lut(tf, &texels, step_voxels);
         let occ = ranges.occupancy(&texels, &lut);
         let grid = ranges.grid.map(|d| d as u32);
-        validated(device, "GpuVolume::upload", || {
+        let mut vol = validated(device, "GpuVolume::upload", || {
             let volume = texture_3d(device, "GpuVolume::volume", dims, texels.format.wgpu());
             write_3d(
                 queue,
@@ -179,6 +185,8 @@ impl GpuVolume {
                 modulation_bound: false,
                 occupancy_view: occupancy.create_view(&Default::default()),
                 block_range_view: block_range.create_view(&Default::default()),
+                gradient: None,
+                gradient_view: no_gradient(device),
                 occupancy,
                 lut_buffer,
                 lut,
@@ -190,7 +198,36 @@ impl GpuVolume {
                 ranges,
                 texels,
             }
-        })
+        })?;
+        // Optional: where the device cannot hold it, shading takes six samples instead.
+        if let Err(e) = vol.set_gradient_volume(gpu, true) {
+            eprintln!("volao: no gradient volume, shading samples the density instead: {e}");
+        }
+        Ok(vol)
+    }
+
+    /// Builds (`on`) or drops the gradient volume ([`super::gradient`]); whether one is
+    /// bound afterwards (a volume whose gradient volume does not fit keeps none). The
+    /// pixels are the same up to the gradient's f16 rounding.
+    pub fn set_gradient_volume(&mut self, gpu: &Gpu, on: bool) -> Result<bool, GpuError> {
+        if on == self.gradient.is_some() {
+            return Ok(on);
+        }
+        self.gradient = None;
+        if on {
+            self.gradient = GradientVolume::new(gpu, &self.volume_view, &self.texels)?;
+        }
+        self.gradient_view = match &self.gradient {
+            Some(g) => g.view.clone(),
+            None => no_gradient(&gpu.device),
+        };
+        self.generation = next_generation();
+        Ok(self.gradient.is_some())
+    }
+
+    /// The gradient volume, if one is bound.
+    pub fn gradient_volume(&self) -> Option<&GradientVolume> {
+        self.gradient.as_ref()
     }
 
     /// Bakes the transfer function for frames of `step_voxels` too, unless it is the
@@ -378,6 +415,17 @@ impl GpuVolume {
 }
 
 /// No opacity modulation: a single texel of 1.
+/// The gradient volume's stand-in when there is none: one texel, never read.
+fn no_gradient(device: &wgpu::Device) -> wgpu::TextureView {
+    texture_3d(
+        device,
+        "GpuVolume::no_gradient",
+        [1, 1, 1],
+        wgpu::TextureFormat::Rgba16Float,
+    )
+    .create_view(&Default::default())
+}
+
 fn no_modulation(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::TextureView {
     let texture = texture_3d(
         device,

@@ -16,6 +16,7 @@ pub mod cpu;
 pub mod extras;
 pub mod gpu;
 mod gpu_volume;
+pub mod gradient;
 pub mod image;
 pub mod offscreen;
 pub mod reuse;
@@ -279,7 +280,9 @@ impl Default for RenderSettings {
 pub struct RaycastParams {
     /// Clip space → volume-centred physical space (mm).
     pub inv_view_proj: [[f32; 4]; 4],
-    /// Half the box extent in mm (the box is `[-h, h]`), w unused.
+    /// Half the box extent in mm (the box is `[-h, h]`); w: the gradient volume's scale
+    /// `M` ([`gradient::GradientVolume::scale`]), 0 when there is none (set by the ray
+    /// caster; the general shader reads it, the CPU twin does not).
     pub box_half: [f32; 4],
     /// Straight RGBA background.
     pub background: [f32; 4],

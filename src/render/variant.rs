@@ -25,6 +25,9 @@ pub struct Variant {
     /// An opacity-modulation volume is bound (not the 1×1×1 texel of 1).
     pub modulation: bool,
     pub skipping: bool,
+    /// A gradient volume is bound (one fetch per gradient instead of six); `None`: the
+    /// uniform `box_half.w` decides (the general shader).
+    pub gradient: Option<bool>,
 }
 
 impl Variant {
@@ -55,6 +58,7 @@ impl Variant {
             clip_shapes: clip.map_or(0, |c| c.uniforms.counts[0]),
             modulation: s.mode.is_composite() && vol.modulation_bound,
             skipping: s.empty_space_skipping,
+            gradient: Some(vol.gradient_volume().is_some()),
         }
     }
 
@@ -71,11 +75,12 @@ impl Variant {
             clip_shapes: 0,
             modulation: true,
             skipping: true,
+            gradient: None,
         }
     }
 
     /// The values of the shader's `override` constants.
-    pub(super) fn constants(&self) -> [(&'static str, f64); 11] {
+    pub(super) fn constants(&self) -> [(&'static str, f64); 12] {
         let b = |on: bool| f64::from(u8::from(on));
         // Shading that fetches: worth finding a sample with opacity before shading.
         let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
@@ -91,6 +96,7 @@ impl Variant {
             ("CLIP_SHAPES", f64::from(self.clip_shapes)),
             ("MODULATION", b(self.modulation)),
             ("SKIPPING", b(self.skipping)),
+            ("GRADIENT", self.gradient.map_or(2.0, b)),
         ]
     }
 }

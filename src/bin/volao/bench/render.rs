@@ -42,6 +42,21 @@ pub struct RenderBenchArgs {
     /// frames then pay the clip test of every sample.
     #[arg(long = "clip", value_name = "SHAPE", value_parser = volao::clip::ClipShape::parse)]
     pub clip: Vec<volao::clip::ClipShape>,
+    /// Where shading takes its gradients, comma-separated: `volume` (the precomputed
+    /// gradient volume, one fetch; what `volao render` uses) and `samples` (six density
+    /// samples per gradient). Each configuration is timed with each, one after the other.
+    #[arg(long, value_delimiter = ',', default_value = "volume")]
+    pub gradient: Vec<GradientSource>,
+}
+
+/// `--gradient`: where the ray caster's shading takes its gradients.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GradientSource {
+    /// The gradient volume (`volao::render::gradient`).
+    Volume,
+    /// Six density samples per gradient.
+    Samples,
 }
 
 impl RenderBenchArgs {
@@ -77,6 +92,7 @@ struct Timed {
     size: [u32; 2],
     mode: String,
     shading: volao::render::Shading,
+    gradient: GradientSource,
     ao: volao::ao::AoMethod,
     median_frame_ms: f64,
     /// Time to compute the AO volume (once per file and method), 0 without.
@@ -114,8 +130,8 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
     if !args.json {
         println!("adapter: {adapter}");
         println!();
-        println!("| volume | size | mode | shading | AO | median frame | AO time |");
-        println!("|---|---|---|---|---|---|---|");
+        println!("| volume | size | mode | shading | gradient | AO | median frame | AO time |");
+        println!("|---|---|---|---|---|---|---|---|");
     }
     for path in &args.files {
         let volume = volume::load(path, &LoadOptions::default())?.volume.to_ras();
@@ -125,66 +141,88 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
             None => Preset::default_for(&stats),
         };
         let tf = TransferFunction::preset(preset, &stats);
-        let mut vol = GpuVolume::new(&gpu, &volume, &tf, RenderSettings::default().step_voxels)?;
-        let ao = AoSettings {
-            method: args.ao,
-            ..Default::default()
-        };
-        let start = Instant::now();
-        let request = AoRequest {
-            tf: &tf,
-            settings: &ao,
-            clip: None,
-            // One AO for every mode timed: an isosurface reads AO wherever it lies.
-            coverage: if args
-                .mode
-                .iter()
-                .all(|m| *m == volao::render::RenderMode::Composite)
-            {
-                volao::ao::sparse::Coverage::Readable
-            } else {
-                volao::ao::sparse::Coverage::Every
-            },
-        };
-        let computed = AoEngine::on(Some(Arc::clone(&gpu))).compute(
-            AoInput::Uploaded(&vol),
-            &request,
-            &|_, _| {},
-        )?;
-        volao::render::offscreen::show_ambient(&gpu, &mut vol, &tf, &ao, computed.ambient)?;
-        let ao_ms = start.elapsed().as_secs_f64() * 1e3;
+        let name = path.display().to_string();
+        // One volume per gradient source, each with its AO.
+        let mut vols = Vec::new();
+        for &gradient in &args.gradient {
+            let mut vol =
+                GpuVolume::new(&gpu, &volume, &tf, RenderSettings::default().step_voxels)?;
+            let wanted = gradient == GradientSource::Volume;
+            if vol.set_gradient_volume(&gpu, wanted)? != wanted {
+                anyhow::bail!("{name}: --gradient volume: the gradient volume does not fit");
+            }
+            let ao = AoSettings {
+                method: args.ao,
+                ..Default::default()
+            };
+            let start = Instant::now();
+            let request = AoRequest {
+                tf: &tf,
+                settings: &ao,
+                clip: None,
+                // One AO for every mode timed: an isosurface reads AO wherever it lies.
+                coverage: if args
+                    .mode
+                    .iter()
+                    .all(|m| *m == volao::render::RenderMode::Composite)
+                {
+                    volao::ao::sparse::Coverage::Readable
+                } else {
+                    volao::ao::sparse::Coverage::Every
+                },
+            };
+            let computed = AoEngine::on(Some(Arc::clone(&gpu))).compute(
+                AoInput::Uploaded(&vol),
+                &request,
+                &|_, _| {},
+            )?;
+            volao::render::offscreen::show_ambient(&gpu, &mut vol, &tf, &ao, computed.ambient)?;
+            let ao_ms = start.elapsed().as_secs_f64() * 1e3;
+            vols.push((gradient, vol, ao_ms));
+        }
         let maps = match args.clip.is_empty() {
             true => None,
             false => {
                 let mut maps = volao::clip::gpu::ClipMaps::new(&gpu)?;
-                let radius = glam::Vec3::from(vol.texels.extent()).length() * 0.5;
+                let radius = glam::Vec3::from(vols[0].1.texels.extent()).length() * 0.5;
                 // No AO depends on the clipping: the dilation margin is unused.
-                let update = maps.update(&gpu, &args.clip, radius, 1.0, ao.clip_resolution)?;
+                let resolution = AoSettings::default().clip_resolution;
+                let update = maps.update(&gpu, &args.clip, radius, 1.0, resolution)?;
                 if let Some(e) = update.errors.first() {
                     anyhow::bail!("{}: --clip: {e}", path.display());
                 }
                 Some(maps)
             }
         };
-        let name = path.display().to_string();
         for &mode in &args.mode {
-            for &shading in &args.shading {
-                let settings = RenderSettings {
-                    mode,
-                    shading,
-                    ..Default::default()
-                };
-                let mut frame = super::frame(20.0, settings, args.width);
-                frame.height = args.height;
-                let seconds = warm_frame(&gpu, &rc, &vol, &frame, (maps.as_ref(), args.runs))?;
+            // Every shading and gradient source of this mode, timed frame by frame in
+            // turn, so that a drift of the machine's speed touches them alike.
+            let configs: Vec<_> = args
+                .shading
+                .iter()
+                .flat_map(|&shading| vols.iter().map(move |v| (shading, v)))
+                .map(|(shading, v)| {
+                    let settings = RenderSettings {
+                        mode,
+                        shading,
+                        ..Default::default()
+                    };
+                    let mut frame = super::frame(20.0, settings, args.width);
+                    frame.height = args.height;
+                    (frame, v)
+                })
+                .collect();
+            let seconds = interleaved_frames(&gpu, &rc, &configs, (maps.as_ref(), args.runs))?;
+            for ((frame, (gradient, _, ao_ms)), seconds) in configs.iter().zip(seconds) {
                 let t = Timed {
                     file: name.clone(),
                     size: [args.width, args.height],
                     mode: mode.to_string(),
-                    shading,
+                    shading: frame.settings.shading,
+                    gradient: *gradient,
                     ao: args.ao,
                     median_frame_ms: seconds * 1e3,
-                    ao_ms,
+                    ao_ms: *ao_ms,
                     clip_shapes: args.clip.len(),
                     adapter: adapter.clone(),
                 };
@@ -192,12 +230,13 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
                     println!("{}", serde_json::to_string(&t)?);
                 } else {
                     println!(
-                        "| {} | {}×{} | {} | {:?} | {} | {:.1} ms | {:.0} ms |",
+                        "| {} | {}×{} | {} | {:?} | {:?} | {} | {:.1} ms | {:.0} ms |",
                         t.file,
                         args.width,
                         args.height,
                         t.mode,
-                        shading,
+                        t.shading,
+                        gradient,
                         ao_name,
                         t.median_frame_ms,
                         ao_ms
@@ -207,6 +246,32 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The median frame time of each configuration in seconds, image readback included:
+/// one warm-up frame each (pipelines, caches), then `runs` rounds of one frame of each
+/// in turn.
+fn interleaved_frames(
+    gpu: &volao::gpu::Gpu,
+    rc: &volao::render::gpu::RayCaster,
+    configs: &[(
+        volao::render::Frame,
+        &(GradientSource, volao::render::gpu::GpuVolume, f64),
+    )],
+    (clip, runs): (Option<&volao::clip::gpu::ClipMaps>, usize),
+) -> Result<Vec<f64>> {
+    for (frame, (_, vol, _)) in configs {
+        rc.render(gpu, vol, frame, clip)?;
+    }
+    let mut times = vec![Vec::new(); configs.len()];
+    for _ in 0..runs.max(1) {
+        for ((frame, (_, vol, _)), t) in configs.iter().zip(&mut times) {
+            let start = Instant::now();
+            rc.render(gpu, vol, frame, clip)?;
+            t.push(start.elapsed().as_secs_f64());
+        }
+    }
+    Ok(times.into_iter().map(median).collect())
 }
 
 /// Ray steps inside the volume box for a whole frame: the work a frame would do with
