@@ -199,10 +199,9 @@ impl GpuVolume {
                 texels,
             }
         })?;
-        // Optional: where the device cannot hold it, shading takes six samples instead.
-        if let Err(e) = vol.set_gradient_volume(gpu, true) {
-            eprintln!("volao: no gradient volume, shading samples the density instead: {e}");
-        }
+        // Optional: where the device cannot hold it, shading takes six samples instead,
+        // the same pixels up to f16 rounding ([`Self::gradient_volume`] says which).
+        let _ = vol.set_gradient_volume(gpu, true);
         Ok(vol)
     }
 
