@@ -244,6 +244,11 @@ def timing(args):
         for shaded in (False, True):
             scene.shade(shaded)
             vtk_ms[shaded] = scene.time(args.runs) * 1e3
+        # VTK's own maximum intensity projection, unshaded, beside its compositing.
+        scene.shade(False)
+        scene.mapper.SetBlendModeToMaximumIntensity()
+        vtk_ms["mip"] = scene.time(args.runs) * 1e3
+        scene.mapper.SetBlendModeToComposite()
         renderer = scene.renderer_string()
         del scene
         for volao in args.volao:
@@ -252,17 +257,20 @@ def timing(args):
             print(json.dumps({"size": size, "volao": volao, "adapter": adapter,
                               "volao_ms": {f"{m}/{s}": v for (m, s), v in ms.items()},
                               "vtk_renderer": renderer, "vtk_unshaded_ms": vtk_ms[False],
-                              "vtk_shaded_ms": vtk_ms[True]}), flush=True)
+                              "vtk_shaded_ms": vtk_ms[True], "vtk_mip_ms": vtk_ms["mip"]}),
+                  flush=True)
     print(f"load average after: {os.getloadavg()[0]:.2f}", file=sys.stderr)
     print()
     print("| size | binary | volao unshaded | volao Phong | Phong / unshaded | volao MIP "
-          "| MIP / composite | VTK unshaded | VTK shaded | volao / VTK unshaded |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| MIP / composite | VTK unshaded | VTK shaded | VTK MIP | VTK MIP / composite "
+          "| volao / VTK unshaded |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for size, volao, _, ms, _, vtk_ms in results:
         none, phong, mip = ms[("composite", "none")], ms[("composite", "phong")], ms[("mip", "none")]
         print(f"| {size}² | {volao} | {none:.0f} ms | {phong:.0f} ms | {phong / none:.2f} "
               f"| {mip:.0f} ms | {mip / none:.2f} | {vtk_ms[False]:.0f} ms "
-              f"| {vtk_ms[True]:.0f} ms | {none / vtk_ms[False]:.2f} |")
+              f"| {vtk_ms[True]:.0f} ms | {vtk_ms['mip']:.0f} ms "
+              f"| {vtk_ms['mip'] / vtk_ms[False]:.2f} | {none / vtk_ms[False]:.2f} |")
     print()
     print(f"volao adapter: {results[0][2]}; VTK {__import__('vtk').vtkVersion.GetVTKVersion()} "
           f"OpenGL renderer: {results[0][4]}")
