@@ -194,54 +194,53 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
                 Some(maps)
             }
         };
-        for &mode in &args.mode {
-            // Every shading and gradient source of this mode, timed frame by frame in
-            // turn, so that a drift of the machine's speed touches them alike.
-            let configs: Vec<_> = args
-                .shading
-                .iter()
-                .flat_map(|&shading| vols.iter().map(move |v| (shading, v)))
-                .map(|(shading, v)| {
-                    let settings = RenderSettings {
-                        mode,
-                        shading,
-                        ..Default::default()
-                    };
-                    let mut frame = super::frame(20.0, settings, args.width);
-                    frame.height = args.height;
-                    (frame, v)
-                })
-                .collect();
-            let seconds = interleaved_frames(&gpu, &rc, &configs, (maps.as_ref(), args.runs))?;
-            for ((frame, (gradient, _, ao_ms)), seconds) in configs.iter().zip(seconds) {
-                let t = Timed {
-                    file: name.clone(),
-                    size: [args.width, args.height],
-                    mode: mode.to_string(),
-                    shading: frame.settings.shading,
-                    gradient: *gradient,
-                    ao: args.ao,
-                    median_frame_ms: seconds * 1e3,
-                    ao_ms: *ao_ms,
-                    clip_shapes: args.clip.len(),
-                    adapter: adapter.clone(),
+        // Every mode, shading and gradient source, timed frame by frame in turn, so
+        // that a drift of the machine's speed touches them alike.
+        let configs: Vec<_> = args
+            .mode
+            .iter()
+            .flat_map(|&mode| args.shading.iter().map(move |&shading| (mode, shading)))
+            .flat_map(|(mode, shading)| vols.iter().map(move |v| (mode, shading, v)))
+            .map(|(mode, shading, v)| {
+                let settings = RenderSettings {
+                    mode,
+                    shading,
+                    ..Default::default()
                 };
-                if args.json {
-                    println!("{}", serde_json::to_string(&t)?);
-                } else {
-                    println!(
-                        "| {} | {}×{} | {} | {:?} | {:?} | {} | {:.1} ms | {:.0} ms |",
-                        t.file,
-                        args.width,
-                        args.height,
-                        t.mode,
-                        t.shading,
-                        gradient,
-                        ao_name,
-                        t.median_frame_ms,
-                        ao_ms
-                    );
-                }
+                let mut frame = super::frame(20.0, settings, args.width);
+                frame.height = args.height;
+                (frame, v)
+            })
+            .collect();
+        let seconds = interleaved_frames(&gpu, &rc, &configs, (maps.as_ref(), args.runs))?;
+        for ((frame, (gradient, _, ao_ms)), seconds) in configs.iter().zip(seconds) {
+            let t = Timed {
+                file: name.clone(),
+                size: [args.width, args.height],
+                mode: frame.settings.mode.to_string(),
+                shading: frame.settings.shading,
+                gradient: *gradient,
+                ao: args.ao,
+                median_frame_ms: seconds * 1e3,
+                ao_ms: *ao_ms,
+                clip_shapes: args.clip.len(),
+                adapter: adapter.clone(),
+            };
+            if args.json {
+                println!("{}", serde_json::to_string(&t)?);
+            } else {
+                println!(
+                    "| {} | {}×{} | {} | {:?} | {:?} | {} | {:.1} ms | {:.0} ms |",
+                    t.file,
+                    args.width,
+                    args.height,
+                    t.mode,
+                    t.shading,
+                    gradient,
+                    ao_name,
+                    t.median_frame_ms,
+                    ao_ms
+                );
             }
         }
     }
