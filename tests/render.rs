@@ -778,6 +778,10 @@ fn the_gradient_volume_holds_each_voxels_central_differences() {
     assert_eq!(at(3, 4, 5), [0.0; 3]);
     let nonzero = g.iter().filter(|v| v.iter().any(|&c| c != 0.0)).count();
     assert_eq!(nonzero, 6, "only the six neighbours along the axes");
+    // Compute passes' uploads go without it (8 bytes per voxel).
+    let texels = common::texels(&one);
+    let compute = GpuVolume::for_compute(&gpu, texels, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    assert!(compute.gradient_volume().is_none());
 
     let wave = Volume::new(
         [20, 18, 16],

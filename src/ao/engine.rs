@@ -328,7 +328,7 @@ fn on_device<'a>(
 ) -> Result<&'a GpuVolume, GpuError> {
     Ok(match input {
         AoInput::Uploaded(v) => v,
-        AoInput::Texels(t) => slot.insert(GpuVolume::from_texels(g, t.clone(), tf, 0.5)?),
+        AoInput::Texels(t) => slot.insert(GpuVolume::for_compute(g, t.clone(), tf, 0.5)?),
     })
 }
 

@@ -71,7 +71,7 @@ pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, Strin
         // clip shapes from the next sync. With clip shapes LAO runs as CAO.
         let texels = texels.ok_or("no volume uploaded")?;
         let vol =
-            GpuVolume::from_texels(&gpu, texels, &tf, step_voxels).map_err(|e| e.to_string())?;
+            GpuVolume::for_compute(&gpu, texels, &tf, step_voxels).map_err(|e| e.to_string())?;
         if !settings.method.is_clipped() {
             settings.method = AoMethod::Cao;
         }

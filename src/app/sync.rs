@@ -252,7 +252,7 @@ impl Viewer {
             if crate::ao::fast::twin_is_faster(&gpu) {
                 return Ok(crate::ao::fast::modulation_cpu(&texels, &tf, &m));
             }
-            let vol = GpuVolume::from_texels(&gpu, texels, &tf, step).map_err(|e| e.to_string())?;
+            let vol = GpuVolume::for_compute(&gpu, texels, &tf, step).map_err(|e| e.to_string())?;
             crate::ao::fast::modulation_gpu(&gpu, &vol, &tf, &m).map_err(|e| e.to_string())
         });
         self.derived.modulation.start(key, job);

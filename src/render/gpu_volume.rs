@@ -118,7 +118,26 @@ impl GpuVolume {
         Self::from_texels(gpu, texels, tf, step_voxels)
     }
 
+    /// Uploads `texels` for ray casting: with the gradient volume shading reads
+    /// ([`Self::set_gradient_volume`]).
     pub fn from_texels(
+        gpu: &Gpu,
+        texels: VolumeTexels,
+        tf: &TransferFunction,
+        step_voxels: f32,
+    ) -> Result<Self, GpuError> {
+        let mut vol = Self::for_compute(gpu, texels, tf, step_voxels)?;
+        // Optional: where the device cannot hold it, shading takes six samples instead,
+        // the same pixels up to f16 rounding ([`Self::gradient_volume`] says which).
+        let _ = vol.set_gradient_volume(gpu, true);
+        Ok(vol)
+    }
+
+    /// Uploads `texels` for compute passes (AO, modulation) that read the density and
+    /// the LUT: without the gradient volume, which only the ray caster's shading reads
+    /// (8 bytes per voxel). Ray casting it is still correct, with six samples per
+    /// gradient.
+    pub fn for_compute(
         gpu: &Gpu,
         texels: VolumeTexels,
         tf: &TransferFunction,
@@ -130,7 +149,7 @@ impl GpuVolume {
         let lut = bake_lut(tf, &texels, step_voxels);
         let occ = ranges.occupancy(&texels, &lut);
         let grid = ranges.grid.map(|d| d as u32);
-        let mut vol = validated(device, "GpuVolume::upload", || {
+        validated(device, "GpuVolume::upload", || {
             let volume = texture_3d(device, "GpuVolume::volume", dims, texels.format.wgpu());
             write_3d(
                 queue,
@@ -198,11 +217,7 @@ impl GpuVolume {
                 ranges,
                 texels,
             }
-        })?;
-        // Optional: where the device cannot hold it, shading takes six samples instead,
-        // the same pixels up to f16 rounding ([`Self::gradient_volume`] says which).
-        let _ = vol.set_gradient_volume(gpu, true);
-        Ok(vol)
+        })
     }
 
     /// Builds (`on`) or drops the gradient volume ([`super::gradient`]); whether one is
