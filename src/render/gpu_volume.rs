@@ -428,7 +428,6 @@ impl GpuVolume {
     }
 }
 
-/// No opacity modulation: a single texel of 1.
 /// The gradient volume's stand-in when there is none: one texel, never read.
 fn no_gradient(device: &wgpu::Device) -> wgpu::TextureView {
     texture_3d(
@@ -440,6 +439,7 @@ fn no_gradient(device: &wgpu::Device) -> wgpu::TextureView {
     .create_view(&Default::default())
 }
 
+/// No opacity modulation: a single texel of 1.
 fn no_modulation(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::TextureView {
     let texture = texture_3d(
         device,

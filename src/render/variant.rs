@@ -58,7 +58,15 @@ impl Variant {
             clip_shapes: clip.map_or(0, |c| c.uniforms.counts[0]),
             modulation: s.mode.is_composite() && vol.modulation_bound,
             skipping: s.empty_space_skipping,
-            gradient: Some(vol.gradient_volume().is_some()),
+            // Only shading and the AO's read point take gradients: without either, the
+            // same pipeline whether a gradient volume is bound or not.
+            gradient: Some(
+                vol.gradient_volume().is_some()
+                    && lit
+                    && (s.shading == super::Shading::Phong
+                        || vol.ao_bound
+                        || vol.extras.live_vao.is_some()),
+            ),
         }
     }
 
