@@ -565,6 +565,8 @@ fn bench_render_times_the_configurations_asked_for_as_json_lines() {
         "composite,mip",
         "--shading",
         "none,phong",
+        "--gradient",
+        "volume,samples",
         "--json",
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
@@ -572,15 +574,16 @@ fn bench_render_times_the_configurations_asked_for_as_json_lines() {
         .lines()
         .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
         .collect();
-    assert_eq!(lines.len(), 4, "one object per mode × shading");
-    for (j, (mode, shading)) in lines.iter().zip([
-        ("composite", "none"),
-        ("composite", "phong"),
-        ("mip", "none"),
-        ("mip", "phong"),
-    ]) {
+    assert_eq!(lines.len(), 8, "one object per mode × shading × gradient");
+    let expected = ["composite", "mip"].into_iter().flat_map(|m| {
+        ["none", "phong"]
+            .into_iter()
+            .flat_map(move |s| ["volume", "samples"].map(|g| (m, s, g)))
+    });
+    for (j, (mode, shading, gradient)) in lines.iter().zip(expected) {
         assert_eq!(j["mode"], mode);
         assert_eq!(j["shading"], shading);
+        assert_eq!(j["gradient"], gradient);
         assert_eq!(j["size"], serde_json::json!([48, 32]));
         assert!(
             j["median_frame_ms"].as_f64().is_some_and(|t| t > 0.0),
