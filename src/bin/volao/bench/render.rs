@@ -108,6 +108,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
     use volao::ao::{AoEngine, AoInput, AoRequest, AoSettings};
     use volao::render::RenderSettings;
     use volao::render::gpu::{GpuVolume, RayCaster};
+    use volao::render::texels::{UploadLimits, VolumeTexels};
     use volao::tf::{Preset, TransferFunction};
 
     let ao_name = serde_json::to_value(args.ao)?
@@ -145,10 +146,13 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
         // One volume per gradient source, each with its AO.
         let mut vols = Vec::new();
         for &gradient in &args.gradient {
-            let mut vol =
-                GpuVolume::new(&gpu, &volume, &tf, RenderSettings::default().step_voxels)?;
-            let wanted = gradient == GradientSource::Volume;
-            if vol.set_gradient_volume(&gpu, wanted)? != wanted {
+            let texels = VolumeTexels::new(&volume, UploadLimits::of(&gpu));
+            let step = RenderSettings::default().step_voxels;
+            let mut vol = match gradient {
+                GradientSource::Volume => GpuVolume::from_texels(&gpu, texels, &tf, step)?,
+                GradientSource::Samples => GpuVolume::for_compute(&gpu, texels, &tf, step)?,
+            };
+            if vol.gradient_volume().is_some() != (gradient == GradientSource::Volume) {
                 anyhow::bail!("{name}: --gradient volume: the gradient volume does not fit");
             }
             let ao = AoSettings {
