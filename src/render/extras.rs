@@ -57,7 +57,9 @@ impl RayExtras {
 #[derive(Debug)]
 pub struct Placeholders {
     uniform: wgpu::Buffer,
-    texture: wgpu::TextureView,
+    /// A filterable float 3-D texel: any such binding that is off (group 2's, and the
+    /// gradient volume's in group 0).
+    pub(super) texture: wgpu::TextureView,
     storage: wgpu::Buffer,
     layer: wgpu::TextureView,
 }

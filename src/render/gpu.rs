@@ -330,7 +330,10 @@ impl RayCaster {
                 wgpu::BindingResource::TextureView(&target_view),
                 wgpu::BindingResource::TextureView(&vol.modulation_view),
                 wgpu::BindingResource::TextureView(&vol.block_range_view),
-                wgpu::BindingResource::TextureView(&vol.gradient_view),
+                wgpu::BindingResource::TextureView(
+                    vol.gradient_volume()
+                        .map_or(&self.placeholders.texture, |g| &g.view),
+                ),
             ],
         );
         let group_2 = super::extras::bind_group_2(

@@ -35,10 +35,8 @@ pub struct GpuVolume {
     /// (min, max) of `norm` per occupancy block: the projection and iso modes' skip test.
     pub(super) block_range_view: wgpu::TextureView,
     /// The density's central differences per voxel ([`super::gradient`]), or `None`: the
-    /// ray caster then takes six density samples per gradient.
+    /// ray caster then takes six density samples per gradient (and binds a placeholder).
     gradient: Option<GradientVolume>,
-    /// `gradient`'s view, or a 1×1×1 RGBA16F texel when there is none.
-    pub(super) gradient_view: wgpu::TextureView,
     pub(super) lut_buffer: wgpu::Buffer,
     /// The baked LUT currently on the GPU (alpha corrected for `lut_step`).
     pub lut: Lut,
@@ -205,7 +203,6 @@ impl GpuVolume {
                 occupancy_view: occupancy.create_view(&Default::default()),
                 block_range_view: block_range.create_view(&Default::default()),
                 gradient: None,
-                gradient_view: no_gradient(device),
                 occupancy,
                 lut_buffer,
                 lut,
@@ -228,14 +225,11 @@ impl GpuVolume {
             return Ok(on);
         }
         self.gradient = None;
-        if on {
-            self.gradient = GradientVolume::new(gpu, &self.volume_view, &self.texels)?;
-        }
-        self.gradient_view = match &self.gradient {
-            Some(g) => g.view.clone(),
-            None => no_gradient(&gpu.device),
-        };
         self.generation = next_generation();
+        if on {
+            self.gradient =
+                GradientVolume::new(gpu, &self.volume_view, &self.texels, &self.ranges)?;
+        }
         Ok(self.gradient.is_some())
     }
 
@@ -426,17 +420,6 @@ impl GpuVolume {
     pub fn occupancy(&self) -> Vec<u8> {
         self.ranges.occupancy(&self.texels, &self.lut)
     }
-}
-
-/// The gradient volume's stand-in when there is none: one texel, never read.
-fn no_gradient(device: &wgpu::Device) -> wgpu::TextureView {
-    texture_3d(
-        device,
-        "GpuVolume::no_gradient",
-        [1, 1, 1],
-        wgpu::TextureFormat::Rgba16Float,
-    )
-    .create_view(&Default::default())
 }
 
 /// No opacity modulation: a single texel of 1.

@@ -9,7 +9,7 @@
 //! per voxel of GPU memory: a volume whose gradient volume would not fit
 //! [`GRADIENT_BUDGET`] (or the adapter's 3-D texture size) keeps the six fetches.
 
-use super::texels::{TexelFormat, VolumeTexels};
+use super::texels::{BlockRanges, TexelFormat, VolumeTexels};
 use crate::gpu::{Gpu, GpuError, validated};
 
 /// The most GPU memory a gradient volume may take (8 bytes per texel).
@@ -45,15 +45,19 @@ pub fn padded(dims: [usize; 3]) -> [usize; 3] {
     dims.map(|d| d + 2)
 }
 
-/// `M` of [`GradientVolume::scale`] for `texels`, or `None` when a float volume holds
-/// no finite largest value.
-fn scale_of(texels: &VolumeTexels) -> Option<f32> {
-    match texels.format {
+/// `M` of [`GradientVolume::scale`] for texels of `format` whose blocks span `ranges`
+/// (every texel lies in a block, so their extremes are the texels'), or `None` when a
+/// float volume holds no finite largest value.
+fn scale_of(format: TexelFormat, ranges: &BlockRanges) -> Option<f32> {
+    match format {
         TexelFormat::R8Unorm | TexelFormat::R16Unorm => Some(1.0),
         TexelFormat::R32Float => {
-            let n = texels.bytes.len() / 4;
-            let m = (0..n)
-                .map(|i| texels.norm_at(i).abs())
+            let m = ranges
+                .ranges
+                .iter()
+                // A block of NaNs alone keeps its empty (∞, −∞) range: nothing to count.
+                .filter(|(lo, hi)| lo <= hi)
+                .map(|&(lo, hi)| lo.abs().max(hi.abs()))
                 .fold(0.0f32, f32::max);
             match m {
                 m if !m.is_finite() => None,
@@ -65,12 +69,14 @@ fn scale_of(texels: &VolumeTexels) -> Option<f32> {
 }
 
 impl GradientVolume {
-    /// Computes the gradient volume of `texels` (already uploaded as `volume`) on the
-    /// GPU, or `None` when it would not fit [`GRADIENT_BUDGET`] or the adapter.
+    /// Computes the gradient volume of `texels` (already uploaded as `volume`, its
+    /// blocks spanning `ranges`) on the GPU, or `None` when it would not fit
+    /// [`GRADIENT_BUDGET`] or the adapter.
     pub fn new(
         gpu: &Gpu,
         volume: &wgpu::TextureView,
         texels: &VolumeTexels,
+        ranges: &BlockRanges,
     ) -> Result<Option<Self>, GpuError> {
         let dims = padded(texels.dims).map(|d| d as u32);
         let bytes = dims.iter().map(|&d| u64::from(d)).product::<u64>() * 8;
@@ -78,7 +84,7 @@ impl GradientVolume {
         if bytes > GRADIENT_BUDGET || dims.iter().any(|&d| d > max_dim) {
             return Ok(None);
         }
-        let Some(scale) = scale_of(texels) else {
+        let Some(scale) = scale_of(texels.format, ranges) else {
             return Ok(None);
         };
         let stage = gpu.stage::<GradientGpu>()?;
