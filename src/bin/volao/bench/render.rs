@@ -66,25 +66,6 @@ impl RenderBenchArgs {
     }
 }
 
-/// The median time of `runs` frames after one warm-up frame (pipelines, caches), in
-/// seconds, image readback included.
-fn warm_frame(
-    gpu: &volao::gpu::Gpu,
-    rc: &volao::render::gpu::RayCaster,
-    vol: &volao::render::gpu::GpuVolume,
-    frame: &volao::render::Frame,
-    (clip, runs): (Option<&volao::clip::gpu::ClipMaps>, usize),
-) -> Result<f64> {
-    rc.render(gpu, vol, frame, clip)?;
-    let mut times = Vec::new();
-    for _ in 0..runs.max(1) {
-        let start = Instant::now();
-        rc.render(gpu, vol, frame, clip)?;
-        times.push(start.elapsed().as_secs_f64());
-    }
-    Ok(median(times))
-}
-
 /// One configuration's result, as `--json` prints it.
 #[derive(serde::Serialize)]
 struct Timed {
@@ -105,7 +86,7 @@ struct Timed {
 /// `volao bench render FILE…`: the configurations asked for, warm frames.
 fn render_files(args: &RenderBenchArgs) -> Result<()> {
     use std::sync::Arc;
-    use volao::ao::{AoEngine, AoInput, AoRequest, AoSettings};
+    use volao::ao::{Ambient, AoEngine, AoInput, AoRequest, AoSettings};
     use volao::render::RenderSettings;
     use volao::render::gpu::{GpuVolume, RayCaster};
     use volao::render::texels::{UploadLimits, VolumeTexels};
@@ -143,47 +124,58 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
         };
         let tf = TransferFunction::preset(preset, &stats);
         let name = path.display().to_string();
-        // One volume per gradient source, each with its AO.
+        let texels = VolumeTexels::new(&volume, UploadLimits::of(&gpu));
+        let step = RenderSettings::default().step_voxels;
+        // One volume per gradient source.
         let mut vols = Vec::new();
         for &gradient in &args.gradient {
-            let texels = VolumeTexels::new(&volume, UploadLimits::of(&gpu));
-            let step = RenderSettings::default().step_voxels;
-            let mut vol = match gradient {
+            let texels = texels.clone();
+            let vol = match gradient {
                 GradientSource::Volume => GpuVolume::from_texels(&gpu, texels, &tf, step)?,
                 GradientSource::Samples => GpuVolume::for_compute(&gpu, texels, &tf, step)?,
             };
             if vol.gradient_volume().is_some() != (gradient == GradientSource::Volume) {
                 anyhow::bail!("{name}: --gradient volume: the gradient volume does not fit");
             }
-            let ao = AoSettings {
-                method: args.ao,
-                ..Default::default()
-            };
-            let start = Instant::now();
-            let request = AoRequest {
-                tf: &tf,
-                settings: &ao,
-                clip: None,
-                // One AO for every mode timed: an isosurface reads AO wherever it lies.
-                coverage: if args
-                    .mode
-                    .iter()
-                    .all(|m| *m == volao::render::RenderMode::Composite)
-                {
-                    volao::ao::sparse::Coverage::Readable
-                } else {
-                    volao::ao::sparse::Coverage::Every
-                },
-            };
-            let computed = AoEngine::on(Some(Arc::clone(&gpu))).compute(
-                AoInput::Uploaded(&vol),
-                &request,
-                &|_, _| {},
-            )?;
-            volao::render::offscreen::show_ambient(&gpu, &mut vol, &tf, &ao, computed.ambient)?;
-            let ao_ms = start.elapsed().as_secs_f64() * 1e3;
-            vols.push((gradient, vol, ao_ms));
+            vols.push((gradient, vol));
         }
+        // The AO, computed once on the first and shown on each.
+        let ao = AoSettings {
+            method: args.ao,
+            ..Default::default()
+        };
+        let start = Instant::now();
+        let request = AoRequest {
+            tf: &tf,
+            settings: &ao,
+            clip: None,
+            // One AO for every mode timed: an isosurface reads AO wherever it lies.
+            coverage: if args
+                .mode
+                .iter()
+                .all(|m| *m == volao::render::RenderMode::Composite)
+            {
+                volao::ao::sparse::Coverage::Readable
+            } else {
+                volao::ao::sparse::Coverage::Every
+            },
+        };
+        let computed = AoEngine::on(Some(Arc::clone(&gpu))).compute(
+            AoInput::Uploaded(&vols[0].1),
+            &request,
+            &|_, _| {},
+        )?;
+        let ao_ms = start.elapsed().as_secs_f64() * 1e3;
+        for (_, vol) in vols.iter_mut().skip(1) {
+            let again = match &computed.ambient {
+                Ambient::One => Ambient::One,
+                Ambient::Live => Ambient::Live,
+                Ambient::Values(a) => Ambient::Values(a.clone()),
+                Ambient::Cao(_) => anyhow::bail!("{name}: bench render computes no CAO"),
+            };
+            volao::render::offscreen::show_ambient(&gpu, vol, &tf, &ao, again)?;
+        }
+        volao::render::offscreen::show_ambient(&gpu, &mut vols[0].1, &tf, &ao, computed.ambient)?;
         let maps = match args.clip.is_empty() {
             true => None,
             false => {
@@ -216,8 +208,9 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
                 (frame, v)
             })
             .collect();
-        let seconds = interleaved_frames(&gpu, &rc, &configs, (maps.as_ref(), args.runs))?;
-        for ((frame, (gradient, _, ao_ms)), seconds) in configs.iter().zip(seconds) {
+        let timed: Vec<_> = configs.iter().map(|(f, (_, vol))| (*f, vol)).collect();
+        let seconds = interleaved_frames(&gpu, &rc, &timed, (maps.as_ref(), args.runs))?;
+        for ((frame, (gradient, _)), seconds) in configs.iter().zip(seconds) {
             let t = Timed {
                 file: name.clone(),
                 size: [args.width, args.height],
@@ -226,7 +219,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
                 gradient: *gradient,
                 ao: args.ao,
                 median_frame_ms: seconds * 1e3,
-                ao_ms: *ao_ms,
+                ao_ms,
                 clip_shapes: args.clip.len(),
                 adapter: adapter.clone(),
             };
@@ -257,18 +250,15 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
 fn interleaved_frames(
     gpu: &volao::gpu::Gpu,
     rc: &volao::render::gpu::RayCaster,
-    configs: &[(
-        volao::render::Frame,
-        &(GradientSource, volao::render::gpu::GpuVolume, f64),
-    )],
+    configs: &[(volao::render::Frame, &volao::render::gpu::GpuVolume)],
     (clip, runs): (Option<&volao::clip::gpu::ClipMaps>, usize),
 ) -> Result<Vec<f64>> {
-    for (frame, (_, vol, _)) in configs {
+    for (frame, vol) in configs {
         rc.render(gpu, vol, frame, clip)?;
     }
     let mut times = vec![Vec::new(); configs.len()];
     for _ in 0..runs.max(1) {
-        for ((frame, (_, vol, _)), t) in configs.iter().zip(&mut times) {
+        for ((frame, vol), t) in configs.iter().zip(&mut times) {
             let start = Instant::now();
             rc.render(gpu, vol, frame, clip)?;
             t.push(start.elapsed().as_secs_f64());
@@ -343,7 +333,7 @@ pub fn render_bench(args: &RenderBenchArgs) -> Result<()> {
                         ..Default::default()
                     };
                     let frame = super::frame(20.0, settings, size);
-                    let t = warm_frame(&gpu, &rc, &vol, &frame, (None, args.runs))?;
+                    let t = interleaved_frames(&gpu, &rc, &[(frame, &vol)], (None, args.runs))?[0];
                     let steps = box_steps(&frame, &vol.texels, &vol.lut);
                     println!(
                         "| {name} | {size}² | {shading:?} | {} | {:.1} ms | {:.2e} |",
