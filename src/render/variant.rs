@@ -43,11 +43,14 @@ impl Variant {
         // the projections get one pipeline whatever the lighting settings.
         let lit = s.mode.uses_ao();
         let shadows = lit && vol.extras.light.is_some();
+        let phong = lit && s.shading == super::Shading::Phong;
+        let ao_volume = lit && vol.ao_bound;
+        let live_vao = lit && vol.extras.live_vao.is_some();
         Variant {
             mode: s.mode.code(),
-            phong: lit && s.shading == super::Shading::Phong,
-            ao_volume: lit && vol.ao_bound,
-            live_vao: lit && vol.extras.live_vao.is_some(),
+            phong,
+            ao_volume,
+            live_vao,
             shadows,
             // With shadows, the surface code stays in: lavapipe (Mesa 22.3.6) segfaults
             // in a worker thread running Phong pipelines that read the light volume and
@@ -60,13 +63,7 @@ impl Variant {
             skipping: s.empty_space_skipping,
             // Only shading and the AO's read point take gradients: without either, the
             // same pipeline whether a gradient volume is bound or not.
-            gradient: Some(
-                vol.gradient_volume().is_some()
-                    && lit
-                    && (s.shading == super::Shading::Phong
-                        || vol.ao_bound
-                        || vol.extras.live_vao.is_some()),
-            ),
+            gradient: Some(vol.gradient_volume().is_some() && (phong || ao_volume || live_vao)),
         }
     }
 
