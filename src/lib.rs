@@ -7,9 +7,11 @@
 //! 2. [`tf`] maps values to colour and opacity (the transfer function, in the data's
 //!    units); [`scene`] files hold a volume, its transfer function, camera, light, AO
 //!    settings, clip shapes and meshes, so any view can be reproduced headlessly.
-//! 3. [`render::texels`] turns the volume into texels for the GPU (halved until it fits);
-//!    [`sample`] is the CPU twins' vocabulary for reading them (trilinear, LUT lookup,
-//!    f16 mip chains) exactly as the shaders do.
+//! 3. [`texels`] turns the volume into texels for the GPU (halved until it fits), with
+//!    the block ranges every stage's skipping reads; it sits below [`ao`] and [`render`],
+//!    which both read it. [`sample`] is the CPU twins' vocabulary for reading them
+//!    (trilinear, LUT lookup, f16 mip chains, how far off a sample AO is read) exactly
+//!    as the shaders do.
 //! 4. [`gpu`] owns the device (one path for viewer, CLI and tests), the shaders, the
 //!    resource helpers, [`gpu::dispatch::SlabDispatch`] (the z-slab loop of the dense
 //!    per-voxel compute stages) and [`gpu::dispatch::BrickDispatch`] (CAO's lists of
@@ -50,6 +52,8 @@ pub mod volume;
 
 pub mod scene;
 pub mod tf;
+
+pub mod texels;
 
 pub mod sample;
 

@@ -5,10 +5,17 @@
 //! Every twin in `stage`-like modules (`ao::lao`, `render::shadow`, `ao::vao`, `ao::cao`,
 //! `render::cpu`, …) samples through these, so the GPU and CPU paths read the same values.
 
-use crate::render::texels::{TexelFormat, VolumeTexels};
+use crate::texels::{TexelFormat, VolumeTexels};
 use crate::tf::{Lut, TransferFunction, correct_opacity};
 use glam::Vec3;
 use rayon::prelude::*;
+
+/// The largest AO read offset ([`crate::render::RenderSettings::ao_offset`]), in voxels:
+/// the ray caster reads AO up to this far off a sample with opacity, along the normal,
+/// and sparse AO computes the voxels within `1 + AO_READ_REACH` of a texel with opacity
+/// (`ao::sparse`), which is what keeps it exact; larger offsets are clamped to it. Both
+/// `render` and `ao` read it from here.
+pub const AO_READ_REACH: usize = 2;
 
 /// Trilinear interpolation of `values` (x fastest) at texture coordinates `uvw` in
 /// [0, 1]³, texel centres at (i + ½)/n, clamped at the edges like a GPU sampler.

@@ -104,16 +104,28 @@ fn expand(tree: &str) -> Vec<String> {
         .collect()
 }
 
-/// Paths starting with `crate`, `super` or `self` in `code` (outside `use` items).
-fn inline_paths(code: &str) -> Vec<String> {
+/// Paths starting with `crate`, `super`, `self` or one of the module's `children` in
+/// `code` (outside `use` items): `reuse::MAX_BALLS` in `render/mod.rs` is an import of
+/// `render/reuse.rs`.
+fn inline_paths(code: &str, children: &BTreeSet<String>) -> Vec<String> {
     let mut out = Vec::new();
     let bytes = code.as_bytes();
-    for start in ["crate::", "super::", "self::"] {
+    let starts = ["crate", "super", "self"]
+        .into_iter()
+        .map(str::to_owned)
+        .chain(children.iter().cloned())
+        .map(|s| format!("{s}::"));
+    for start in starts {
+        let start = start.as_str();
         let mut from = 0;
         while let Some(i) = code[from..].find(start) {
             let i = from + i;
             from = i + start.len();
-            if i > 0 && (bytes[i - 1].is_ascii_alphanumeric() || bytes[i - 1] == b'_') {
+            // Not the tail of a longer name or path (`crate::render::reuse::` is found
+            // as a whole from `crate::`).
+            if i > 0
+                && (bytes[i - 1].is_ascii_alphanumeric() || matches!(bytes[i - 1], b'_' | b':'))
+            {
                 continue;
             }
             let end = code[i..]
@@ -220,7 +232,7 @@ fn import_graph() -> BTreeMap<PathBuf, BTreeSet<PathBuf>> {
                 paths.extend(expand(tree));
             }
         }
-        paths.extend(inline_paths(&rest));
+        paths.extend(inline_paths(&rest, &children));
         let deps: BTreeSet<PathBuf> = paths
             .iter()
             .filter_map(|p| {
@@ -294,11 +306,17 @@ fn cycles(graph: &BTreeMap<PathBuf, BTreeSet<PathBuf>>) -> Vec<Vec<PathBuf>> {
 fn no_import_cycle_between_library_files() {
     let graph = import_graph();
     assert!(graph.len() > 40, "found only {} library files", graph.len());
-    // The checker itself must see imports: render/gpu_volume.rs uses the texels.
-    assert!(
-        graph[Path::new("render/gpu_volume.rs")].contains(Path::new("render/texels.rs")),
-        "the import parser missed render/gpu_volume.rs → render/texels.rs"
-    );
+    // The checker itself must see imports: render/gpu_volume.rs uses the texels, and
+    // render/mod.rs names render/reuse.rs by a bare child path (`reuse::MAX_BALLS`).
+    for (from, to) in [
+        ("render/gpu_volume.rs", "texels/mod.rs"),
+        ("render/mod.rs", "render/reuse.rs"),
+    ] {
+        assert!(
+            graph[Path::new(from)].contains(Path::new(to)),
+            "the import parser missed {from} → {to}"
+        );
+    }
     let found = cycles(&graph);
     let report: Vec<String> = found
         .iter()
@@ -328,6 +346,14 @@ fn the_cycle_checker_finds_a_cycle() {
     ]);
     assert_eq!(cycles(&graph).len(), 1);
     assert_eq!(expand("a::{b, c::{d, e}}"), ["a::b", "a::c::d", "a::c::e"]);
+    // A bare path through a child module is an import of that child, wherever it
+    // stands; the tail of a longer path or name is not.
+    let children = BTreeSet::from(["reuse".to_owned()]);
+    let code = "let n = reuse::MAX_BALLS; let m = crate::render::reuse::X; let k = nonreuse::Y;";
+    assert_eq!(
+        inline_paths(code, &children),
+        ["crate::render::reuse::X", "reuse::MAX_BALLS"]
+    );
 }
 
 #[test]

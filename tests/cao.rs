@@ -11,7 +11,9 @@ use common::{crop, device, texels};
 
 use common::{Rng, data, differing};
 use glam::Vec3;
-use volao::ao::cao::{CaoGpu, CaoMode, CaoVolume, clip_volume_cpu, lao_on_opacity_cpu, reach_mm};
+use volao::ao::cao::{
+    CaoGpu, CaoMode, CaoVolume, Pose, clip_volume_cpu, lao_on_opacity_cpu, reach_mm,
+};
 use volao::ao::lao::{Rays, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::{Bricks, Coverage};
@@ -19,13 +21,23 @@ use volao::clip::camera::EMPTY;
 use volao::clip::{ClipMode, ClipShape, Shape};
 use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
-use volao::render::texels::BlockRanges;
 use volao::render::{Camera, Frame, RenderMode, RenderSettings};
+use volao::texels::BlockRanges;
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume};
 
 /// Depth-map size in these tests (the default is 1024; small keeps lavapipe quick).
 const MAP: u32 = 128;
+
+/// A CAO frame's pose for `shapes` with maps of [`MAP`] pixels.
+fn pose(shapes: &[ClipShape], reach_mm: f32, mode: CaoMode) -> Pose<'_> {
+    Pose {
+        shapes,
+        resolution: MAP,
+        reach_mm,
+        mode,
+    }
+}
 /// Samples per LAO ray here (the default is 20).
 const SAMPLES: u32 = 8;
 
@@ -154,7 +166,7 @@ impl Scene {
     /// One frame of sparse CAO, for its figures.
     fn update(&mut self, shapes: &[ClipShape], reach: f32) -> volao::ao::cao::CaoStats {
         let Scene { gpu, vol, cao, .. } = self;
-        cao.update(gpu, &vol.texels, shapes, MAP, reach, CaoMode::Selective)
+        cao.update(gpu, &vol.texels, pose(shapes, reach, CaoMode::Selective))
             .unwrap_or_else(|e| panic!("{e}"))
     }
 
@@ -190,7 +202,7 @@ fn run(
     reach: f32,
 ) -> (Vec<f32>, Vec<[u8; 4]>, f64, bool) {
     let stats = cao
-        .update(gpu, &vol.texels, shapes, MAP, reach, mode)
+        .update(gpu, &vol.texels, pose(shapes, reach, mode))
         .unwrap_or_else(|e| panic!("{e}"));
     assert!(stats.clip_errors.is_empty(), "{:?}", stats.clip_errors);
     let ao = cao
@@ -209,10 +221,7 @@ fn run(
 /// brick and voxel tests: some sample of non-zero opacity weights it, i.e. one of the 8
 /// cells around it has a density range over which the (uncorrected) LUT is not
 /// transparent. A cell's corners are the texels at and above its lower corner.
-fn readable_voxels(
-    texels: &volao::render::texels::VolumeTexels,
-    tf: &TransferFunction,
-) -> Vec<bool> {
+fn readable_voxels(texels: &volao::texels::VolumeTexels, tf: &TransferFunction) -> Vec<bool> {
     let lut = volao::sample::bake_lut(tf, texels, 1.0);
     let d = texels.dims;
     let at = |x: usize, y: usize, z: usize| texels.norm_at(x + d[0] * (y + d[1] * z));
@@ -240,7 +249,7 @@ fn readable_voxels(
     // The ray caster reads AO up to AO_READ_REACH voxels off a sample in an open cell,
     // and the trilinear read weights the voxels within one of that point: voxel v is
     // read if a cell c with v − 1 − reach ≤ c ≤ v + reach is open.
-    let r = volao::render::AO_READ_REACH as isize;
+    let r = volao::sample::AO_READ_REACH as isize;
     let is_open = |c: [isize; 3]| {
         let c = [0, 1, 2].map(|a| (c[a].clamp(-1, d[a] as isize - 1) + 1) as usize);
         open[c[0] + n[0] * (c[1] + n[1] * c[2])]
@@ -869,7 +878,7 @@ fn bad_shapes_are_reported_and_the_rest_still_clip() {
     many.extend(std::iter::repeat_n(good.clone(), 8));
     let stats = s
         .cao
-        .update(&s.gpu, &s.vol.texels, &many, MAP, reach, CaoMode::Selective)
+        .update(&s.gpu, &s.vol.texels, pose(&many, reach, CaoMode::Selective))
         .unwrap_or_else(|e| panic!("{e}"));
     let errors = stats.clip_errors.join("\n");
     assert!(errors.contains("non-finite"), "{errors}");
@@ -988,7 +997,11 @@ fn a_carved_pocket_keeps_its_light_with_cao_gpu_and_cpu() {
     };
     let reach = reach_mm(SAMPLES, vol.texels.spacing);
     let stats = cao
-        .update(&gpu, &vol.texels, &[pocket], MAP, reach, CaoMode::Selective)
+        .update(
+            &gpu,
+            &vol.texels,
+            pose(&[pocket], reach, CaoMode::Selective),
+        )
         .unwrap_or_else(|e| panic!("{e}"));
     assert!(
         stats.clip_errors.is_empty() && stats.clipped > 0,

@@ -10,7 +10,7 @@ use volao::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Coverage;
 use volao::render::gpu::GpuVolume;
-use volao::render::texels::BlockRanges;
+use volao::texels::BlockRanges;
 use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
 
@@ -271,7 +271,7 @@ fn gpu_matches_cpu_twin_for_every_ray_set() {
 }
 
 /// A 48×48×40 piece of the cranium CT with bone and air, under `ct-bone`, as texels.
-fn cranium_bone_crop() -> (TransferFunction, volao::render::texels::VolumeTexels) {
+fn cranium_bone_crop() -> (TransferFunction, volao::texels::VolumeTexels) {
     let full = volume::load(&data("raw/cranium-ct.raw"), &LoadOptions::default())
         .unwrap_or_else(|e| panic!("{e}"))
         .volume;

@@ -10,8 +10,8 @@ use std::path::PathBuf;
 use volao::gpu::Gpu;
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::image::{Tolerance, check};
-use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
+use volao::texels::{UploadLimits, VolumeTexels};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume};
 

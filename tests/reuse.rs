@@ -9,7 +9,7 @@ mod common;
 
 use common::{crop, data, device, texels};
 use glam::Vec3;
-use volao::ao::cao::{CaoGpu, CaoMode};
+use volao::ao::cao::{CaoGpu, CaoMode, Pose};
 use volao::ao::lao::Rays;
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Coverage;
@@ -72,10 +72,12 @@ impl Scene {
             .update(
                 &self.gpu,
                 &self.vol.texels,
-                shapes,
-                MAP,
-                reach,
-                CaoMode::Selective,
+                Pose {
+                    shapes,
+                    resolution: MAP,
+                    reach_mm: reach,
+                    mode: CaoMode::Selective,
+                },
             )
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(stats.clip_errors.is_empty(), "{:?}", stats.clip_errors);
@@ -266,7 +268,7 @@ fn the_cut_changes_the_ao_only_within_its_reach_and_up_to_it() {
     let half = Vec3::from(texels.extent()) * 0.5;
     let reach = &inputs.shapes[0];
     let read_margin =
-        volao::render::AO_READ_REACH as f32 * spacing.min_element() + spacing.length();
+        volao::sample::AO_READ_REACH as f32 * spacing.min_element() + spacing.length();
     let bound = reach.ao.radius - read_margin;
     let mut farthest = 0.0f32;
     for (i, (x, y)) in ao.iter().zip(&pao).enumerate() {

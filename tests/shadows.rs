@@ -324,7 +324,7 @@ fn slab_frame() -> Frame {
 /// Where each pixel's ray meets the back slab's face (y = 24 voxels), as the voxel x of
 /// the hit; `None` where it misses the face, or the front slab (if `front`) is in the way.
 fn face_hits(
-    t: &volao::render::texels::VolumeTexels,
+    t: &volao::texels::VolumeTexels,
     lut: &volao::tf::Lut,
     f: &Frame,
     front: bool,
@@ -440,7 +440,7 @@ fn shadows_add_no_high_frequency_energy_to_the_cranium() {
     // direction (as `volao render --shadows` without --light) against the same frame
     // without. The cranium halved (128×128×54) at 256² has as many pixels per voxel as
     // the full one at 512², the size the issue measures, for a quarter of the work.
-    use volao::render::texels::{UploadLimits, VolumeTexels};
+    use volao::texels::{UploadLimits, VolumeTexels};
     let gpu = vulkan_device();
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
     let volume = volao::volume::load(&common::data("raw/cranium-ct.raw"), &Default::default())

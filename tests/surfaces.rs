@@ -12,8 +12,8 @@ use volao::render::cpu::{self, CpuSurfaces};
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::image::Tolerance;
 use volao::render::surface::Surface;
-use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading};
+use volao::texels::{UploadLimits, VolumeTexels};
 use volao::tf::TransferFunction;
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
 

@@ -20,8 +20,8 @@ use crate::gpu::{
     Gpu, GpuError, copy_texture_out, read_buffer, storage_buffer, submit_compute, texture_readback,
     unpad, validated,
 };
-use crate::render::texels::VolumeTexels;
 use crate::sample::trilinear;
+use crate::texels::VolumeTexels;
 use crate::tf::TransferFunction;
 use glam::Vec3;
 use rayon::prelude::*;

@@ -17,7 +17,7 @@ use super::{AoMethod, AoSettings};
 use crate::clip::ClipShape;
 use crate::gpu::{Gpu, GpuError, GpuUse};
 use crate::render::gpu::GpuVolume;
-use crate::render::texels::{BlockRanges, UploadLimits, VolumeTexels};
+use crate::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use crate::tf::TransferFunction;
 use std::sync::Arc;
 
@@ -308,7 +308,13 @@ impl AoEngine {
                 AoMethod::LaoFull => CaoMode::Full,
                 _ => CaoMode::Selective,
             };
-            stats = Some(c.update(g, texels, clip, s.clip_resolution, reach, mode)?);
+            let pose = crate::ao::cao::Pose {
+                shapes: clip,
+                resolution: s.clip_resolution,
+                reach_mm: reach,
+                mode,
+            };
+            stats = Some(c.update(g, texels, pose)?);
         }
         Ok(AoComputed {
             ambient: Ambient::Cao(Box::new(c)),

@@ -7,7 +7,7 @@ use super::filter::{self, AmbientMap, FilterGpu, OpacityModulation, RadiusUnit, 
 use super::{AoMethod, AoSettings};
 use crate::gpu::{Gpu, GpuError};
 use crate::render::gpu::GpuVolume;
-use crate::render::texels::VolumeTexels;
+use crate::texels::VolumeTexels;
 use crate::tf::TransferFunction;
 
 /// The filter map a method asks for, if it is one.

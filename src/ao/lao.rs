@@ -13,8 +13,8 @@ use crate::gpu::{
     Gpu, GpuError, output_buffer, read_buffer, readback_buffer, storage_buffer, validated,
 };
 use crate::render::gpu::GpuVolume;
-use crate::render::texels::VolumeTexels;
 use crate::sample::{alpha_column, lut_lerp, trilinear, voxel_centre};
+use crate::texels::VolumeTexels;
 use crate::tf::Lut;
 use glam::Vec3;
 use rayon::prelude::*;

@@ -26,12 +26,12 @@
 //! With skipping off ([`Bricks::dense`], `--no-skipping`) every list holds every brick
 //! and no ray skips: the paper's dense CAO.
 
-use crate::clip::camera::ClipCamera;
-use crate::clip::gpu::{ClipUniforms, ShapeUniform};
-use crate::render::texels::{BLOCK, BlockRanges, VolumeTexels};
+use crate::clip::camera::{ClipCamera, bound_in_volume, carved_ball};
+use crate::clip::gpu::ClipUniforms;
 use crate::render::{RenderMode, RenderSettings};
+use crate::texels::{BLOCK, BlockRanges, VolumeTexels};
 use crate::tf::{Lut, TransferFunction};
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 
 /// Which voxels an AO computation covers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -189,7 +189,7 @@ pub struct VoxelTest {
     pub value_map: [f64; 2],
     /// Texels taken below the voxel on each axis, and as many above (at least 1):
     /// `1 + AO_READ_REACH`, as the ray caster reads AO up to that far off a sample with
-    /// opacity (`render::AO_READ_REACH`). Tests take fewer to show that exactness rests
+    /// opacity (`sample::AO_READ_REACH`). Tests take fewer to show that exactness rests
     /// on it.
     pub below: usize,
 }
@@ -209,7 +209,7 @@ impl VoxelTest {
             prefix,
             map: [a, b, (lut.rgba.len().max(2) - 1) as f32],
             value_map: [texels.value_scale, texels.value_offset],
-            below: 1 + crate::render::AO_READ_REACH,
+            below: 1 + crate::sample::AO_READ_REACH,
         }
     }
 
@@ -612,22 +612,6 @@ pub const MAX_CUT_BALLS: usize = 8;
 /// The margin of step IV's per-ray test beyond where a shape can carve, in voxel
 /// diagonals ([`Bricks::cut_balls`]).
 pub const RAY_TEST_MARGIN: f32 = 1.5;
-
-/// Where shape `s`'s maps can say "carved", in volume mm: the centre of the mesh's
-/// bounding sphere and its radius with three map pixels for the maps' quantisation
-/// ([`ClipCamera::reach_bound`] without the dilation).
-pub(crate) fn carved_ball(s: &ShapeUniform, camera: &ClipCamera) -> (Vec3, f32) {
-    let (_, centre) = bound_in_volume(s, camera);
-    (centre, camera.bound_radius + 3.0 / camera.pixels_per_mm)
-}
-
-/// A shape's clipping camera back in volume mm: map → volume, and the centre of the
-/// mesh's bounding sphere (the pose is rigid: the radius stays).
-fn bound_in_volume(s: &ShapeUniform, camera: &ClipCamera) -> (Mat4, Vec3) {
-    let to_volume = Mat4::from_cols_array_2d(&s.volume_to_map).inverse();
-    let centre = to_volume.transform_point3(camera.project(camera.bound_centre));
-    (to_volume, centre)
-}
 
 /// Brick boxes in volume mm, for a volume of `spacing` and half-extent `half`.
 struct BrickBox {

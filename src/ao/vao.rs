@@ -22,10 +22,10 @@ use crate::gpu::{
     Gpu, GpuError, bind_group, f16_texture, output_buffer, readback_buffer, shaders,
     uniform_buffer, validated,
 };
-use crate::render::texels::VolumeTexels;
 use crate::sample::{
     bake_lut, f16_lut_map, f16_map, mip_chain, per_voxel, trilinear, voxel_centre,
 };
+use crate::texels::VolumeTexels;
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
 

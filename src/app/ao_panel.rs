@@ -79,7 +79,7 @@ pub fn show(
     });
     ui.add(egui::Slider::new(strength, 0.0..=3.0).text("AO strength s"))
         .on_hover_text("How deep occlusion darkens: 0 no AO, 1 as computed, above 1 deeper");
-    let reach = crate::render::AO_READ_REACH as f32;
+    let reach = crate::sample::AO_READ_REACH as f32;
     ui.add(egui::Slider::new(offset, 0.0..=reach).text("AO read offset (voxels)"))
         .on_hover_text(
             "Where a sample reads the AO: this far out of the material along the normal, \

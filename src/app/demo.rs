@@ -13,7 +13,7 @@ use crate::ao::{AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
 use crate::clip::{ClipShape, Shape};
 use crate::gpu::Gpu;
 use crate::render::Camera;
-use crate::render::texels::{UploadLimits, VolumeTexels};
+use crate::texels::{UploadLimits, VolumeTexels};
 use crate::tf::TransferFunction;
 use crate::volume::Volume;
 use glam::Vec3;

@@ -9,7 +9,7 @@ use super::derived::{AoKey, AoShown};
 use super::jobs::{Job, Polled};
 use crate::ao::filter::{RadiusUnit, StatisticSource};
 use crate::ao::{Ambient, AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
-use crate::render::texels::VolumeTexels;
+use crate::texels::VolumeTexels;
 use crate::tf::TransferFunction;
 use std::sync::Arc;
 
@@ -155,7 +155,7 @@ mod tests {
         assert_eq!(p.method, AoMethod::Gauss);
         assert_eq!((p.radius, p.radius_unit), (16.0, RadiusUnit::Mm));
         let vol = crate::volume::demo::head_phantom(16).to_ras();
-        let texels = VolumeTexels::new(&vol, crate::render::texels::UploadLimits::NONE);
+        let texels = VolumeTexels::new(&vol, crate::texels::UploadLimits::NONE);
         let stats = vol.stats();
         let tf = TransferFunction::preset(crate::tf::Preset::default_for(&stats), &stats);
         let a = compute_preview(&texels, &tf, &lao).expect("preview");

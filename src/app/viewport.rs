@@ -10,7 +10,7 @@
 //! rectangle to draw into.
 
 use super::tiles::{RECENT_TILES, Tile, TileCosts, next_tile, strip_texture};
-use crate::ao::cao::{CaoFrame, CaoGpu, CaoMode, CaoStats};
+use crate::ao::cao::{CaoFrame, CaoGpu, CaoMode, CaoStats, Pose};
 use crate::clip::ClipShape;
 use crate::clip::gpu::ClipMaps;
 use crate::gpu::pacer::Pacer;

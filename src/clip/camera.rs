@@ -6,6 +6,7 @@
 //! maps (`floor` gives the texel) and a depth in (0, 1), larger = farther. Square pixels
 //! and a linear depth keep the dilation a sphere: `r_xy` pixels across, `r_z` deep.
 
+use super::gpu_data::ShapeUniform;
 use super::mesh::TriMesh;
 use glam::{Mat4, Vec3, Vec4};
 
@@ -120,6 +121,22 @@ impl ClipCamera {
 /// absorb f32 rounding.
 pub fn dilation_margin(reach_mm: f32, pixel_mm: f32) -> f32 {
     (reach_mm + std::f32::consts::SQRT_2 * pixel_mm) * 1.01 + 0.01
+}
+
+/// Where shape `s`'s maps can say "carved", in volume mm: the centre of the mesh's
+/// bounding sphere and its radius with three map pixels for the maps' quantisation
+/// ([`ClipCamera::reach_bound`] without the dilation).
+pub fn carved_ball(s: &ShapeUniform, camera: &ClipCamera) -> (Vec3, f32) {
+    let (_, centre) = bound_in_volume(s, camera);
+    (centre, camera.bound_radius + 3.0 / camera.pixels_per_mm)
+}
+
+/// A shape's clipping camera back in volume mm: map → volume, and the centre of the
+/// mesh's bounding sphere (the pose is rigid: the radius stays).
+pub fn bound_in_volume(s: &ShapeUniform, camera: &ClipCamera) -> (Mat4, Vec3) {
+    let to_volume = Mat4::from_cols_array_2d(&s.volume_to_map).inverse();
+    let centre = to_volume.transform_point3(camera.project(camera.bound_centre));
+    (to_volume, centre)
 }
 
 #[cfg(test)]

@@ -30,22 +30,28 @@ const MAX_GROWTH: f64 = 4.0;
 /// How much of the earlier measurements of a kind of work each new piece keeps.
 const DECAY: f64 = 0.8;
 
-/// When something finished, stamped by a queue callback.
-type Stamp = Arc<Mutex<Option<Instant>>>;
+/// When the work submitted before it was made finished, stamped by a queue callback
+/// (seen at a device poll).
+#[derive(Debug, Clone, Default)]
+pub struct Stamp(Arc<Mutex<Option<Instant>>>);
 
-fn stamp_when_done(gpu: &Gpu) -> Stamp {
-    let stamp: Stamp = Arc::default();
-    let s = Arc::clone(&stamp);
-    gpu.queue.on_submitted_work_done(move || {
-        if let Ok(mut t) = s.lock() {
-            *t = Some(Instant::now());
-        }
-    });
-    stamp
-}
+impl Stamp {
+    /// A stamp for everything submitted to `gpu`'s queue so far.
+    pub fn when_done(gpu: &Gpu) -> Self {
+        let stamp = Stamp::default();
+        let s = Arc::clone(&stamp.0);
+        gpu.queue.on_submitted_work_done(move || {
+            if let Ok(mut t) = s.lock() {
+                *t = Some(Instant::now());
+            }
+        });
+        stamp
+    }
 
-fn read(stamp: &Stamp) -> Option<Instant> {
-    stamp.lock().ok().and_then(|t| *t)
+    /// When that work finished, once it has.
+    pub fn get(&self) -> Option<Instant> {
+        self.0.lock().ok().and_then(|t| *t)
+    }
 }
 
 /// A submitted piece being timed.
@@ -145,9 +151,12 @@ impl Pacer {
         let mut outstanding = 0.0;
         let mut finished: Vec<(String, u64, Duration)> = Vec::new();
         let timed = &mut self.timed;
-        self.queued.retain(|p| match read(&p.done) {
+        self.queued.retain(|p| match p.done.get() {
             Some(done) => {
-                let start = read(&p.ahead_done).map_or(p.submitted, |t| t.max(p.submitted));
+                let start = p
+                    .ahead_done
+                    .get()
+                    .map_or(p.submitted, |t| t.max(p.submitted));
                 let took = done.saturating_duration_since(start);
                 finished.push((p.label.clone(), p.units, took));
                 if let Some(tag) = p.tag {
@@ -296,7 +305,7 @@ impl Pacer {
         submit: impl FnOnce() -> R,
     ) -> R {
         self.left -= estimate;
-        let ahead_done = stamp_when_done(gpu);
+        let ahead_done = Stamp::when_done(gpu);
         let submitted = Instant::now();
         let r = submit();
         self.queued.push(Piece {
@@ -305,7 +314,7 @@ impl Pacer {
             estimate,
             submitted,
             ahead_done,
-            done: stamp_when_done(gpu),
+            done: Stamp::when_done(gpu),
             tag,
         });
         self.poller.active.store(true, Ordering::Relaxed);

@@ -1,9 +1,9 @@
 //! CPU twin of `shaders/raycast.wgsl`: the same steps in the same order, in f32, on
 //! rayon. Tests compare it with the GPU; it is also the fallback without an adapter.
 
-use super::texels::{BlockRanges, VolumeTexels};
 use super::{Frame, Image, OPAQUE, RaycastParams, jitter};
 use crate::sample::trilinear;
+use crate::texels::{BlockRanges, VolumeTexels};
 use crate::tf::Lut;
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;

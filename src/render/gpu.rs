@@ -15,7 +15,7 @@ use crate::gpu::{
 /// watchdog on real GPUs) and lets any image size fit the 2-D texture limit.
 pub const TILE: u32 = 2048;
 
-pub use super::texels::MAX_VOLUME_BYTES;
+pub use crate::texels::MAX_VOLUME_BYTES;
 
 /// Long-lived ray-casting state: built once per device.
 #[derive(Debug)]

@@ -7,9 +7,9 @@
 use super::extras::GpuLight;
 use super::gradient::GradientVolume;
 use super::shadow::LightVolume;
-use super::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use crate::gpu::{Gpu, GpuError, validated};
 use crate::sample::bake_lut;
+use crate::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
 
@@ -59,28 +59,11 @@ fn next_generation() -> u64 {
     NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
-fn texture_3d(
-    device: &wgpu::Device,
-    label: &str,
-    dims: [u32; 3],
-    format: wgpu::TextureFormat,
-) -> wgpu::Texture {
-    device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d {
-            width: dims[0],
-            height: dims[1],
-            depth_or_array_layers: dims[2],
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D3,
-        format,
-        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[],
-    })
-}
+/// How the volume's textures are used: sampled by the shaders, written by the upload.
+const SAMPLED: wgpu::TextureUsages =
+    wgpu::TextureUsages::TEXTURE_BINDING.union(wgpu::TextureUsages::COPY_DST);
 
+/// Writes `data` into the whole of `texture` (one level of `dims`).
 fn write_3d(
     queue: &wgpu::Queue,
     texture: &wgpu::Texture,
@@ -88,20 +71,7 @@ fn write_3d(
     bytes_per_texel: u32,
     data: &[u8],
 ) {
-    queue.write_texture(
-        texture.as_image_copy(),
-        data,
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(dims[0] * bytes_per_texel),
-            rows_per_image: Some(dims[1]),
-        },
-        wgpu::Extent3d {
-            width: dims[0],
-            height: dims[1],
-            depth_or_array_layers: dims[2],
-        },
-    );
+    crate::gpu::write_texture_3d(queue, texture, 0, dims, bytes_per_texel, data);
 }
 
 impl GpuVolume {
@@ -148,7 +118,13 @@ impl GpuVolume {
         let occ = ranges.occupancy(&texels, &lut);
         let grid = ranges.grid.map(|d| d as u32);
         validated(device, "GpuVolume::upload", || {
-            let volume = texture_3d(device, "GpuVolume::volume", dims, texels.format.wgpu());
+            let volume = crate::gpu::texture_3d(
+                device,
+                "GpuVolume::volume",
+                dims,
+                texels.format.wgpu(),
+                SAMPLED,
+            );
             write_3d(
                 queue,
                 &volume,
@@ -156,26 +132,20 @@ impl GpuVolume {
                 texels.format.bytes() as u32,
                 &texels.bytes,
             );
-            // No AO volume yet: a single texel of 1 makes A(x) = 1 everywhere.
-            let ao = texture_3d(
-                device,
-                "GpuVolume::ambient_occlusion",
-                [1, 1, 1],
-                wgpu::TextureFormat::R32Float,
-            );
-            write_3d(queue, &ao, [1, 1, 1], 4, bytemuck::bytes_of(&1.0f32));
-            let occupancy = texture_3d(
+            let occupancy = crate::gpu::texture_3d(
                 device,
                 "GpuVolume::occupancy",
                 grid,
                 wgpu::TextureFormat::R8Uint,
+                SAMPLED,
             );
             write_3d(queue, &occupancy, grid, 1, &occ);
-            let block_range = texture_3d(
+            let block_range = crate::gpu::texture_3d(
                 device,
                 "GpuVolume::block_range",
                 grid,
                 wgpu::TextureFormat::Rg32Float,
+                SAMPLED,
             );
             let range_texels: Vec<[f32; 2]> = ranges.ranges.iter().map(|&(a, b)| [a, b]).collect();
             write_3d(
@@ -194,7 +164,8 @@ impl GpuVolume {
             queue.write_buffer(&lut_buffer, 0, bytemuck::cast_slice(&lut.rgba));
             GpuVolume {
                 volume_view: volume.create_view(&Default::default()),
-                ao_view: ao.create_view(&Default::default()),
+                // No AO volume yet: a single texel of 1 makes A(x) = 1 everywhere.
+                ao_view: no_ambient_occlusion(device, queue),
                 ao_bound: false,
                 ao_stand_in: None,
                 reads_stand_in: false,
@@ -313,11 +284,12 @@ impl GpuVolume {
     pub fn set_ambient_occlusion(&mut self, gpu: &Gpu, values: &[f32]) {
         self.generation = next_generation();
         let dims = self.texels.dims.map(|d| d as u32);
-        let texture = texture_3d(
+        let texture = crate::gpu::texture_3d(
             &gpu.device,
             "GpuVolume::ambient_occlusion",
             dims,
             wgpu::TextureFormat::R32Float,
+            SAMPLED,
         );
         write_3d(&gpu.queue, &texture, dims, 4, bytemuck::cast_slice(values));
         self.ao_view = texture.create_view(&Default::default());
@@ -364,14 +336,7 @@ impl GpuVolume {
     /// shows this while a new AO volume is computed for a changed transfer function.
     pub fn clear_ambient_occlusion(&mut self, gpu: &Gpu) {
         self.generation = next_generation();
-        let ao = texture_3d(
-            &gpu.device,
-            "GpuVolume::ambient_occlusion",
-            [1, 1, 1],
-            wgpu::TextureFormat::R32Float,
-        );
-        write_3d(&gpu.queue, &ao, [1, 1, 1], 4, bytemuck::bytes_of(&1.0f32));
-        self.ao_view = ao.create_view(&Default::default());
+        self.ao_view = no_ambient_occlusion(&gpu.device, &gpu.queue);
         self.ao_bound = false;
         self.ao_stand_in = None;
     }
@@ -393,11 +358,12 @@ impl GpuVolume {
             .iter()
             .map(|&a| (a.clamp(0.0, 1.0) * 65535.0).round() as u16)
             .collect();
-        let texture = texture_3d(
+        let texture = crate::gpu::texture_3d(
             &gpu.device,
             "GpuVolume::opacity_modulation",
             dims,
             wgpu::TextureFormat::R16Unorm,
+            SAMPLED,
         );
         write_3d(
             &gpu.queue,
@@ -424,13 +390,38 @@ impl GpuVolume {
 
 /// No opacity modulation: a single texel of 1.
 fn no_modulation(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::TextureView {
-    let texture = texture_3d(
+    let format = wgpu::TextureFormat::R8Unorm;
+    one_texel(
         device,
+        queue,
         "GpuVolume::opacity_modulation",
-        [1, 1, 1],
-        wgpu::TextureFormat::R8Unorm,
-    );
-    write_3d(queue, &texture, [1, 1, 1], 1, &[255]);
+        format,
+        &[255],
+    )
+}
+
+/// No ambient occlusion: a single texel of 1.
+fn no_ambient_occlusion(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::TextureView {
+    let (format, one) = (wgpu::TextureFormat::R32Float, 1.0f32);
+    one_texel(
+        device,
+        queue,
+        "GpuVolume::ambient_occlusion",
+        format,
+        bytemuck::bytes_of(&one),
+    )
+}
+
+/// A volume of one texel holding `bytes` (a stand-in that reads as a constant).
+fn one_texel(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    format: wgpu::TextureFormat,
+    bytes: &[u8],
+) -> wgpu::TextureView {
+    let texture = crate::gpu::texture_3d(device, label, [1, 1, 1], format, SAMPLED);
+    write_3d(queue, &texture, [1, 1, 1], bytes.len() as u32, bytes);
     texture.create_view(&Default::default())
 }
 

@@ -9,8 +9,8 @@
 //! per voxel of GPU memory: a volume whose gradient volume would not fit
 //! [`GRADIENT_BUDGET`] (or the adapter's 3-D texture size) keeps the six fetches.
 
-use super::texels::{BlockRanges, TexelFormat, VolumeTexels};
 use crate::gpu::{Gpu, GpuError, validated};
+use crate::texels::{BlockRanges, TexelFormat, VolumeTexels};
 
 /// The most GPU memory a gradient volume may take (8 bytes per texel).
 pub const GRADIENT_BUDGET: u64 = 1 << 30;

@@ -22,14 +22,14 @@ pub mod offscreen;
 pub mod reuse;
 pub mod shadow;
 pub mod surface;
-pub mod texels;
 mod variant;
 
 pub use camera::Camera;
 pub use image::Image;
 
+use crate::sample::AO_READ_REACH;
+use crate::texels::{BLOCK, VolumeTexels};
 use crate::tf::Lut;
-use texels::{BLOCK, VolumeTexels};
 
 /// Opacity at which a ray stops (early ray termination).
 pub const OPAQUE: f32 = 0.99;
@@ -143,11 +143,6 @@ pub const DEFAULT_AO_STRENGTH: f32 = 1.0;
 
 /// The default [`RenderSettings::ao_offset`], in voxels.
 pub const DEFAULT_AO_OFFSET: f32 = 2.0;
-
-/// The largest [`RenderSettings::ao_offset`], in voxels: sparse AO computes the voxels
-/// within `1 + AO_READ_REACH` of a texel with opacity (`ao::sparse`), which is what keeps
-/// it exact; larger offsets are clamped to it.
-pub const AO_READ_REACH: usize = 2;
 
 /// What the AO method gives a point in front of an open, flat, opaque surface, `A_open`:
 /// the shading reads `A' = min(A / A_open, 1)`, so a flat face in the open keeps its light

@@ -5,7 +5,6 @@
 use super::cpu;
 use super::gpu::{GpuVolume, RayCaster};
 use super::shadow::{LightGpu, LightVolume, light_cpu, light_direction, light_lut};
-use super::texels::{UploadLimits, VolumeTexels};
 use super::{Frame, Image, RenderSettings};
 use crate::ao::cao::CaoStats;
 use crate::ao::vao::PositionalAo;
@@ -13,6 +12,7 @@ use crate::ao::{Ambient, AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
 use crate::clip::ClipShape;
 use crate::clip::gpu::ClipMaps;
 use crate::gpu::{Gpu, GpuError};
+use crate::texels::{UploadLimits, VolumeTexels};
 use crate::tf::TransferFunction;
 use crate::volume::Volume;
 use std::sync::Arc;

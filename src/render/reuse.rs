@@ -16,8 +16,9 @@
 use crate::clip::ClipShape;
 use crate::clip::camera::ClipCamera;
 use crate::clip::gpu::ClipMaps;
-use crate::render::texels::VolumeTexels;
-use crate::render::{AO_READ_REACH, Frame, RaycastParams};
+use crate::render::{Frame, RaycastParams};
+use crate::sample::AO_READ_REACH;
+use crate::texels::VolumeTexels;
 use glam::{Vec3, Vec4};
 
 /// The most balls a frame's uniforms hold; more are merged into one that holds them all.
@@ -107,7 +108,7 @@ impl ImageInputs {
         let min_spacing = spacing.min_element();
         let mut out = Vec::with_capacity(n);
         for (i, (shape, camera)) in shapes.iter().zip(&cameras).enumerate() {
-            let (centre, carved) = crate::ao::sparse::carved_ball(&u.shapes[i], camera);
+            let (centre, carved) = crate::clip::camera::carved_ball(&u.shapes[i], camera);
             if !centre.is_finite() {
                 return None;
             }
@@ -256,8 +257,8 @@ pub fn screen_rect(
 mod tests {
     use super::*;
     use crate::clip::Shape;
-    use crate::render::texels::{UploadLimits, VolumeTexels};
     use crate::render::{Camera, RenderSettings};
+    use crate::texels::{UploadLimits, VolumeTexels};
     use crate::volume::{Volume, VoxelData};
 
     fn reach(x: f32, size: f32) -> ShapeReach {

@@ -12,9 +12,9 @@
 
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
 use crate::gpu::{Gpu, GpuError, output_buffer, readback_buffer, storage_buffer, validated};
-use crate::render::texels::VolumeTexels;
 use crate::sample::bake_lut;
 use crate::sample::{alpha_column, lut_lerp, per_voxel, trilinear, voxel_centre};
+use crate::texels::VolumeTexels;
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
 

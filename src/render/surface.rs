@@ -8,7 +8,7 @@
 
 use crate::gpu::{GpuError, bind_group, shaders, uniform_buffer, validated};
 use crate::render::Frame;
-use crate::render::texels::VolumeTexels;
+use crate::texels::VolumeTexels;
 use glam::{Mat4, Vec3, Vec4};
 
 /// A triangle mesh in the volume's centred physical space (mm, RAS, the box is

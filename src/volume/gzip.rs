@@ -9,6 +9,33 @@ use std::path::Path;
 /// more than this many times N, so a header claiming more is refused before allocating.
 pub const MAX_DEFLATE_RATIO: u64 = 1032;
 
+/// Refuses a file that cannot hold `end` bytes (`what`, for the message) before anything
+/// is allocated: exactly for a plain file of `exact` bytes, by deflate's largest ratio
+/// for a gzip file (`exact` is `None`) whose size gives at most `bound` bytes.
+pub fn check_holds(
+    path: &Path,
+    what: String,
+    end: u64,
+    (exact, bound): (Option<u64>, u64),
+) -> Result<(), VolumeError> {
+    match exact {
+        Some(len) if len < end => Err(VolumeError::Truncated {
+            path: path.to_owned(),
+            what,
+            expected: end,
+            actual: len,
+        }),
+        None if bound < end => Err(VolumeError::invalid(
+            path,
+            format!(
+                "truncated: {what} need {end} bytes but a gzip file of {} can hold at most {bound}",
+                super::fmt_bytes(bound / MAX_DEFLATE_RATIO)
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// Reads exactly `buf.len()` bytes; a short read becomes [`VolumeError::Truncated`]
 /// reporting how far the file went (`consumed` bytes were read before this call).
 pub fn read_all(

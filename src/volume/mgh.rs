@@ -10,7 +10,7 @@
 //! offset `Pxyz_c − (Mdc · delta) · dims / 2`. With goodRASflag = 0, nibabel (and so
 //! volao) takes delta = 1, its default coronal Mdc and `Pxyz_c` = 0.
 
-use super::gzip::{MAX_DEFLATE_RATIO, finish_gzip, read_all, skip};
+use super::gzip::{MAX_DEFLATE_RATIO, check_holds, finish_gzip, read_all, skip};
 use super::nifti::{self, Layout};
 use super::orient::{AffineSource, Orientation};
 use super::{Reading, Scaling, Volume, VolumeError, VoxelType, fmt_bytes, fmt_dims};
@@ -252,26 +252,7 @@ fn read(
     let start = DATA_OFFSET + frame as u64 * lay.frame_bytes;
     let end = start + lay.frame_bytes;
     let what = format!("{} {} voxels", fmt_dims(lay.dims), lay.ty);
-    match exact {
-        Some(len) if len < end => {
-            return Err(VolumeError::Truncated {
-                path: path.to_owned(),
-                what,
-                expected: end,
-                actual: len,
-            });
-        }
-        None if bound < end => {
-            return Err(VolumeError::invalid(
-                path,
-                format!(
-                    "truncated: {what} need {end} bytes but a gzip file of {} can hold at most {bound}",
-                    fmt_bytes(bound / MAX_DEFLATE_RATIO)
-                ),
-            ));
-        }
-        _ => {}
-    }
+    check_holds(path, what, end, (exact, bound))?;
     let consumed = HEADER_LEN as u64;
     skip(
         &mut r,

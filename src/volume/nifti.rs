@@ -5,6 +5,7 @@
 //! NIfTI-2 header, the voxel reading and the writer are ours. Voxels are read straight
 //! into their final typed buffer and byte-swapped in place: loading peaks at one payload.
 
+use super::gzip::check_holds;
 pub use super::gzip::{MAX_DEFLATE_RATIO, read_all, skip};
 use super::orient::{AffineSource, Orientation};
 use super::{Scaling, Volume, VolumeError, VoxelData, VoxelType, fmt_bytes, fmt_dims};
@@ -633,26 +634,7 @@ pub fn load(
     let data_path = if pair { &paths.image } else { &paths.header };
     let what = format!("{} {} voxels", fmt_dims(lay.dims), lay.ty);
     // Refuse impossible sizes before allocating: exact for plain files, bounded for gzip.
-    match exact_len {
-        Some(len) if len < end => {
-            return Err(VolumeError::Truncated {
-                path: data_path.clone(),
-                what,
-                expected: end,
-                actual: len,
-            });
-        }
-        None if bound < end => {
-            return Err(VolumeError::invalid(
-                data_path,
-                format!(
-                    "truncated: {what} need {end} bytes but a gzip file of {} can hold at most {bound}",
-                    fmt_bytes(bound / MAX_DEFLATE_RATIO)
-                ),
-            ));
-        }
-        _ => {}
-    }
+    check_holds(data_path, what, end, (exact_len, bound))?;
     let gap = start.checked_sub(consumed).ok_or_else(|| {
         VolumeError::invalid(
             data_path,

@@ -93,10 +93,10 @@ pub fn device() -> volao::gpu::Gpu {
 }
 
 /// A volume's texels at full resolution (no halving).
-pub fn texels(v: &volao::volume::Volume) -> volao::render::texels::VolumeTexels {
-    volao::render::texels::VolumeTexels::new(
+pub fn texels(v: &volao::volume::Volume) -> volao::texels::VolumeTexels {
+    volao::texels::VolumeTexels::new(
         v,
-        volao::render::texels::UploadLimits {
+        volao::texels::UploadLimits {
             max_dim: 4096,
             max_bytes: 1 << 30,
         },
@@ -206,10 +206,10 @@ pub fn ramp_tf(from: f64, to: f64, alpha: f32) -> volao::tf::TransferFunction {
 
 /// A real volume's texels shrunk (by the renderer's own downsampling) to ≤ 64 voxels per
 /// axis, so CPU twins stay fast in CI.
-pub fn small_texels(volume: &volao::volume::Volume) -> volao::render::texels::VolumeTexels {
-    volao::render::texels::VolumeTexels::new(
+pub fn small_texels(volume: &volao::volume::Volume) -> volao::texels::VolumeTexels {
+    volao::texels::VolumeTexels::new(
         volume,
-        volao::render::texels::UploadLimits {
+        volao::texels::UploadLimits {
             max_dim: 64,
             max_bytes: 1 << 30,
         },

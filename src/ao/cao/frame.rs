@@ -12,7 +12,7 @@
 
 use super::{CaoGpu, CaoMode, CaoStats, Lists};
 use crate::gpu::dispatch::{BrickDispatch, ChunkParams, Pass};
-use crate::gpu::pacer::Pacer;
+use crate::gpu::pacer::{Pacer, Stamp};
 use crate::gpu::{Gpu, GpuError, readback_buffer, validated};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -20,9 +20,6 @@ use std::time::Instant;
 /// Clip tests and LAO samples per second assumed before anything was measured (about
 /// lavapipe's on two cores): the first slices are short on any adapter.
 const FIRST_RATE: f64 = 1e8;
-
-/// When something finished, recorded by a queue callback.
-type Stamp = Arc<Mutex<Option<Instant>>>;
 
 /// What an asynchronous map of the counters returned.
 type Mapped = Arc<Mutex<Option<Result<(), String>>>>;
@@ -176,18 +173,6 @@ fn submit_paced<P: ChunkParams>(
     Ok(true)
 }
 
-/// A callback stamping when the work submitted so far is done.
-fn stamp_when_done(gpu: &Gpu) -> Stamp {
-    let stamp: Stamp = Arc::default();
-    let s = Arc::clone(&stamp);
-    gpu.queue.on_submitted_work_done(move || {
-        if let Ok(mut t) = s.lock() {
-            *t = Some(Instant::now());
-        }
-    });
-    stamp
-}
-
 impl CaoGpu {
     /// Submits what fits of `frame`'s work in the pacer's slice (at least one chunk while
     /// any of the slice is left). Returns true once all of it is submitted.
@@ -215,7 +200,7 @@ impl CaoGpu {
             }
         }
         if frame.done[0].is_none() {
-            frame.done[0] = Some(stamp_when_done(gpu));
+            frame.done[0] = Some(Stamp::when_done(gpu));
         }
         if !self.advance_listed(gpu, frame, pacer)? {
             return Ok(false);
@@ -234,7 +219,7 @@ impl CaoGpu {
                 return Ok(false);
             }
         }
-        frame.done[1] = Some(stamp_when_done(gpu));
+        frame.done[1] = Some(Stamp::when_done(gpu));
         // The counters, read back asynchronously into a buffer of this frame's own.
         let (readback, mapped) = map_counters(gpu, &self.counters, "Cao::counters")?;
         frame.counters = Some((readback, mapped));
@@ -258,7 +243,7 @@ impl CaoGpu {
         let when = |i: usize| {
             frame.done[i]
                 .as_ref()
-                .and_then(|s| s.lock().ok().and_then(|t| *t))
+                .and_then(Stamp::get)
                 .unwrap_or_else(Instant::now)
         };
         let (iv, v) = (when(0), when(1));

@@ -36,7 +36,7 @@ use crate::gpu::{
     Gpu, GpuError, read_buffer, readback_buffer, storage_buffer, uniform_group, validated,
 };
 use crate::render::gpu::GpuVolume;
-use crate::render::texels::VolumeTexels;
+use crate::texels::VolumeTexels;
 use crate::tf::TransferFunction;
 use glam::Vec3;
 use std::time::Instant;
@@ -192,6 +192,17 @@ pub struct CaoStats {
     /// Step V ray cast over a list of the voxels to ray cast (`listed`) rather than
     /// over bricks.
     pub listed: bool,
+}
+
+/// What one CAO frame is for: the clip shapes, their maps' resolution (pixels) and
+/// reach (mm: normally [`CaoGpu::reach_mm`]; tests shrink it to show exactness depends
+/// on it), and which voxels step V ray casts.
+#[derive(Debug, Clone, Copy)]
+pub struct Pose<'a> {
+    pub shapes: &'a [ClipShape],
+    pub resolution: u32,
+    pub reach_mm: f32,
+    pub mode: CaoMode,
 }
 
 impl CaoStats {
@@ -495,13 +506,11 @@ impl CaoGpu {
         &mut self,
         gpu: &Gpu,
         texels: &VolumeTexels,
-        shapes: &[ClipShape],
-        resolution: u32,
-        reach_mm: f32,
-        mode: CaoMode,
+        pose: Pose<'_>,
     ) -> Result<CaoStats, GpuError> {
         let t0 = Instant::now();
-        let frame = self.begin(gpu, texels, shapes, resolution, reach_mm, mode)?;
+        let mode = pose.mode;
+        let frame = self.begin(gpu, texels, pose)?;
         crate::gpu::wait(&gpu.device, "Cao::maps", crate::gpu::WAIT)?;
         let t1 = Instant::now();
         let mut stats = self.run_timed(gpu, &frame.lists, mode)?;
@@ -517,11 +526,14 @@ impl CaoGpu {
         &mut self,
         gpu: &Gpu,
         texels: &VolumeTexels,
-        shapes: &[ClipShape],
-        resolution: u32,
-        reach_mm: f32,
-        mode: CaoMode,
+        pose: Pose<'_>,
     ) -> Result<CaoFrame, GpuError> {
+        let Pose {
+            shapes,
+            resolution,
+            reach_mm,
+            mode,
+        } = pose;
         let radius = Vec3::from(texels.extent()).length() * 0.5;
         let ClipUpdate { errors, .. } = self
             .clip

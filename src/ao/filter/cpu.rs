@@ -25,7 +25,7 @@
 //! [`FilterCpu::compute_into`]) the outputs between calls.
 
 use super::{AmbientMap, BIG, BoxStats, Source, ambient_run, segment_len, window_count};
-use crate::render::texels::VolumeTexels;
+use crate::texels::VolumeTexels;
 use rayon::prelude::*;
 
 /// Rows the x pass interleaves (16 floats: four SSE or two AVX2 registers per step).

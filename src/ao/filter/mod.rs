@@ -30,8 +30,8 @@ use crate::gpu::{
     submit_compute, texture_3d, texture_readback, uniform_group, unpad, validated,
 };
 use crate::render::gpu::GpuVolume;
-use crate::render::texels::VolumeTexels;
 use crate::sample::bake_lut;
+use crate::texels::VolumeTexels;
 use crate::tf::{Lut, TransferFunction};
 use rayon::prelude::*;
 
@@ -158,7 +158,7 @@ impl Source {
     /// format (the same numbers as `VolumeTexels::norm_at`).
     #[inline(always)]
     pub fn decode(&self, texels: &VolumeTexels, start: usize, out: &mut [f32]) {
-        use crate::render::texels::TexelFormat;
+        use crate::texels::TexelFormat;
         let bytes = &texels.bytes[start * texels.format.bytes()..];
         match texels.format {
             TexelFormat::R8Unorm => self.decode_as(bytes, out, |[b]| b as f32 / 255.0),

@@ -308,10 +308,12 @@ impl ViewportGpu {
             .begin(
                 gpu,
                 &vol.texels,
-                clip,
-                setup.resolution,
-                reach,
-                setup.cao_mode,
+                Pose {
+                    shapes: clip,
+                    resolution: setup.resolution,
+                    reach_mm: reach,
+                    mode: setup.cao_mode,
+                },
             )
             .map_err(|e| e.to_string())?;
         let errors = frame.clip_errors().to_vec();

@@ -5,7 +5,7 @@ use crate::progress::{load_with_bar, slice_bar};
 use anyhow::{Context, Result, bail};
 use volao::ao::sparse::Coverage;
 use volao::ao::{Ambient, AoEngine, AoInput, AoRequest};
-use volao::render::texels::{UploadLimits, VolumeTexels};
+use volao::texels::{UploadLimits, VolumeTexels};
 use volao::volume::{self, Volume, fmt_dims};
 
 /// `volao ao`.

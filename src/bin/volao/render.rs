@@ -202,7 +202,7 @@ impl RenderArgs {
         set_within(
             &mut settings.ao_offset,
             self.ao_offset,
-            0.0..=volao::render::AO_READ_REACH as f32,
+            0.0..=volao::sample::AO_READ_REACH as f32,
             "--ao-offset must be between 0 and 2 voxels",
         )?;
         set(&mut settings.shading, self.shading);

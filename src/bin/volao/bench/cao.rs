@@ -17,15 +17,15 @@ use anyhow::Result;
 use glam::Vec3;
 use std::path::PathBuf;
 use std::time::Instant;
-use volao::ao::cao::{CaoGpu, CaoMode, CaoStats};
+use volao::ao::cao::{CaoGpu, CaoMode, CaoStats, Pose};
 use volao::ao::lao::Rays;
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Coverage;
 use volao::clip::{ClipShape, Shape};
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::reuse::{ImageInputs, reusable};
-use volao::render::texels::{UploadLimits, VolumeTexels};
 use volao::render::{Frame, RenderSettings, Shading};
+use volao::texels::{UploadLimits, VolumeTexels};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, RawOverrides, VoxelType};
 
@@ -264,14 +264,13 @@ impl Bench {
         previous: Option<&Shown>,
     ) -> Result<Timed> {
         let reach = cao.reach_mm(&self.vol.texels);
-        let stats = cao.update(
-            &self.gpu,
-            &self.vol.texels,
+        let pose = Pose {
             shapes,
-            self.resolution,
-            reach,
+            resolution: self.resolution,
+            reach_mm: reach,
             mode,
-        )?;
+        };
+        let stats = cao.update(&self.gpu, &self.vol.texels, pose)?;
         self.vol.set_ambient_occlusion_view(cao.ao_view());
         let inputs = ImageInputs::of(Some(&cao.clip), shapes, &self.vol.texels, reach, true);
         let start = Instant::now();

@@ -11,7 +11,7 @@ use volao::ao::lao::{LaoGpu, Rays, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Bricks;
 use volao::render::gpu::GpuVolume;
-use volao::render::texels::{UploadLimits, VolumeTexels};
+use volao::texels::{UploadLimits, VolumeTexels};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, RawOverrides};
 

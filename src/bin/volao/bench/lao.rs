@@ -43,8 +43,8 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     use volao::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
     use volao::ao::rays::RaySet;
     use volao::render::gpu::{GpuVolume, RayCaster};
-    use volao::render::texels::{UploadLimits, VolumeTexels};
     use volao::render::{RenderSettings, Shading};
+    use volao::texels::{UploadLimits, VolumeTexels};
 
     let gpu = volao::gpu::request_device()?;
     let lao = gpu.stage::<LaoGpu>()?;

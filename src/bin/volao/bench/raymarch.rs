@@ -11,7 +11,7 @@ use volao::ao::vao::{VaoGpu, VaoInputs, VaoSettings};
 use volao::render::RenderSettings;
 use volao::render::gpu::{GpuVolume, RayCaster};
 use volao::render::shadow::{LightGpu, light_direction, light_lut};
-use volao::render::texels::{UploadLimits, VolumeTexels};
+use volao::texels::{UploadLimits, VolumeTexels};
 use volao::tf::TransferFunction;
 
 /// Arguments of `volao bench raymarch`.

@@ -89,7 +89,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
     use volao::ao::{Ambient, AoEngine, AoInput, AoRequest, AoSettings};
     use volao::render::RenderSettings;
     use volao::render::gpu::{GpuVolume, RayCaster};
-    use volao::render::texels::{UploadLimits, VolumeTexels};
+    use volao::texels::{UploadLimits, VolumeTexels};
     use volao::tf::{Preset, TransferFunction};
 
     let ao_name = serde_json::to_value(args.ao)?
@@ -271,7 +271,7 @@ fn interleaved_frames(
 /// neither early termination nor empty-space skipping (both only reduce it).
 fn box_steps(
     frame: &volao::render::Frame,
-    texels: &volao::render::texels::VolumeTexels,
+    texels: &volao::texels::VolumeTexels,
     lut: &volao::tf::Lut,
 ) -> f64 {
     use glam::{Mat4, Vec3, Vec4};
