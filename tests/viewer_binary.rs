@@ -146,3 +146,51 @@ fn a_bad_file_exits_with_one_error_line() {
         "{output}"
     );
 }
+
+/// The scripted clip drag of docs/benchmarks.md (`--bench-clip-drag`, the Engine with
+/// 14-ray CAO) always finishes, at the default target rate and at one a second. At one
+/// a second the viewport's images are made at full size (the measured rate keeps the
+/// target without a reduction), and until 2026-12-07 an image at full size never
+/// started while CAO's update was on its way, which during a drag is always: the run
+/// never finished (every time, here). The viewer's watchdog ends a stalled run with what
+/// it was waiting for, so a failure says where it stuck.
+#[test]
+fn the_scripted_clip_drag_always_finishes() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/scenes/engine_cao.json");
+    for rate in ["1", "10", "1"] {
+        let mut cmd = xvfb_run();
+        cmd.arg(env!("CARGO_BIN_EXE_volao")).args([
+            "view",
+            &scene.display().to_string(),
+            "--size",
+            "256x256",
+            "--clip-maps",
+            "128",
+            "--bench-clip-drag",
+            "6",
+            "--target-rate",
+            rate,
+        ]);
+        let start = Instant::now();
+        let (ok, output) = run_bounded(cmd, Duration::from_secs(400));
+        eprintln!(
+            "target rate {rate}: the drag finished in {:.0} s\n{output}",
+            start.elapsed().as_secs_f64()
+        );
+        assert!(
+            ok,
+            "the scripted drag failed at target rate {rate}:\n{output}"
+        );
+        assert!(
+            output.contains("CAO updates while dragging: 5")
+                && output.contains("images while dragging a clip shape"),
+            "the drag's report is missing:\n{output}"
+        );
+        if rate == "1" {
+            assert!(
+                output.contains("at 1/1"),
+                "the test needs images at full size while dragging:\n{output}"
+            );
+        }
+    }
+}

@@ -5,9 +5,9 @@ use super::jobs::Progress;
 use crate::ao::AoSettings;
 use crate::gpu::Gpu;
 use crate::render::gpu::GpuVolume;
-use crate::render::texels::{UploadLimits, VolumeTexels};
 use crate::render::{Camera, RenderSettings, Shading};
 use crate::scene::{Light, MeshSource, SCENE_VERSION, Scene, VolumeSource};
+use crate::texels::{UploadLimits, VolumeTexels};
 use crate::tf::{Preset, TransferFunction};
 use crate::volume::{self, Histogram, LoadOptions, Stats, Volume};
 use std::path::{Path, PathBuf};
@@ -79,6 +79,9 @@ pub struct ViewerOptions {
     pub bench_clip_drag: Option<u64>,
     /// Every volume opens with every skip off (`--no-skipping`: the naive result).
     pub no_skipping: bool,
+    /// Images per second wanted while the view moves (`--target-rate`, the Rendering
+    /// panel's "Target rate"); `None`: the default.
+    pub target_rate: Option<f32>,
 }
 
 impl Default for ViewerOptions {
@@ -93,6 +96,7 @@ impl Default for ViewerOptions {
             clip_resolution: None,
             bench_clip_drag: None,
             no_skipping: false,
+            target_rate: None,
         }
     }
 }

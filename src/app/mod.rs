@@ -286,7 +286,12 @@ impl Viewer {
             frame_ms: None,
             frames_seen: 0,
             pacer,
-            interactive: Default::default(),
+            interactive: viewport::Interactive {
+                target_fps: options
+                    .target_rate
+                    .unwrap_or(viewport::Interactive::default().target_fps),
+                ..Default::default()
+            },
             motion: Motion {
                 last: None,
                 changed_at: Instant::now(),

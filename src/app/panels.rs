@@ -436,7 +436,7 @@ impl Viewer {
             .scripted
             .images
             .last()
-            .is_none_or(|(t, _)| t.elapsed() > Duration::from_millis(500));
+            .is_none_or(|(t, _, _)| t.elapsed() > Duration::from_millis(500));
         if let Some((fraction, in_cao)) = work
             && waited
         {

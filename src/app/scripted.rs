@@ -5,11 +5,18 @@
 
 use super::Viewer;
 use super::screenshot::ShotSize;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// CAO updates `--bench-clip-drag` waits for while dragging (besides its images), so that
 /// it can say how far apart they came (four intervals: one slow one moves the mean less).
 const MIN_CAO_UPDATES: usize = 5;
+
+/// A scripted run in which no image and no CAO update has completed for this long says
+/// where the viewport's work stands (on stderr), once.
+const STALL_REPORT: Duration = Duration::from_secs(30);
+
+/// ... and ends with an error after this long, rather than running until it is killed.
+const STALL_FAIL: Duration = Duration::from_secs(180);
 
 /// Where a scripted run stands: `--exit-after-frames` and `--bench-clip-drag`.
 #[derive(Debug, Default)]
@@ -22,10 +29,15 @@ pub(super) struct Scripted {
     pub(super) bench_last: Option<Instant>,
     /// When the counted frames began and the viewport's images by then.
     pub(super) bench_start: Option<(Instant, u64)>,
-    /// Images completed: when, and seconds each took from its start.
-    pub(super) images: Vec<(Instant, f64)>,
+    /// Images completed: when, seconds each took from its start, and its interactive
+    /// scale (1: full size).
+    pub(super) images: Vec<(Instant, f64, u32)>,
     /// When each CAO update's counters came back (one per update completed).
     pub(super) cao_updates: Vec<Instant>,
+    /// The watchdog: images, and CAO updates, completed when it last saw one more, and
+    /// when; whether it has reported the stall.
+    pub(super) progress: Option<[(usize, Instant); 2]>,
+    pub(super) stall_reported: bool,
 }
 
 impl Viewer {
@@ -40,6 +52,9 @@ impl Viewer {
         ctx.request_repaint();
         self.fail_on_ao_error();
         if self.close_if_requested(ctx) {
+            return;
+        }
+        if self.watchdog() {
             return;
         }
         let now = Instant::now();
@@ -65,12 +80,12 @@ impl Viewer {
         }
         b.bench_last = Some(now);
         // The first two images after the drag starts were begun before it: not counted.
-        let images: Vec<Instant> = b
-            .images
-            .iter()
-            .skip(images_before as usize + 2)
-            .map(|i| i.0)
-            .collect();
+        let counted = b.images.iter().skip(images_before as usize + 2);
+        let images: Vec<Instant> = counted.clone().map(|i| i.0).collect();
+        let mut scales = std::collections::BTreeMap::<u32, usize>::new();
+        for i in counted {
+            *scales.entry(i.2).or_default() += 1;
+        }
         // CAO's updates (each for the newest pose when it began) completed while dragging;
         // the first was begun before.
         let updates: Vec<Instant> = b
@@ -115,9 +130,14 @@ impl Viewer {
                 between.len() as f64 / elapsed,
                 since.elapsed().as_secs_f64()
             );
+            let scales: Vec<String> = scales
+                .iter()
+                .map(|(s, n)| format!("{n} at 1/{s}"))
+                .collect();
             println!(
                 "images that cast only the rays near a change and kept the rest: {reused} of \
-                 {rendered}"
+                 {rendered}; the drag's images by size on each axis: {}",
+                scales.join(", ")
             );
             // Where the GPU's time went: each label's pieces, timed alone.
             let wall = since.elapsed().as_secs_f64();
@@ -171,6 +191,53 @@ impl Viewer {
         } else {
             self.fail_exit("--bench-clip-drag needs a scene with a clip shape".into());
         }
+    }
+
+    /// The scripted drag's watchdog: when no image has completed for [`STALL_REPORT`],
+    /// or no CAO update while one is on its way, says what the viewport is waiting for
+    /// (the image being made, CAO's update, the pacer's queue) on stderr; after
+    /// [`STALL_FAIL`] the run ends with that as its error instead of running on (a
+    /// viewer that never settles looks the same to a user whichever of the two stopped).
+    /// True when it ended the run.
+    fn watchdog(&mut self) -> bool {
+        let now = Instant::now();
+        // The background jobs (loading, AO, light) show their own progress.
+        let jobs_done = self.doc.is_some() && self.load_job.is_none() && self.derived_ready();
+        let cao = self.cao_update_in_flight();
+        let seen = [self.scripted.images.len(), self.scripted.cao_updates.len()];
+        let last = self.scripted.progress.get_or_insert([(0, now); 2]);
+        let mut stalled = Vec::new();
+        for (i, what) in ["image", "CAO update"].into_iter().enumerate() {
+            if last[i].0 != seen[i] || !jobs_done || (i == 1 && !cao) {
+                last[i] = (seen[i], now);
+            }
+            let since = now - last[i].1;
+            if since >= STALL_REPORT {
+                stalled.push((since, what));
+            }
+        }
+        let Some(&(since, _)) = stalled.iter().max() else {
+            self.scripted.stall_reported = false;
+            return false;
+        };
+        let what: Vec<&str> = stalled.iter().map(|s| s.1).collect();
+        let state = format!(
+            "no {} for {:.0} s: {}; {}",
+            what.join(" and no "),
+            since.as_secs_f64(),
+            self.with_viewport(|v| v.describe_work())
+                .unwrap_or_else(|| "no viewport".into()),
+            self.pacer.describe(),
+        );
+        if since >= STALL_FAIL {
+            self.fail_exit(format!("the viewer stalled: {state}"));
+            return true;
+        }
+        if !self.scripted.stall_reported {
+            self.scripted.stall_reported = true;
+            eprintln!("volao: watchdog: {state}");
+        }
+        false
     }
 
     /// `--exit-after-frames N [--screenshot PNG]`: count frames that show the volume with

@@ -15,7 +15,7 @@ use crate::ao::filter::StatisticSource;
 use crate::gpu::Gpu;
 use crate::render::Frame;
 use crate::render::gpu::GpuVolume;
-use crate::render::texels::VolumeTexels;
+use crate::texels::VolumeTexels;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -473,6 +473,7 @@ impl Viewer {
             scale: 1,
             step_factor: 1.0,
             image_interval: None,
+            moving: false,
         })
     }
 
@@ -495,6 +496,7 @@ impl Viewer {
             self.motion.changed_at = Instant::now();
         }
         let moving = self.motion.changed_at.elapsed() < INTERACTIVE_REST;
+        want.moving = moving;
         if moving && self.interactive.on {
             want.scale = self.interactive_scale(&want.frame);
             want.step_factor = self.interactive.step_factor;
@@ -540,7 +542,8 @@ impl Viewer {
             self.toast(format!("Viewport: {e}"), true);
         }
         if let Some(seconds) = pumped.completed {
-            self.scripted.images.push((Instant::now(), seconds));
+            let scale = self.with_viewport(|v| v.shown_scale()).unwrap_or(1);
+            self.scripted.images.push((Instant::now(), seconds, scale));
         }
         if busy {
             self.ctx.request_repaint();

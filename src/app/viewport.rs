@@ -393,6 +393,10 @@ pub(super) struct Want {
     /// (the interactive target rate): the GPU's other time goes to the update, which
     /// brings the cut's AO. `None`: as often as they can.
     pub image_interval: Option<std::time::Duration>,
+    /// The view (camera, clip shapes) changed in the last [`INTERACTIVE_REST`]: images
+    /// follow it while CAO's update is on its way, whatever their scale (a GPU fast
+    /// enough for the target rate at full size draws them at scale 1).
+    pub moving: bool,
 }
 
 /// An image being made.

@@ -321,6 +321,34 @@ impl Pacer {
         r
     }
 
+    /// What is queued and what is left of the slice, in one line (the scripted runs'
+    /// watchdog says it when nothing has moved for a long time).
+    pub fn describe(&self) -> String {
+        let now = Instant::now();
+        let pieces: Vec<String> = self
+            .queued
+            .iter()
+            .map(|p| {
+                format!(
+                    "{} ({:.1} ms expected, queued {:.1} s ago, ahead {})",
+                    p.label,
+                    p.estimate * 1e3,
+                    (now - p.submitted).as_secs_f64(),
+                    match p.ahead_done.get() {
+                        Some(_) => "done",
+                        None => "not done",
+                    }
+                )
+            })
+            .collect();
+        format!(
+            "pacer: {:.1} ms of the slice left, {} pieces queued [{}]",
+            self.left * 1e3,
+            self.queued.len(),
+            pieces.join("; ")
+        )
+    }
+
     /// Whether pieces are still queued.
     pub fn busy(&self) -> bool {
         !self.queued.is_empty()

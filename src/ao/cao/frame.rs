@@ -90,6 +90,53 @@ impl CaoFrame {
         &self.clip_errors
     }
 
+    /// Where the frame stands, in one line (for the viewer's watchdog).
+    pub fn describe(&self) -> String {
+        let listing = match &self.listing {
+            None => "over bricks".to_owned(),
+            Some(l) => format!(
+                "listing: {} gathered, count {}, {} traced{}",
+                l.gathered,
+                match (l.count, &l.count_map) {
+                    (Some(n), _) => n.to_string(),
+                    (None, Some((_, m))) => match m.lock().ok().and_then(|m| m.clone()) {
+                        Some(_) => "mapped, not read".to_owned(),
+                        None => "being mapped".to_owned(),
+                    },
+                    (None, None) => "not asked".to_owned(),
+                },
+                l.traced,
+                if l.over_bricks { ", over bricks" } else { "" }
+            ),
+        };
+        let stamped = |i: usize| match &self.done[i] {
+            None => "not submitted",
+            Some(s) => match s.get() {
+                Some(_) => "done",
+                None => "running",
+            },
+        };
+        format!(
+            "CAO frame {:.1} s old: step IV {}/{} bricks ({}), step V {}/{} bricks ({}), {listing}, \
+             all submitted {}, counters {}",
+            self.started.elapsed().as_secs_f64(),
+            self.next[0],
+            self.lists.clip.len(),
+            stamped(0),
+            self.next[1],
+            self.lists.lao.len(),
+            stamped(1),
+            self.all_submitted,
+            match &self.counters {
+                None => "not mapped",
+                Some((_, m)) => match m.lock().ok().and_then(|m| m.clone()) {
+                    Some(_) => "mapped",
+                    None => "being mapped",
+                },
+            }
+        )
+    }
+
     /// Bricks submitted and bricks in all, over both steps (for progress; gathering the
     /// voxel list counts as a brick's worth of work per brick).
     pub fn progress(&self) -> (u32, u32) {

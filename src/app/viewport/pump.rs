@@ -101,6 +101,57 @@ impl ViewportGpu {
         self.shown.as_ref().map_or(1, |s| s.key.scale)
     }
 
+    /// The image and the CAO update being made, in one line (for the scripted runs'
+    /// watchdog).
+    pub(in crate::app) fn describe_work(&self) -> String {
+        let work = match &self.work {
+            None => "no image being made".to_owned(),
+            Some(w) => format!(
+                "image {}×{} (scale {}, exact AO {}, {}) started {:.1} s ago: rows {}..{} of \
+                 {}..{}, column {}",
+                w.key.frame.width,
+                w.key.frame.height,
+                w.key.scale,
+                w.key.ao_exact,
+                match (w.reused, &w.clip) {
+                    (true, _) => "reusing",
+                    (false, Some(_)) => "own clip maps",
+                    (false, None) => "full",
+                },
+                w.started.elapsed().as_secs_f64(),
+                w.next_row,
+                w.rows.end,
+                w.rows.start,
+                w.rows.end,
+                w.next_column
+            ),
+        };
+        let cao = match &self.cao_work {
+            None => "no CAO update".to_owned(),
+            Some(c) => format!(
+                "CAO update began {:.1} s ago (tainted {}, imaged {}): {}",
+                c.began.elapsed().as_secs_f64(),
+                c.tainted,
+                c.imaged,
+                c.frame.describe()
+            ),
+        };
+        let pending = match &self.stats_pending {
+            None => String::new(),
+            Some(f) => format!("; figures pending: {}", f.describe()),
+        };
+        let compiling = match &self.compiling {
+            None => "",
+            Some(_) => "; a pipeline compiling",
+        };
+        format!(
+            "{work}; {cao}{pending}{compiling}; {} images so far, AO exact for the shapes \
+             drawn: {}",
+            self.frames_rendered,
+            self.shown_ao_exact()
+        )
+    }
+
     /// Moves the viewport's image towards `want` within the pacer's slice (see the
     /// module's documentation). Never waits for the GPU.
     pub(in crate::app) fn pump(&mut self, gpu: &Gpu, want: &Want, pacer: &mut Pacer) -> Pumped {
@@ -195,7 +246,7 @@ impl ViewportGpu {
         // A strip that cast only the pixels near a change says nothing of what its
         // part of the picture costs.
         pacer.timed(STRIP_REUSING);
-        if self.work.is_none() && self.should_start(&key, want.image_interval) {
+        if self.work.is_none() && self.should_start(&key, want) {
             match self.start(gpu, key, want) {
                 Ok(errors) => out.clip_errors.extend(errors),
                 Err(e) => {
@@ -273,12 +324,16 @@ impl ViewportGpu {
     }
 
     /// Whether to start an image for `key` now. Not while CAO's update is on its way,
-    /// unless the view moves (an interactive image, `key.scale > 1`), the image drawn
-    /// shows another view and the last image started at least `interval` ago: dragging
-    /// a shape, the clipping follows the mouse at the interactive target rate with
-    /// `V_PAO` for AO, and the rest of the GPU's time goes to the update; at rest the
-    /// image waits for the exact AO.
-    fn should_start(&self, key: &ViewKey, interval: Option<std::time::Duration>) -> bool {
+    /// unless the view moves (`want.moving`), the image drawn shows another view and the
+    /// last image started at least `want.image_interval` ago: dragging a shape, the
+    /// clipping follows the mouse at the interactive target rate with `V_PAO` for AO, and
+    /// the rest of the GPU's time goes to the update; at rest the image waits for the
+    /// exact AO. Whether the view moves is not told by the image's scale: where the
+    /// measured rate reaches the target rate at full size, a moving view's images are at
+    /// scale 1 too (until 2026-12-07 that stopped every image for as long as a drag
+    /// with CAO went on, since each update began as the last one ended: the scripted
+    /// drag then never finished).
+    fn should_start(&self, key: &ViewKey, want: &Want) -> bool {
         let shown = self.shown.as_ref().map(|s| &s.key);
         if shown == Some(key) {
             return false;
@@ -286,9 +341,9 @@ impl ViewportGpu {
         if self.cao_work.is_none() {
             return true;
         }
-        key.scale > 1
+        want.moving
             && !shown.is_some_and(|s| s.same_view(key))
-            && due(self.last_start, interval, Instant::now())
+            && due(self.last_start, want.image_interval, Instant::now())
     }
 
     /// Begins CAO's update for `clip` (posing the clip maps for it). Returns the shapes

@@ -40,6 +40,10 @@ pub struct ViewArgs {
     /// driver).
     #[arg(long, value_name = "PIXELS", value_parser = clap::value_parser!(u32).range(16..=8192))]
     pub clip_maps: Option<u32>,
+    /// Images per second wanted while the view moves (the Rendering panel's "Target
+    /// rate", 1 to 60; default 10): interactive images are made smaller until they keep it.
+    #[arg(long, value_name = "IMAGES_PER_S", value_parser = parse_target_rate)]
+    pub target_rate: Option<f32>,
     /// Window size in points, e.g. 1280x800.
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     pub size: Option<[f32; 2]>,
@@ -62,6 +66,14 @@ pub fn parse_size(s: &str) -> Result<[f32; 2], String> {
         return Err(format!("{s:?}: each side must be 64 to 16384"));
     }
     Ok([w as f32, h as f32])
+}
+
+/// `--target-rate`: images per second, 1 to 60 (the Rendering panel's range).
+pub fn parse_target_rate(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(r) if (1.0..=60.0).contains(&r) => Ok(r),
+        _ => Err(format!("{s:?}: expected images per second from 1 to 60")),
+    }
 }
 
 #[derive(Args, Debug)]
