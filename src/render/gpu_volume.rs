@@ -63,15 +63,19 @@ fn next_generation() -> u64 {
 const SAMPLED: wgpu::TextureUsages =
     wgpu::TextureUsages::TEXTURE_BINDING.union(wgpu::TextureUsages::COPY_DST);
 
-/// Writes `data` into the whole of `texture` (one level of `dims`).
-fn write_3d(
+/// A volume texture of `dims` holding `bytes` (tightly packed texels of `format`).
+fn filled(
+    device: &wgpu::Device,
     queue: &wgpu::Queue,
-    texture: &wgpu::Texture,
+    label: &str,
     dims: [u32; 3],
-    bytes_per_texel: u32,
-    data: &[u8],
-) {
-    crate::gpu::write_texture_3d(queue, texture, 0, dims, bytes_per_texel, data);
+    format: wgpu::TextureFormat,
+    bytes: &[u8],
+) -> wgpu::Texture {
+    let texture = crate::gpu::texture_3d(device, label, dims, format, SAMPLED);
+    let texel = format.block_copy_size(None).unwrap_or(1);
+    crate::gpu::write_texture_3d(queue, &texture, 0, dims, texel, bytes);
+    texture
 }
 
 impl GpuVolume {
@@ -118,41 +122,29 @@ impl GpuVolume {
         let occ = ranges.occupancy(&texels, &lut);
         let grid = ranges.grid.map(|d| d as u32);
         validated(device, "GpuVolume::upload", || {
-            let volume = crate::gpu::texture_3d(
+            let volume = filled(
                 device,
+                queue,
                 "GpuVolume::volume",
                 dims,
                 texels.format.wgpu(),
-                SAMPLED,
-            );
-            write_3d(
-                queue,
-                &volume,
-                dims,
-                texels.format.bytes() as u32,
                 &texels.bytes,
             );
-            let occupancy = crate::gpu::texture_3d(
+            let occupancy = filled(
                 device,
+                queue,
                 "GpuVolume::occupancy",
                 grid,
                 wgpu::TextureFormat::R8Uint,
-                SAMPLED,
+                &occ,
             );
-            write_3d(queue, &occupancy, grid, 1, &occ);
-            let block_range = crate::gpu::texture_3d(
+            let range_texels: Vec<[f32; 2]> = ranges.ranges.iter().map(|&(a, b)| [a, b]).collect();
+            let block_range = filled(
                 device,
+                queue,
                 "GpuVolume::block_range",
                 grid,
                 wgpu::TextureFormat::Rg32Float,
-                SAMPLED,
-            );
-            let range_texels: Vec<[f32; 2]> = ranges.ranges.iter().map(|&(a, b)| [a, b]).collect();
-            write_3d(
-                queue,
-                &block_range,
-                grid,
-                8,
                 bytemuck::cast_slice(&range_texels),
             );
             let lut_buffer = device.create_buffer(&wgpu::BufferDescriptor {
@@ -263,13 +255,8 @@ impl GpuVolume {
         gpu.queue
             .write_buffer(&self.lut_buffer, 0, bytemuck::cast_slice(&self.lut.rgba));
         let occ = self.ranges.occupancy(&self.texels, &self.lut);
-        write_3d(
-            &gpu.queue,
-            &self.occupancy,
-            self.ranges.grid.map(|d| d as u32),
-            1,
-            &occ,
-        );
+        let grid = self.ranges.grid.map(|d| d as u32);
+        crate::gpu::write_texture_3d(&gpu.queue, &self.occupancy, 0, grid, 1, &occ);
     }
 
     /// The volume texture (for compute passes such as LAO).
@@ -284,14 +271,14 @@ impl GpuVolume {
     pub fn set_ambient_occlusion(&mut self, gpu: &Gpu, values: &[f32]) {
         self.generation = next_generation();
         let dims = self.texels.dims.map(|d| d as u32);
-        let texture = crate::gpu::texture_3d(
+        let texture = filled(
             &gpu.device,
+            &gpu.queue,
             "GpuVolume::ambient_occlusion",
             dims,
             wgpu::TextureFormat::R32Float,
-            SAMPLED,
+            bytemuck::cast_slice(values),
         );
-        write_3d(&gpu.queue, &texture, dims, 4, bytemuck::cast_slice(values));
         self.ao_view = texture.create_view(&Default::default());
         self.ao_bound = true;
         self.ao_stand_in = None;
@@ -358,18 +345,12 @@ impl GpuVolume {
             .iter()
             .map(|&a| (a.clamp(0.0, 1.0) * 65535.0).round() as u16)
             .collect();
-        let texture = crate::gpu::texture_3d(
+        let texture = filled(
             &gpu.device,
+            &gpu.queue,
             "GpuVolume::opacity_modulation",
             dims,
             wgpu::TextureFormat::R16Unorm,
-            SAMPLED,
-        );
-        write_3d(
-            &gpu.queue,
-            &texture,
-            dims,
-            2,
             bytemuck::cast_slice(&quantised),
         );
         self.modulation_view = texture.create_view(&Default::default());
@@ -420,9 +401,7 @@ fn one_texel(
     format: wgpu::TextureFormat,
     bytes: &[u8],
 ) -> wgpu::TextureView {
-    let texture = crate::gpu::texture_3d(device, label, [1, 1, 1], format, SAMPLED);
-    write_3d(queue, &texture, [1, 1, 1], bytes.len() as u32, bytes);
-    texture.create_view(&Default::default())
+    filled(device, queue, label, [1, 1, 1], format, bytes).create_view(&Default::default())
 }
 
 impl GpuVolume {

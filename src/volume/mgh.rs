@@ -173,21 +173,8 @@ pub fn layout(
             ),
         ));
     }
-    if frame_bytes > max_bytes {
-        return Err(VolumeError::TooLarge {
-            path: path.to_owned(),
-            dims: fmt_dims(dims),
-            ty: ty.to_string(),
-            bytes: fmt_bytes(frame_bytes),
-            limit: fmt_bytes(max_bytes),
-        });
-    }
-    if frame as u64 >= frames {
-        return Err(VolumeError::invalid(
-            path,
-            super::frame_out_of_range(frame, frames),
-        ));
-    }
+    let ty_name = ty.to_string();
+    super::check_frame(path, dims, ty_name, frame_bytes, max_bytes, frame, frames)?;
     Ok(Layout {
         dims,
         ty,

@@ -343,6 +343,35 @@ pub fn display_path(path: &Path) -> String {
     format!("{head}…{tail}")
 }
 
+/// Refuses, before anything is allocated, a frame of `frame_bytes` (`dims` voxels of
+/// type `ty`) larger than `max_bytes`, or frame `frame` of a file of `frames` frames.
+pub fn check_frame(
+    path: &Path,
+    dims: [usize; 3],
+    ty: String,
+    frame_bytes: u64,
+    max_bytes: u64,
+    frame: usize,
+    frames: u64,
+) -> Result<(), VolumeError> {
+    if frame_bytes > max_bytes {
+        return Err(VolumeError::TooLarge {
+            path: path.to_owned(),
+            dims: fmt_dims(dims),
+            ty,
+            bytes: fmt_bytes(frame_bytes),
+            limit: fmt_bytes(max_bytes),
+        });
+    }
+    if frame as u64 >= frames {
+        return Err(VolumeError::invalid(
+            path,
+            frame_out_of_range(frame, frames),
+        ));
+    }
+    Ok(())
+}
+
 /// "frame 3 requested but the file has 3 frames (frames count from 0: 0 … 2)".
 pub fn frame_out_of_range(frame: usize, frames: u64) -> String {
     if frames == 1 {

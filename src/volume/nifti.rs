@@ -339,21 +339,8 @@ pub fn layout(
             format!("dimensions {:?} overflow", &h.dim[1..=ndim]),
         ));
     };
-    if frame_bytes > max_bytes {
-        return Err(VolumeError::TooLarge {
-            path: path.to_owned(),
-            dims: fmt_dims(dims),
-            ty: ty.name().into(),
-            bytes: fmt_bytes(frame_bytes),
-            limit: fmt_bytes(max_bytes),
-        });
-    }
-    if frame as u64 >= frames {
-        return Err(VolumeError::invalid(
-            path,
-            super::frame_out_of_range(frame, frames),
-        ));
-    }
+    let ty_name = ty.name().to_owned();
+    super::check_frame(path, dims, ty_name, frame_bytes, max_bytes, frame, frames)?;
     let vo = h.vox_offset;
     if !vo.is_finite() || vo < 0.0 || vo.fract() != 0.0 {
         return Err(VolumeError::invalid(
