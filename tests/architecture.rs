@@ -105,8 +105,8 @@ fn expand(tree: &str) -> Vec<String> {
 }
 
 /// Paths starting with `crate`, `super`, `self` or one of the module's `children` in
-/// `code` (outside `use` items): `reuse::MAX_BALLS` in `render/mod.rs` is an import of
-/// `render/reuse.rs`.
+/// `code` (outside `use` items): `slicing::Slicing` in `gpu/mod.rs` is an import of
+/// `gpu/slicing.rs`.
 fn inline_paths(code: &str, children: &BTreeSet<String>) -> Vec<String> {
     let mut out = Vec::new();
     let bytes = code.as_bytes();
@@ -307,10 +307,10 @@ fn no_import_cycle_between_library_files() {
     let graph = import_graph();
     assert!(graph.len() > 40, "found only {} library files", graph.len());
     // The checker itself must see imports: render/gpu_volume.rs uses the texels, and
-    // render/mod.rs names render/reuse.rs by a bare child path (`reuse::MAX_BALLS`).
+    // gpu/mod.rs names gpu/slicing.rs by a bare child path (`slicing::Slicing`).
     for (from, to) in [
         ("render/gpu_volume.rs", "texels/mod.rs"),
-        ("render/mod.rs", "render/reuse.rs"),
+        ("gpu/mod.rs", "gpu/slicing.rs"),
     ] {
         assert!(
             graph[Path::new(from)].contains(Path::new(to)),

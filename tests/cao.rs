@@ -878,7 +878,11 @@ fn bad_shapes_are_reported_and_the_rest_still_clip() {
     many.extend(std::iter::repeat_n(good.clone(), 8));
     let stats = s
         .cao
-        .update(&s.gpu, &s.vol.texels, pose(&many, reach, CaoMode::Selective))
+        .update(
+            &s.gpu,
+            &s.vol.texels,
+            pose(&many, reach, CaoMode::Selective),
+        )
         .unwrap_or_else(|e| panic!("{e}"));
     let errors = stats.clip_errors.join("\n");
     assert!(errors.contains("non-finite"), "{errors}");

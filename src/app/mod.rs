@@ -134,10 +134,33 @@ pub struct Viewer {
     motion: Motion,
     /// The viewport shows the full-quality image of what the document says.
     viewport_current: bool,
-    scripted: scripted::Scripted,
+    scripted: Scripted,
     /// Set when a `--screenshot` could not be written (the process exits non-zero).
     pub exit_error: Arc<Mutex<Option<String>>>,
     last_title: String,
+}
+
+/// Where a scripted run stands: `--exit-after-frames` and `--bench-clip-drag`
+/// (`scripted.rs`).
+#[derive(Debug, Default)]
+struct Scripted {
+    /// Frames shown with the volume (and its AO) ready, for `--exit-after-frames`.
+    ready_frames: u64,
+    exit_requested: bool,
+    /// UI frame intervals (s) of `--bench-clip-drag`, while dragging.
+    bench: Vec<f64>,
+    bench_last: Option<Instant>,
+    /// When the counted frames began and the viewport's images by then.
+    bench_start: Option<(Instant, u64)>,
+    /// Images completed: when, seconds each took from its start, and its interactive
+    /// scale (1: full size).
+    images: Vec<(Instant, f64, u32)>,
+    /// When each CAO update's counters came back (one per update completed).
+    cao_updates: Vec<Instant>,
+    /// The watchdog: images, and CAO updates, completed when it last saw one more, and
+    /// when; whether it has reported the stall.
+    progress: Option<[(usize, Instant); 2]>,
+    stall_reported: bool,
 }
 
 /// The last view wanted and since when.
@@ -297,7 +320,7 @@ impl Viewer {
                 changed_at: Instant::now(),
             },
             viewport_current: false,
-            scripted: scripted::Scripted::default(),
+            scripted: Scripted::default(),
             exit_error: Arc::default(),
             last_title: String::new(),
             options: options.clone(),

@@ -18,28 +18,6 @@ const STALL_REPORT: Duration = Duration::from_secs(30);
 /// ... and ends with an error after this long, rather than running until it is killed.
 const STALL_FAIL: Duration = Duration::from_secs(180);
 
-/// Where a scripted run stands: `--exit-after-frames` and `--bench-clip-drag`.
-#[derive(Debug, Default)]
-pub(super) struct Scripted {
-    /// Frames shown with the volume (and its AO) ready, for `--exit-after-frames`.
-    pub(super) ready_frames: u64,
-    pub(super) exit_requested: bool,
-    /// UI frame intervals (s) of `--bench-clip-drag`, while dragging.
-    pub(super) bench: Vec<f64>,
-    pub(super) bench_last: Option<Instant>,
-    /// When the counted frames began and the viewport's images by then.
-    pub(super) bench_start: Option<(Instant, u64)>,
-    /// Images completed: when, seconds each took from its start, and its interactive
-    /// scale (1: full size).
-    pub(super) images: Vec<(Instant, f64, u32)>,
-    /// When each CAO update's counters came back (one per update completed).
-    pub(super) cao_updates: Vec<Instant>,
-    /// The watchdog: images, and CAO updates, completed when it last saw one more, and
-    /// when; whether it has reported the stall.
-    pub(super) progress: Option<[(usize, Instant); 2]>,
-    pub(super) stall_reported: bool,
-}
-
 impl Viewer {
     /// One frame of `--bench-clip-drag N`: once the view is ready, moves the first clip
     /// shape every UI frame (back and forth by 1 mm, a slow drag) and measures the UI

@@ -9,6 +9,7 @@ pub mod dispatch;
 pub mod pacer;
 pub mod resources;
 pub mod shaders;
+pub mod slicing;
 pub mod smoke;
 
 pub use resources::*;
@@ -66,7 +67,7 @@ pub struct Gpu {
     /// Each stage's long-lived state (pipelines, layouts, samplers), built on first use.
     stages: StageCache,
     /// How long one submission of a long stage may take (the viewer's slices).
-    pub slicing: dispatch::Slicing,
+    pub slicing: slicing::Slicing,
 }
 
 /// Long-lived GPU state of one pipeline stage, built once per device (rerun's
@@ -99,7 +100,7 @@ impl Gpu {
             queue,
             info,
             stages: StageCache::default(),
-            slicing: dispatch::Slicing::default(),
+            slicing: slicing::Slicing::default(),
         }
     }
 

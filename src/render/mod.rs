@@ -31,6 +31,14 @@ use crate::sample::AO_READ_REACH;
 use crate::texels::{BLOCK, VolumeTexels};
 use crate::tf::Lut;
 
+/// The default direction towards the light (volume RAS space): from the patient's left,
+/// front and above, so shadows fall visibly in an anterior view.
+pub const DEFAULT_LIGHT: [f32; 3] = [-0.5, 0.6, 0.62];
+
+/// The most balls a frame's uniforms hold ([`reuse`]: where shapes that moved can
+/// change an image); more are merged into one that holds them all.
+pub const MAX_BALLS: usize = 8;
+
 /// Opacity at which a ray stops (early ray termination).
 pub const OPAQUE: f32 = 0.99;
 
@@ -262,7 +270,7 @@ impl Default for RenderSettings {
             empty_space_skipping: true,
             background: [0.0, 0.0, 0.0, 1.0],
             shadows: false,
-            light_direction: shadow::DEFAULT_LIGHT,
+            light_direction: DEFAULT_LIGHT,
             opacity_modulation: None,
             clip_surface: None,
         }
@@ -303,10 +311,10 @@ pub struct RaycastParams {
     /// ([`reuse`]): only pixels whose rays meet one are cast. 0: every pixel.
     pub reuse: [u32; 4],
     /// Centre (volume-centred mm) and radius of each ball of `reuse`.
-    pub balls: [[f32; 4]; reuse::MAX_BALLS],
+    pub balls: [[f32; 4]; MAX_BALLS],
 }
 
-const _: () = assert!(std::mem::size_of::<RaycastParams>() == 64 + 11 * 16 + reuse::MAX_BALLS * 16);
+const _: () = assert!(std::mem::size_of::<RaycastParams>() == 64 + 11 * 16 + MAX_BALLS * 16);
 
 /// Everything a frame needs besides the volume and the LUT data.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -367,7 +375,7 @@ impl Frame {
                 s.ao_reference.open_plane(ao_offset * min_spacing),
             ],
             reuse: [0; 4],
-            balls: [[0.0; 4]; reuse::MAX_BALLS],
+            balls: [[0.0; 4]; MAX_BALLS],
         }
     }
 }

@@ -21,8 +21,7 @@ use crate::sample::AO_READ_REACH;
 use crate::texels::VolumeTexels;
 use glam::{Vec3, Vec4};
 
-/// The most balls a frame's uniforms hold; more are merged into one that holds them all.
-pub const MAX_BALLS: usize = 8;
+pub use super::MAX_BALLS;
 
 /// A ball in volume-centred mm (the ray caster's space).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -29,9 +29,7 @@ pub const LIGHT_START_STEPS: f32 = 1.5;
 /// A light ray stops once its transmittance falls below this.
 pub const T_STOP: f32 = 1e-4;
 
-/// The default direction towards the light (volume RAS space): from the patient's left,
-/// front and above, so shadows fall visibly in an anterior view.
-pub const DEFAULT_LIGHT: [f32; 3] = [-0.5, 0.6, 0.62];
+pub use super::DEFAULT_LIGHT;
 
 /// The opacity table for light rays: alpha corrected for a step of [`LIGHT_STEP_VOXELS`].
 pub fn light_lut(tf: &TransferFunction, texels: &VolumeTexels) -> Lut {

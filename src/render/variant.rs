@@ -2,7 +2,7 @@
 //! `shaders/raycast.wgsl`); [`super::gpu::RayCaster`] builds one per variant in use.
 
 use super::Frame;
-use super::gpu::GpuVolume;
+use super::gpu_volume::GpuVolume;
 
 /// What a frame's pipeline is specialised for: the `override` constants of
 /// `shaders/raycast.wgsl`. A feature that is off is left out of the shader (on lavapipe

@@ -327,7 +327,7 @@ impl CaoGpu {
             return Ok(true);
         };
         let group = [parts.2];
-        let pass = super::listed::pass(&parts, &group);
+        let pass = super::voxel_list::pass(&parts, &group);
         let gather = (&pass, self.lao_params);
         if !submit_paced(gpu, pacer, gather, &chunks, &mut listing.gathered)? {
             return Ok(false);
@@ -356,7 +356,7 @@ impl CaoGpu {
             return Ok(true);
         };
         let group = [parts.2];
-        let pass = super::listed::pass(&parts, &group);
+        let pass = super::voxel_list::pass(&parts, &group);
         submit_paced(gpu, pacer, (&pass, params), &chunks, &mut listing.traced)
     }
 }

@@ -44,14 +44,15 @@ use std::time::Instant;
 pub use super::settings::DEFAULT_MSAA;
 pub use cpu::{clip_volume_cpu, lao_on_opacity_cpu};
 pub use frame::CaoFrame;
-pub use listed::MAX_LIST_BYTES_PER_VOXEL;
 pub use pipelines::CaoPipelines;
+pub use voxel_list::MAX_LIST_BYTES_PER_VOXEL;
 
 mod cpu;
 mod frame;
 mod listed;
 mod pipelines;
 mod readback;
+mod voxel_list;
 
 /// Selective recomputation (CAO) or the baseline that ray casts every voxel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -244,7 +245,7 @@ pub struct CaoGpu {
     rays_buffer: wgpu::Buffer,
     occupied_buffer: wgpu::Buffer,
     /// A frame's voxels to ray cast ([`listed`]), made on the first frame that lists.
-    list: Option<listed::VoxelList>,
+    list: Option<voxel_list::VoxelList>,
     /// This frame's brick lists: step IV's, then step V's (room for two of every brick).
     lists: wgpu::Buffer,
     /// Uniforms of steps IV and V, rewritten per submission, and the bind groups reading them.

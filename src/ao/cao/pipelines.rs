@@ -1,7 +1,7 @@
 //! CAO's pipelines, built once per device: step IV (by the number of clip shapes) and
 //! step V, with skipping and dense.
 
-use super::listed;
+use super::voxel_list as listed;
 use crate::ao::sparse::Bricks;
 use crate::gpu::{GpuError, compute_pipeline, shaders, validated};
 
