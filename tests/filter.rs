@@ -98,6 +98,38 @@ fn separable_statistics_equal_brute_force_cpu() {
     }
 }
 
+/// A `FilterCpu` reused for another radius gives the maps of fresh buffers on one worker
+/// thread too. A thread keeps the box sizes of the tile it last did (by tile and z
+/// window); until 2026-12-07 it kept them from one run to the next, so a run whose first
+/// tile had the index and z window of the last tile before read the other radius's sizes
+/// (`reused_cpu_buffers_give_the_same_maps_as_fresh_ones` failed now and then under load,
+/// when a thread took no tile of the run between). One tile per slice, one thread: the
+/// first tile of the second run is the last of the first, with the same z window.
+#[test]
+fn a_thread_keeps_no_box_sizes_from_an_earlier_run() {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a thread pool");
+    let mut rng = Rng(0x0bad_5eed_0000_0001);
+    let v = u8_volume([12, 10, 9], |_, _, _| rng.below(256) as u8);
+    let t = texels(&v);
+    let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
+    let source = Source::new(&t, &tf, StatisticSource::Density);
+    let mut filter = FilterCpu::default();
+    let mut reused = Vec::new();
+    for r in [[1, 1, 2], [3, 3, 2]] {
+        pool.install(|| filter.compute_into(&t, &source, r, &MAPS, &mut reused));
+        let fresh = compute_cpu(&t, &source, r, &MAPS);
+        for ((map, a), b) in MAPS.iter().zip(&reused).zip(&fresh) {
+            assert!(
+                a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "r {r:?} {map:?}: a reused FilterCpu differs from fresh buffers"
+            );
+        }
+    }
+}
+
 /// A `FilterCpu` reused across volumes of other sizes, radii and maps gives the same
 /// bits as fresh buffers: stale ring planes and output contents are never read.
 #[test]

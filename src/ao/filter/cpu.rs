@@ -467,6 +467,12 @@ impl FilterCpu {
         if self.scratch.len() != threads {
             self.scratch = (0..threads).map(|_| Default::default()).collect();
         }
+        // A tile's box sizes depend on this run's dims and radius: none is kept from an
+        // earlier run (a thread that took no tile since could otherwise reuse the sizes of
+        // another volume's tile of the same index and z window).
+        for s in &self.scratch {
+            s.lock().unwrap_or_else(|e| e.into_inner()).tile.counts_for = None;
+        }
         let (ring, scratch, simd) = (&mut self.ring, &self.scratch, self.simd);
         // Every voxel of every output is written below, so old contents may stay.
         results.resize_with(outputs.len(), Vec::new);
