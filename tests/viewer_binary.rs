@@ -148,16 +148,18 @@ fn a_bad_file_exits_with_one_error_line() {
 }
 
 /// The scripted clip drag of docs/benchmarks.md (`--bench-clip-drag`, the Engine with
-/// 14-ray CAO) always finishes, at the default target rate and at one a second. At one
-/// a second the viewport's images are made at full size (the measured rate keeps the
-/// target without a reduction), and until 2026-12-07 an image at full size never
-/// started while CAO's update was on its way, which during a drag is always: the run
-/// never finished (every time, here). The viewer's watchdog ends a stalled run with what
-/// it was waiting for, so a failure says where it stuck.
+/// 14-ray CAO) always finishes: without interactive quality (`--target-rate off`: the
+/// images of a moving view at full size), at the default target rate and at one a
+/// second. Until 2026-12-07 an image at full size never started while CAO's update was
+/// on its way, which during a drag is always: the run never finished, whether the size
+/// was full because interactive quality was off or because the measured rate kept the
+/// target rate without a reduction (at 256², one a second, on a quiet machine). The
+/// viewer's watchdog ends a stalled run with what it was waiting for, so a failure says
+/// where it stuck.
 #[test]
 fn the_scripted_clip_drag_always_finishes() {
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/scenes/engine_cao.json");
-    for rate in ["1", "10", "1"] {
+    for rate in ["off", "10", "1"] {
         let mut cmd = xvfb_run();
         cmd.arg(env!("CARGO_BIN_EXE_volao")).args([
             "view",
@@ -181,12 +183,17 @@ fn the_scripted_clip_drag_always_finishes() {
             ok,
             "the scripted drag failed at target rate {rate}:\n{output}"
         );
+        // The report: its images, and at least five CAO updates while dragging.
+        let updates = output
+            .split("CAO updates while dragging: ")
+            .nth(1)
+            .and_then(|rest| rest.split(',').next())
+            .and_then(|n| n.trim().parse::<u32>().ok());
         assert!(
-            output.contains("CAO updates while dragging: 5")
-                && output.contains("images while dragging a clip shape"),
+            output.contains("images while dragging a clip shape") && updates >= Some(5),
             "the drag's report is missing:\n{output}"
         );
-        if rate == "1" {
+        if rate == "off" {
             assert!(
                 output.contains("at 1/1"),
                 "the test needs images at full size while dragging:\n{output}"

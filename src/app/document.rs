@@ -80,8 +80,9 @@ pub struct ViewerOptions {
     /// Every volume opens with every skip off (`--no-skipping`: the naive result).
     pub no_skipping: bool,
     /// Images per second wanted while the view moves (`--target-rate`, the Rendering
-    /// panel's "Target rate"); `None`: the default.
-    pub target_rate: Option<f32>,
+    /// panel's "Target rate"); `Some(None)`: no interactive quality (`--target-rate
+    /// off`); `None`: the defaults.
+    pub target_rate: Option<Option<f32>>,
 }
 
 impl Default for ViewerOptions {

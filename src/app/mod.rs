@@ -309,11 +309,16 @@ impl Viewer {
             frame_ms: None,
             frames_seen: 0,
             pacer,
-            interactive: viewport::Interactive {
-                target_fps: options
-                    .target_rate
-                    .unwrap_or(viewport::Interactive::default().target_fps),
-                ..Default::default()
+            interactive: match options.target_rate {
+                None => Default::default(),
+                Some(None) => viewport::Interactive {
+                    on: false,
+                    ..Default::default()
+                },
+                Some(Some(target_fps)) => viewport::Interactive {
+                    target_fps,
+                    ..Default::default()
+                },
             },
             motion: Motion {
                 last: None,

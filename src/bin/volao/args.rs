@@ -41,9 +41,11 @@ pub struct ViewArgs {
     #[arg(long, value_name = "PIXELS", value_parser = clap::value_parser!(u32).range(16..=8192))]
     pub clip_maps: Option<u32>,
     /// Images per second wanted while the view moves (the Rendering panel's "Target
-    /// rate", 1 to 60; default 10): interactive images are made smaller until they keep it.
-    #[arg(long, value_name = "IMAGES_PER_S", value_parser = parse_target_rate)]
-    pub target_rate: Option<f32>,
+    /// rate", 1 to 60; default 10): interactive images are made smaller until they keep
+    /// it. `off`: images at full size while the view moves too (the panel's
+    /// "Interactive quality while moving" unticked).
+    #[arg(long, value_name = "IMAGES_PER_S|off", value_parser = parse_target_rate)]
+    pub target_rate: Option<TargetRate>,
     /// Window size in points, e.g. 1280x800.
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     pub size: Option<[f32; 2]>,
@@ -68,11 +70,35 @@ pub fn parse_size(s: &str) -> Result<[f32; 2], String> {
     Ok([w as f32, h as f32])
 }
 
-/// `--target-rate`: images per second, 1 to 60 (the Rendering panel's range).
-pub fn parse_target_rate(s: &str) -> Result<f32, String> {
+/// `volao view --target-rate`: images per second while the view moves, or none reduced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TargetRate {
+    /// No interactive quality: the images of a moving view at full size.
+    Off,
+    /// Images per second, 1 to 60 (the Rendering panel's range).
+    Images(f32),
+}
+
+impl TargetRate {
+    /// As the viewer's options take it: `None` for off.
+    pub fn images(self) -> Option<f32> {
+        match self {
+            TargetRate::Off => None,
+            TargetRate::Images(r) => Some(r),
+        }
+    }
+}
+
+/// `--target-rate`: images per second, 1 to 60, or `off`.
+pub fn parse_target_rate(s: &str) -> Result<TargetRate, String> {
+    if s.trim().eq_ignore_ascii_case("off") {
+        return Ok(TargetRate::Off);
+    }
     match s.trim().parse::<f32>() {
-        Ok(r) if (1.0..=60.0).contains(&r) => Ok(r),
-        _ => Err(format!("{s:?}: expected images per second from 1 to 60")),
+        Ok(r) if (1.0..=60.0).contains(&r) => Ok(TargetRate::Images(r)),
+        _ => Err(format!(
+            "{s:?}: expected images per second from 1 to 60, or off"
+        )),
     }
 }
 

@@ -30,7 +30,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         exit_after_frames: args.exit_after_frames,
         bench_clip_drag: args.bench_clip_drag,
         no_skipping: args.no_skipping,
-        target_rate: args.target_rate,
+        target_rate: args.target_rate.map(|r| r.images()),
         ..Default::default()
     };
     if let Some(size) = args.size {
