@@ -559,7 +559,12 @@ impl ViewportGpu {
         // lavapipe), not in the UI's frame; the image waits for it.
         let surfaces = !vol.extras.surfaces.is_empty();
         let variant = Variant::of(vol, &w.key.frame, clip, surfaces);
-        if !ray_caster.has_pipeline(variant) {
+        if ray_caster.has_pipeline(variant) {
+            // Built (here or on the worker thread): nothing is compiling for it any more.
+            if compiling.as_ref().is_some_and(|(v, _)| *v == variant) {
+                *compiling = None;
+            }
+        } else {
             match compiling {
                 Some((v, state)) if *v == variant => {
                     let failed = state.lock().ok().and_then(|s| s.clone());
