@@ -79,10 +79,9 @@ pub struct ViewerOptions {
     pub bench_clip_drag: Option<u64>,
     /// Every volume opens with every skip off (`--no-skipping`: the naive result).
     pub no_skipping: bool,
-    /// Images per second wanted while the view moves (`--target-rate`, the Rendering
-    /// panel's "Target rate"); `Some(None)`: no interactive quality (`--target-rate
-    /// off`); `None`: the defaults.
-    pub target_rate: Option<Option<f32>>,
+    /// Interactive quality while the view moves, as the viewer starts (`--target-rate`;
+    /// the Rendering panel changes it).
+    pub interactive: super::viewport::Interactive,
 }
 
 impl Default for ViewerOptions {
@@ -97,7 +96,7 @@ impl Default for ViewerOptions {
             clip_resolution: None,
             bench_clip_drag: None,
             no_skipping: false,
-            target_rate: None,
+            interactive: Default::default(),
         }
     }
 }

@@ -309,17 +309,7 @@ impl Viewer {
             frame_ms: None,
             frames_seen: 0,
             pacer,
-            interactive: match options.target_rate {
-                None => Default::default(),
-                Some(None) => viewport::Interactive {
-                    on: false,
-                    ..Default::default()
-                },
-                Some(Some(target_fps)) => viewport::Interactive {
-                    target_fps,
-                    ..Default::default()
-                },
-            },
+            interactive: options.interactive,
             motion: Motion {
                 last: None,
                 changed_at: Instant::now(),

@@ -541,8 +541,7 @@ impl Viewer {
         if let Some(e) = pumped.error {
             self.toast(format!("Viewport: {e}"), true);
         }
-        if let Some(seconds) = pumped.completed {
-            let scale = self.with_viewport(|v| v.shown_scale()).unwrap_or(1);
+        if let Some((seconds, scale)) = pumped.completed {
             self.scripted.images.push((Instant::now(), seconds, scale));
         }
         if busy {

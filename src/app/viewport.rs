@@ -448,6 +448,7 @@ pub(super) struct Pumped {
     /// Shapes left out by the clip maps, with why.
     pub clip_errors: Vec<String>,
     pub error: Option<String>,
-    /// An image was completed: seconds since its work started.
-    pub completed: Option<f64>,
+    /// An image was completed: seconds since its work started, and its interactive
+    /// scale (1: full size).
+    pub completed: Option<(f64, u32)>,
 }

@@ -372,36 +372,15 @@ impl GpuVolume {
 /// No opacity modulation: a single texel of 1.
 fn no_modulation(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::TextureView {
     let format = wgpu::TextureFormat::R8Unorm;
-    one_texel(
-        device,
-        queue,
-        "GpuVolume::opacity_modulation",
-        format,
-        &[255],
-    )
+    let label = "GpuVolume::opacity_modulation";
+    filled(device, queue, label, [1, 1, 1], format, &[255]).create_view(&Default::default())
 }
 
 /// No ambient occlusion: a single texel of 1.
 fn no_ambient_occlusion(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::TextureView {
-    let (format, one) = (wgpu::TextureFormat::R32Float, 1.0f32);
-    one_texel(
-        device,
-        queue,
-        "GpuVolume::ambient_occlusion",
-        format,
-        bytemuck::bytes_of(&one),
-    )
-}
-
-/// A volume of one texel holding `bytes` (a stand-in that reads as a constant).
-fn one_texel(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    label: &str,
-    format: wgpu::TextureFormat,
-    bytes: &[u8],
-) -> wgpu::TextureView {
-    filled(device, queue, label, [1, 1, 1], format, bytes).create_view(&Default::default())
+    let (format, one) = (wgpu::TextureFormat::R32Float, bytemuck::bytes_of(&1.0f32));
+    let label = "GpuVolume::ambient_occlusion";
+    filled(device, queue, label, [1, 1, 1], format, one).create_view(&Default::default())
 }
 
 impl GpuVolume {

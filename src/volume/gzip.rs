@@ -16,7 +16,8 @@ pub fn check_holds(
     path: &Path,
     what: String,
     end: u64,
-    (exact, bound): (Option<u64>, u64),
+    exact: Option<u64>,
+    bound: u64,
 ) -> Result<(), VolumeError> {
     match exact {
         Some(len) if len < end => Err(VolumeError::Truncated {

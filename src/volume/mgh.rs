@@ -239,7 +239,7 @@ fn read(
     let start = DATA_OFFSET + frame as u64 * lay.frame_bytes;
     let end = start + lay.frame_bytes;
     let what = format!("{} {} voxels", fmt_dims(lay.dims), lay.ty);
-    check_holds(path, what, end, (exact, bound))?;
+    check_holds(path, what, end, exact, bound)?;
     let consumed = HEADER_LEN as u64;
     skip(
         &mut r,

@@ -621,7 +621,7 @@ pub fn load(
     let data_path = if pair { &paths.image } else { &paths.header };
     let what = format!("{} {} voxels", fmt_dims(lay.dims), lay.ty);
     // Refuse impossible sizes before allocating: exact for plain files, bounded for gzip.
-    check_holds(data_path, what, end, (exact_len, bound))?;
+    check_holds(data_path, what, end, exact_len, bound)?;
     let gap = start.checked_sub(consumed).ok_or_else(|| {
         VolumeError::invalid(
             data_path,

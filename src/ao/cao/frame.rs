@@ -99,9 +99,9 @@ impl CaoFrame {
                 l.gathered,
                 match (l.count, &l.count_map) {
                     (Some(n), _) => n.to_string(),
-                    (None, Some((_, m))) => match m.lock().ok().and_then(|m| m.clone()) {
-                        Some(_) => "mapped, not read".to_owned(),
-                        None => "being mapped".to_owned(),
+                    (None, Some((_, m))) => match came_back(m) {
+                        true => "mapped, not read".to_owned(),
+                        false => "being mapped".to_owned(),
                     },
                     (None, None) => "not asked".to_owned(),
                 },
@@ -129,9 +129,9 @@ impl CaoFrame {
             self.all_submitted,
             match &self.counters {
                 None => "not mapped",
-                Some((_, m)) => match m.lock().ok().and_then(|m| m.clone()) {
-                    Some(_) => "mapped",
-                    None => "being mapped",
+                Some((_, m)) => match came_back(m) {
+                    true => "mapped",
+                    false => "being mapped",
                 },
             }
         )
@@ -171,6 +171,11 @@ fn map_counters(
             }
         });
     Ok((readback, mapped))
+}
+
+/// Whether an asynchronous map has come back (done or failed).
+fn came_back(mapped: &Mapped) -> bool {
+    mapped.lock().is_ok_and(|state| state.is_some())
 }
 
 /// The bytes of a mapped counters' copy once its map has completed (`None` before).

@@ -1,7 +1,7 @@
 //! CAO's pipelines, built once per device: step IV (by the number of clip shapes) and
 //! step V, with skipping and dense.
 
-use super::voxel_list as listed;
+use super::voxel_list::ListedPipelines;
 use crate::ao::sparse::Bricks;
 use crate::gpu::{GpuError, compute_pipeline, shaders, validated};
 
@@ -19,7 +19,7 @@ pub struct CaoPipelines {
     /// Step V of a frame with skipping: readable voxels, every ray sample fetched.
     lao_frame: wgpu::ComputePipeline,
     /// A frame's step V over a list of its voxels.
-    pub(super) listed: listed::ListedPipelines,
+    pub(super) listed: ListedPipelines,
     pub(super) sampler: wgpu::Sampler,
     /// The format of `V_o`, `V_PAO` and `V_AO`: R16Float (2 bytes per voxel each) where
     /// the adapter can write it from a shader, else R32Float.
@@ -120,7 +120,7 @@ impl crate::gpu::Stage for CaoPipelines {
             let frame_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
                 crate::ao::sparse::frame_variant(format_of(code))
             })?;
-            let listed = listed::ListedPipelines::create(device, format_of)?;
+            let listed = ListedPipelines::create(device, format_of)?;
             let clip_layout = ClipPipelines::layout(device, format);
             validated(device, "CaoPipelines::create", || CaoPipelines {
                 clip: ClipPipelines::new(device, "Cao::clip", &clip_module, &clip_layout),

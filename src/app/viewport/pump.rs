@@ -282,7 +282,7 @@ impl ViewportGpu {
             Ok(Advanced::Going | Advanced::Starved) => {}
             Ok(Advanced::Done) => {
                 if let Some(w) = self.work.take() {
-                    out.completed = Some(w.started.elapsed().as_secs_f64());
+                    out.completed = Some((w.started.elapsed().as_secs_f64(), w.key.scale));
                     let reused = w.reused;
                     if let Some(old) = self.shown.take() {
                         if old.key.scale != w.key.scale {

@@ -79,16 +79,6 @@ pub enum TargetRate {
     Images(f32),
 }
 
-impl TargetRate {
-    /// As the viewer's options take it: `None` for off.
-    pub fn images(self) -> Option<f32> {
-        match self {
-            TargetRate::Off => None,
-            TargetRate::Images(r) => Some(r),
-        }
-    }
-}
-
 /// `--target-rate`: images per second, 1 to 60, or `off`.
 pub fn parse_target_rate(s: &str) -> Result<TargetRate, String> {
     if s.trim().eq_ignore_ascii_case("off") {

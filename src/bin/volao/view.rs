@@ -1,6 +1,6 @@
 //! `volao view` (and `volao` alone): the viewer.
 
-use crate::args::ViewArgs;
+use crate::args::{TargetRate, ViewArgs};
 use anyhow::{Result, bail};
 
 /// `volao view`.
@@ -30,9 +30,13 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         exit_after_frames: args.exit_after_frames,
         bench_clip_drag: args.bench_clip_drag,
         no_skipping: args.no_skipping,
-        target_rate: args.target_rate.map(|r| r.images()),
         ..Default::default()
     };
+    match args.target_rate {
+        None => {}
+        Some(TargetRate::Off) => options.interactive.on = false,
+        Some(TargetRate::Images(r)) => options.interactive.target_fps = r,
+    }
     if let Some(size) = args.size {
         options.window_size = size;
     }
