@@ -7,6 +7,7 @@
 // CPU twin: src/ao/cao.rs (`clip_volume_cpu`); keep the two in step.
 //!include clip_common.wgsl
 //!include bricks.wgsl
+//!include cao_format.wgsl
 
 struct Params {
     dims: vec4<u32>,      // x, y, z, unused
@@ -28,8 +29,8 @@ const CLIPPED: f32 = -2.0;
 @group(0) @binding(1) var volume: texture_3d<f32>;
 @group(0) @binding(2) var<storage, read> lut_alpha: array<f32>;
 @group(0) @binding(3) var<storage, read> msaa: array<vec4<f32>>;  // offsets in voxels
-@group(0) @binding(4) var v_o: texture_storage_3d<r16float, write>;
-@group(0) @binding(5) var v_ao: texture_storage_3d<r16float, write>;
+@group(0) @binding(4) var v_o: CaoWrite;
+@group(0) @binding(5) var v_ao: CaoWrite;
 @group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>; // recompute, clipped
 @group(0) @binding(7) var<storage, read> bricks: array<u32>;
 @group(0) @binding(8) var v_pao: texture_3d<f32>;
@@ -49,16 +50,16 @@ fn position_mm(v: vec3<u32>, offset: vec3<f32>) -> vec3<f32> {
 }
 
 // Whether voxels share their corners' clip tests (below): `false` in the dense pipeline
-// (`--no-skipping`, ao::sparse::dense_variant), which tests the 8 corners of every
+// (`--no-skipping`, ao::sparse::DENSE_CLIP), which tests the 8 corners of every
 // voxel as Algorithm 2 is written. The same classifications either way.
-const SHARED_CORNERS: bool = true;
+override SHARED_CORNERS: bool = true;
 // Whether a voxel is affected when its centre lies in a dilation, as with skipping: the
 // reach (ao::cao::reach_mm) runs from the voxel's centre and already covers its cell's
 // clip samples and the trilinear stencils. The corners and anti-aliasing samples then
 // need only whether they are visible, which reads half the clip maps. `false` in the
 // dense pipeline: any of the 9 + N samples in a dilation marks the voxel, as Algorithm 2
 // is written (the paper's mask).
-const CENTRE_REACH: bool = true;
+override CENTRE_REACH: bool = true;
 
 // The classification (bit 0 visible, bit 1 affected) of the corners of this workgroup's
 // voxels: the 9 × 9 × 2 lattice points of one layer of a brick, shared by up to 8 voxels

@@ -16,19 +16,20 @@ const RECOMPUTE: f32 = -1.0;
 // V_PAO and writes V_AO = 1 there itself, so a frame's step V never repeats the
 // per-voxel readability test (7³ texel fetches, more than a 6-ray LAO's samples).
 const UNREAD: f32 = 2.0;
-// Whether this is the per-frame pipeline (ao::sparse::frame_variant): step IV has
+// Whether this is the per-frame pipeline (ao::sparse::FRAME): step IV has
 // resolved every unreadable voxel already.
-const FRAME: bool = false;
+override FRAME: bool = false;
 //!include cao_ray.wgsl
 //!include readable.wgsl
 
 //!include cao_params.wgsl
+//!include cao_format.wgsl
 
 @group(0) @binding(0) var<uniform> p: Params;
 @group(0) @binding(1) var v_o: texture_3d<f32>;
 @group(0) @binding(2) var linear_clamp: sampler;
 @group(0) @binding(3) var<storage, read> rays: array<vec4<f32>>;  // xyz direction, w weight
-@group(0) @binding(4) var v_ao: texture_storage_3d<r16float, read_write>;
+@group(0) @binding(4) var v_ao: CaoReadWrite;
 @group(0) @binding(5) var<storage, read> bricks: array<u32>;
 @group(0) @binding(6) var<storage, read> occupied: array<u32>;
 @group(0) @binding(7) var<storage, read_write> counters: array<atomic<u32>, 4>; // [2]: ray cast

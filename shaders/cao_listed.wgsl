@@ -6,12 +6,13 @@
 //!include cao_ray.wgsl
 
 //!include cao_params.wgsl
+//!include cao_format.wgsl
 
 @group(0) @binding(0) var<uniform> p: Params;
 @group(0) @binding(1) var v_o: texture_3d<f32>;
 @group(0) @binding(2) var linear_clamp: sampler;
 @group(0) @binding(3) var<storage, read> rays: array<vec4<f32>>;  // xyz direction, w weight
-@group(0) @binding(4) var v_ao: texture_storage_3d<r16float, write>;
+@group(0) @binding(4) var v_ao: CaoWrite;
 @group(0) @binding(5) var<storage, read> occupied: array<u32>;
 @group(0) @binding(6) var<storage, read> listed: array<u32>;
 

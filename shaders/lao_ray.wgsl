@@ -12,13 +12,13 @@
 // `occupied: array<u32>` (1 per cell where a sample may be opaque).
 
 // Whether this pipeline skips at all: `false` in the dense pipelines (`--no-skipping`),
-// which a CPU driver then compiles without the skipping code (ao::sparse::dense_variant).
-const SKIPPING: bool = true;
+// which a CPU driver then compiles without the skipping code (ao::sparse::DENSE).
+override SKIPPING: bool = true;
 // Whether rays step over empty cells: `false` for rays from readable voxels only (LAO
-// for rendering, CAO's V_PAO and frames: ao::sparse::readable_variant), which start at
+// for rendering, CAO's V_PAO and frames: ao::sparse::READABLE), which start at
 // surfaces and cross occupied cells, where the per-sample check costs more than it saves
 // (they still stop fetching at the box: boxed_ray).
-const RAY_SKIPPING: bool = true;
+override RAY_SKIPPING: bool = true;
 // Edge of the cells rays step over, in voxels (ao::sparse::RAY_CELL).
 const RAY_CELL: u32 = 4u;
 

@@ -218,7 +218,7 @@ pub fn lao_cpu(
 pub struct LaoGpu {
     /// Rays step over empty cells (every voxel: `volao ao`).
     sparse: crate::gpu::ComputeStage,
-    /// Readable voxels only, rays fetch every sample ([`super::sparse::readable_variant`]).
+    /// Readable voxels only, rays fetch every sample ([`super::sparse::READABLE`]).
     readable: crate::gpu::ComputeStage,
     /// Nothing skipped (`--no-skipping`).
     dense: crate::gpu::ComputeStage,
@@ -235,17 +235,17 @@ impl crate::gpu::Stage for LaoGpu {
         use crate::gpu::ComputeStage;
         Ok(LaoGpu {
             sparse: ComputeStage::new(device, "Lao", "lao.wgsl")?,
-            readable: ComputeStage::edited(
+            readable: ComputeStage::specialised(
                 device,
                 "Lao::readable",
                 "lao.wgsl",
-                super::sparse::readable_variant,
+                super::sparse::READABLE,
             )?,
-            dense: ComputeStage::edited(
+            dense: ComputeStage::specialised(
                 device,
                 "Lao::dense",
                 "lao.wgsl",
-                super::sparse::dense_variant,
+                super::sparse::DENSE,
             )?,
         })
     }

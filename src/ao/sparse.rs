@@ -28,6 +28,7 @@
 
 use crate::clip::camera::{ClipCamera, bound_in_volume, carved_ball};
 use crate::clip::gpu::ClipUniforms;
+use crate::gpu::shaders::Constants;
 use crate::render::{RenderMode, RenderSettings};
 use crate::texels::{BLOCK, BlockRanges, VolumeTexels};
 use crate::tf::{Lut, TransferFunction};
@@ -663,25 +664,16 @@ fn plane_ranges(
     (lo, hi)
 }
 
-/// A skipping shader's source (one including `lao_ray.wgsl`, or CAO's step IV) made into
-/// its dense variant, the computation as the papers write it: the skipping code is
-/// compiled out, so that `--no-skipping` runs as fast as the plain loops did, and step
-/// IV tests the corners of every voxel itself (`cao_clip.wgsl`; the same bits) and marks
-/// a voxel when any of its clip samples lies in a dilation (the paper's mask).
-pub fn dense_variant(code: String) -> String {
-    code.replace(
-        "const SKIPPING: bool = true;",
-        "const SKIPPING: bool = false;",
-    )
-    .replace(
-        "const SHARED_CORNERS: bool = true;",
-        "const SHARED_CORNERS: bool = false;",
-    )
-    .replace(
-        "const CENTRE_REACH: bool = true;",
-        "const CENTRE_REACH: bool = false;",
-    )
-}
+/// The `override` constants that make a skipping pipeline (a shader including
+/// `lao_ray.wgsl`) its dense variant, the computation as the papers write it: the
+/// skipping code is compiled out, so that `--no-skipping` runs as fast as the plain
+/// loops did.
+pub const DENSE: Constants = &[("SKIPPING", 0.0)];
+
+/// CAO's dense step IV (`cao_clip.wgsl`): it tests the corners of every voxel itself (the
+/// same bits) and marks a voxel when any of its clip samples lies in a dilation (the
+/// paper's mask).
+pub const DENSE_CLIP: Constants = &[("SHARED_CORNERS", 0.0), ("CENTRE_REACH", 0.0)];
 
 /// Rays from readable voxels (LAO for rendering, CAO's `V_PAO`): they fetch every
 /// sample inside the box (`boxed_ray` in `lao_ray.wgsl`: the in-box samples found once
@@ -691,24 +683,18 @@ pub fn dense_variant(code: String) -> String {
 /// without); the voxels skipped are the saving.
 /// Exported AO volumes (every voxel, most of them in empty space) keep stepping over
 /// empty cells.
-pub fn readable_variant(code: String) -> String {
-    code.replace(
-        "const RAY_SKIPPING: bool = true;",
-        "const RAY_SKIPPING: bool = false;",
-    )
-}
+pub const READABLE: Constants = &[("RAY_SKIPPING", 0.0)];
 
 /// Whether `bricks` computes only readable voxels (whose rays fetch every sample:
-/// [`readable_variant`]).
+/// [`READABLE`]).
 pub fn readable_only(bricks: &Bricks) -> bool {
     bricks.skipping && bricks.voxels.is_some()
 }
 
-/// CAO's per-frame step V: rays fetch every sample (the same bits, see `lao_ray.wgsl`),
-/// and the readable-voxel test is step IV's (it reads what the `V_PAO` run marked).
-pub fn frame_variant(code: String) -> String {
-    readable_variant(code).replace("const FRAME: bool = false;", "const FRAME: bool = true;")
-}
+/// CAO's per-frame step V (`cao_lao.wgsl`): rays fetch every sample (the same bits, see
+/// `lao_ray.wgsl`), and the readable-voxel test is step IV's (it reads what the `V_PAO`
+/// run marked).
+pub const FRAME: Constants = &[("RAY_SKIPPING", 0.0), ("FRAME", 1.0)];
 
 /// Bricks per axis for a volume of `dims`.
 pub fn grid_of(dims: [usize; 3]) -> [usize; 3] {
@@ -800,20 +786,28 @@ mod tests {
         }
     }
 
-    /// Each variant's text replacement finds its constant: a renamed constant would
-    /// otherwise leave the variant silently the same as the skipping shader.
+    /// Each variant names constants its shader declares `override`: wgpu would refuse
+    /// an unknown one, and a renamed constant must not leave a variant silently the
+    /// same as the skipping shader.
     #[test]
-    fn every_variant_changes_what_it_names() {
+    fn every_variant_names_overrides_of_its_shader() {
         let source = |name| crate::gpu::shaders::source(name).expect("embedded shader");
-        let clip = source("cao_clip.wgsl");
-        let lao = source("cao_lao.wgsl");
-        let dense_clip = dense_variant(clip.clone());
-        for off in ["SHARED_CORNERS: bool = false", "CENTRE_REACH: bool = false"] {
-            assert!(dense_clip.contains(off), "dense step IV lacks {off}");
+        let declared = |code: &str, constants: Constants| {
+            for (name, _) in constants {
+                assert!(
+                    code.contains(&format!("override {name}: ")),
+                    "{name} not declared"
+                );
+            }
+        };
+        declared(&source("cao_clip.wgsl"), DENSE_CLIP);
+        for shader in ["cao_lao.wgsl", "lao.wgsl"] {
+            for constants in [DENSE, READABLE] {
+                declared(&source(shader), constants);
+            }
         }
-        assert!(dense_variant(lao.clone()).contains("SKIPPING: bool = false"));
-        assert!(readable_variant(lao.clone()).contains("RAY_SKIPPING: bool = false"));
-        assert!(frame_variant(lao).contains("const FRAME: bool = true;"));
+        declared(&source("cao_lao.wgsl"), FRAME);
+        declared(&source("cao_listed.wgsl"), READABLE);
     }
 
     #[test]

@@ -27,12 +27,28 @@ pub fn compute_pipeline(
     entry: &str,
     layout: Option<&wgpu::PipelineLayout>,
 ) -> wgpu::ComputePipeline {
+    specialised_pipeline(device, label, module, layout, &[], entry)
+}
+
+/// The compute pipeline of entry point `entry` in `module` with its `override`
+/// constants set to `constants` (a variant, see [`super::shaders::Constants`]).
+pub fn specialised_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    layout: Option<&wgpu::PipelineLayout>,
+    constants: &[(&str, f64)],
+    entry: &str,
+) -> wgpu::ComputePipeline {
     device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some(label),
         layout,
         module,
         entry_point: Some(entry),
-        compilation_options: Default::default(),
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants,
+            ..Default::default()
+        },
         cache: None,
     })
 }
@@ -136,19 +152,20 @@ pub struct ComputeStage {
 impl ComputeStage {
     /// Builds `shader`'s pipeline, labelled `"{name}::pipeline"`.
     pub fn new(device: &wgpu::Device, name: &str, shader: &str) -> Result<Self, GpuError> {
-        Self::edited(device, name, shader, |code| code)
+        Self::specialised(device, name, shader, &[])
     }
 
-    /// The same from `shader`'s source with `edit` applied (a specialisation).
-    pub fn edited(
+    /// The same with `shader`'s `override` constants set to `constants` (a variant).
+    pub fn specialised(
         device: &wgpu::Device,
         name: &str,
         shader: &str,
-        edit: impl Fn(String) -> String,
+        constants: super::shaders::Constants,
     ) -> Result<Self, GpuError> {
-        let module = super::shaders::module_with(device, shader, edit)?;
+        let module = super::shaders::module(device, shader)?;
+        let label = format!("{name}::pipeline");
         validated(device, &format!("{name}::new"), || ComputeStage {
-            pipeline: compute_pipeline(device, &format!("{name}::pipeline"), &module, "main", None),
+            pipeline: specialised_pipeline(device, &label, &module, None, constants, "main"),
             sampler: linear_sampler(device, &format!("{name}::linear_clamp")),
         })
     }

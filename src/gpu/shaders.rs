@@ -2,6 +2,10 @@
 //!
 //! WGSL has no includes. A line `//!include common.wgsl` (a comment, so every file
 //! still parses on its own) is replaced by that file's text, once per shader.
+//!
+//! Shader variants use two mechanisms, never edits of the text: `override` constants
+//! set per pipeline ([`Constants`]: what a variant compiles out), and includes swapped
+//! for other files ([`module_swapping`]: what WGSL cannot override, a storage format).
 
 use super::GpuError;
 
@@ -19,6 +23,8 @@ pub const SOURCES: &[(&str, &str)] = &[
     shader!("box_stats.wgsl"),
     shader!("bricks.wgsl"),
     shader!("cao_clip.wgsl"),
+    shader!("cao_format.wgsl"),
+    shader!("cao_format_r32.wgsl"),
     shader!("cao_gather.wgsl"),
     shader!("cao_lao.wgsl"),
     shader!("cao_listed.wgsl"),
@@ -44,9 +50,22 @@ pub const SOURCES: &[(&str, &str)] = &[
 
 const DIRECTIVE: &str = "//!include ";
 
+/// Values of a pipeline's `override` constants, by name: one variant of a shader.
+pub type Constants = &'static [(&'static str, f64)];
+
+/// Includes to resolve to other files, `(included, instead)`.
+pub type Swaps<'a> = &'a [(&'a str, &'a str)];
+
 /// The embedded source of `name` with its includes resolved.
 pub fn source(name: &str) -> Result<String, GpuError> {
+    source_swapping(name, &[])
+}
+
+/// The embedded source of `name` with its includes resolved, `swaps` naming the files
+/// included instead of others.
+pub fn source_swapping(name: &str, swaps: Swaps<'_>) -> Result<String, GpuError> {
     let lookup = |n: &str| {
+        let n = swaps.iter().find(|(k, _)| *k == n).map_or(n, |(_, v)| *v);
         SOURCES
             .iter()
             .find(|(k, _)| *k == n)
@@ -92,23 +111,17 @@ fn include(
 
 /// Creates a shader module from an embedded shader, failing on validation errors.
 pub fn module(device: &wgpu::Device, name: &str) -> Result<wgpu::ShaderModule, GpuError> {
-    let code = source(name)?;
-    super::validated(device, name, || {
-        device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(name),
-            source: wgpu::ShaderSource::Wgsl(code.into()),
-        })
-    })
+    module_swapping(device, name, &[])
 }
 
-/// The shader `name` with `edit` applied to its resolved source (a storage format
-/// chosen for the adapter, say).
-pub fn module_with(
+/// The shader `name` with the includes `swaps` names resolved to other files (a storage
+/// format chosen for the adapter, say).
+pub fn module_swapping(
     device: &wgpu::Device,
     name: &str,
-    edit: impl Fn(String) -> String,
+    swaps: Swaps<'_>,
 ) -> Result<wgpu::ShaderModule, GpuError> {
-    let code = edit(source(name)?);
+    let code = source_swapping(name, swaps)?;
     super::validated(device, name, || {
         device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(name),

@@ -2,8 +2,9 @@
 //! step V, with skipping and dense.
 
 use super::voxel_list::ListedPipelines;
-use crate::ao::sparse::Bricks;
-use crate::gpu::{GpuError, compute_pipeline, shaders, validated};
+use crate::ao::sparse::{self, Bricks};
+use crate::gpu::shaders::{self, Constants, Swaps};
+use crate::gpu::{GpuError, specialised_pipeline, validated};
 
 /// CAO's pipelines and sampler, built once per device.
 #[derive(Debug)]
@@ -69,19 +70,12 @@ impl ClipPipelines {
         label: &str,
         module: &wgpu::ShaderModule,
         layout: &wgpu::PipelineLayout,
+        variant: Constants,
     ) -> Self {
         let built_for = |shapes: u32| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(label),
-                layout: Some(layout),
-                module,
-                entry_point: Some("main"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("CLIP_SHAPES", f64::from(shapes))],
-                    ..Default::default()
-                },
-                cache: None,
-            })
+            let mut constants = vec![("CLIP_SHAPES", f64::from(shapes))];
+            constants.extend_from_slice(variant);
+            specialised_pipeline(device, label, module, Some(layout), &constants, "main")
         };
         ClipPipelines([built_for(0), built_for(1), built_for(2)])
     }
@@ -100,46 +94,27 @@ impl ClipPipelines {
 impl crate::gpu::Stage for CaoPipelines {
     fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
         let build = |format: wgpu::TextureFormat| -> Result<Self, GpuError> {
-            let name = if format == wgpu::TextureFormat::R16Float {
-                "r16float"
-            } else {
-                "r32float"
+            let swaps: Swaps<'_> = match format {
+                wgpu::TextureFormat::R16Float => &[],
+                _ => &[("cao_format.wgsl", "cao_format_r32.wgsl")],
             };
-            let format_of = |code: String| code.replace("r16float", name);
-            let clip_module = shaders::module_with(device, "cao_clip.wgsl", format_of)?;
-            let clip_dense_module = shaders::module_with(device, "cao_clip.wgsl", |code| {
-                crate::ao::sparse::dense_variant(format_of(code))
-            })?;
-            let lao_module = shaders::module_with(device, "cao_lao.wgsl", format_of)?;
-            let dense_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
-                crate::ao::sparse::dense_variant(format_of(code))
-            })?;
-            let readable_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
-                crate::ao::sparse::readable_variant(format_of(code))
-            })?;
-            let frame_module = shaders::module_with(device, "cao_lao.wgsl", |code| {
-                crate::ao::sparse::frame_variant(format_of(code))
-            })?;
-            let listed = ListedPipelines::create(device, format_of)?;
+            let clip_module = shaders::module_swapping(device, "cao_clip.wgsl", swaps)?;
+            let lao_module = shaders::module_swapping(device, "cao_lao.wgsl", swaps)?;
+            let lao = |label: &str, constants: Constants| {
+                specialised_pipeline(device, label, &lao_module, None, constants, "main")
+            };
+            let listed = ListedPipelines::create(device, swaps)?;
             let clip_layout = ClipPipelines::layout(device, format);
+            let clip = |label: &str, constants: Constants| {
+                ClipPipelines::new(device, label, &clip_module, &clip_layout, constants)
+            };
             validated(device, "CaoPipelines::create", || CaoPipelines {
-                clip: ClipPipelines::new(device, "Cao::clip", &clip_module, &clip_layout),
-                clip_dense: ClipPipelines::new(
-                    device,
-                    "Cao::clip_dense",
-                    &clip_dense_module,
-                    &clip_layout,
-                ),
-                lao: compute_pipeline(device, "Cao::lao", &lao_module, "main", None),
-                lao_dense: compute_pipeline(device, "Cao::lao_dense", &dense_module, "main", None),
-                lao_readable: compute_pipeline(
-                    device,
-                    "Cao::lao_readable",
-                    &readable_module,
-                    "main",
-                    None,
-                ),
-                lao_frame: compute_pipeline(device, "Cao::lao_frame", &frame_module, "main", None),
+                clip: clip("Cao::clip", &[]),
+                clip_dense: clip("Cao::clip_dense", sparse::DENSE_CLIP),
+                lao: lao("Cao::lao", &[]),
+                lao_dense: lao("Cao::lao_dense", sparse::DENSE),
+                lao_readable: lao("Cao::lao_readable", sparse::READABLE),
+                lao_frame: lao("Cao::lao_frame", sparse::FRAME),
                 listed,
                 sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
                 format,
@@ -175,7 +150,7 @@ impl CaoPipelines {
         match (bricks.skipping, frame) {
             (false, _) => &self.lao_dense,
             (true, true) => &self.lao_frame,
-            (true, false) if crate::ao::sparse::readable_only(bricks) => &self.lao_readable,
+            (true, false) if sparse::readable_only(bricks) => &self.lao_readable,
             (true, false) => &self.lao,
         }
     }

@@ -3,7 +3,9 @@
 //! does with them is in `listed.rs`; nothing here knows CAO's own types.
 
 use crate::gpu::dispatch::Pass;
-use crate::gpu::{Gpu, GpuError, compute_pipeline, shaders, uniform_group, validated};
+use crate::gpu::{
+    Gpu, GpuError, compute_pipeline, shaders, specialised_pipeline, uniform_group, validated,
+};
 
 /// A pass's pipeline, bind group and uniforms (the caller makes the [`Pass`]).
 pub(super) type Parts<'a> = (
@@ -38,18 +40,17 @@ pub(super) struct ListedPipelines {
 }
 
 impl ListedPipelines {
-    /// `format_of` names the CAO volumes' format in the shaders.
+    /// `swaps` chooses the CAO volumes' format in the shaders (`cao_format.wgsl`).
     pub(super) fn create(
         device: &wgpu::Device,
-        format_of: impl Fn(String) -> String,
+        swaps: shaders::Swaps<'_>,
     ) -> Result<Self, GpuError> {
-        let gather = shaders::module_with(device, "cao_gather.wgsl", &format_of)?;
-        let trace = shaders::module_with(device, "cao_listed.wgsl", |code| {
-            crate::ao::sparse::readable_variant(format_of(code))
-        })?;
+        let gather = shaders::module(device, "cao_gather.wgsl")?;
+        let trace = shaders::module_swapping(device, "cao_listed.wgsl", swaps)?;
+        let readable = crate::ao::sparse::READABLE;
         validated(device, "CaoPipelines::listed", || ListedPipelines {
             gather: compute_pipeline(device, "Cao::gather", &gather, "main", None),
-            trace: compute_pipeline(device, "Cao::listed", &trace, "main", None),
+            trace: specialised_pipeline(device, "Cao::listed", &trace, None, readable, "main"),
         })
     }
 }
