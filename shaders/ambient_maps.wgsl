@@ -2,18 +2,18 @@
 // the variance of §4.2). One invocation per voxel.
 // CPU twin: src/ao/filter/mod.rs (`ambient`, `ambient_run`), which evaluates pow and exp
 // with vectorisable approximations (within 1e-6); keep the two in step.
+//!include volume.wgsl
 
 struct Params {
     dims: vec4<u32>,    // x, y, z, map (0 Penner, 1 CDF, 2 Gauss, 3 variance)
     radius: vec4<u32>,  // box radius per axis
-    source: vec4<f32>,  // a, b, entries - 1, opacity (1) or density (0)
+    source: vec4<f32>,  // w: opacity (1) or density (0); xyz unused (the map is volume.wgsl's)
 }
 
+// The density and the opacity table: volume.wgsl (group 3), its voxels unfiltered.
 @group(0) @binding(0) var<uniform> p: Params;
-@group(0) @binding(1) var volume: texture_3d<f32>;
-@group(0) @binding(2) var<storage, read> lut_alpha: array<f32>;
-@group(0) @binding(3) var stats: texture_3d<f32>;
-@group(0) @binding(4) var out_map: texture_storage_3d<r32float, write>;
+@group(0) @binding(1) var stats: texture_3d<f32>;
+@group(0) @binding(2) var out_map: texture_storage_3d<r32float, write>;
 
 const VARIANCE_FLOOR: f32 = 1e-12;
 const ERF_A: f32 = 0.1400123;
@@ -23,13 +23,9 @@ const SQRT_2: f32 = 1.4142135;
 // Same as in box_stats.wgsl.
 fn source_value(norm: f32) -> f32 {
     if p.source.w == 0.0 {
-        return norm * p.source.x + p.source.y;
+        return data_value(norm);
     }
-    let t = clamp(norm * p.source.x + p.source.y, 0.0, p.source.z);
-    let i0 = u32(floor(t));
-    let i1 = min(i0 + 1u, u32(p.source.z));
-    let a0 = lut_alpha[i0];
-    return a0 + (lut_alpha[i1] - a0) * (t - floor(t));
+    return opacity(norm);
 }
 
 // Voxels of the cropped window [i - r, i + r] ∩ [0, n).
@@ -93,6 +89,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         * window_count(gid.z, p.radius.z, dims.z));
     let s = textureLoad(stats, gid, 0);
     let m = vec4<f32>(s.x, s.y, s.z / n, s.w / n);
-    let v_x = source_value(textureLoad(volume, gid, 0).r);
+    let v_x = source_value(value_of_voxel(vec3<i32>(gid)));
     textureStore(out_map, gid, vec4<f32>(ambient(p.dims.w, v_x, m), 0.0, 0.0, 1.0));
 }

@@ -4,19 +4,19 @@
 // pivot m = c + r, so window(i) = op(S[i − r], P[i + r]) with the suffixes
 // S[a] = op(v[a..m)) and prefixes P[b] = op(v[m..=b]). Windows are cropped at the faces.
 // CPU twin: src/ao/filter/cpu.rs (`segment`, `FilterCpu`); keep the two in step.
+//!include volume.wgsl
 
 struct Params {
     dims: vec4<u32>,    // x, y, z, axis
     run: vec4<u32>,     // r, segment length L, segments per line, first pass (1)
-    source: vec4<f32>,  // a, b, entries - 1, opacity (1) or density (0)
+    source: vec4<f32>,  // w: opacity (1) or density (0); xyz unused (the map is volume.wgsl's)
     count: vec4<u32>,   // invocations, invocations per dispatch row, lines
 }
 
+// The density and the opacity table: volume.wgsl (group 3), its voxels unfiltered.
 @group(0) @binding(0) var<uniform> p: Params;
-@group(0) @binding(1) var volume: texture_3d<f32>;
-@group(0) @binding(2) var<storage, read> lut_alpha: array<f32>;
-@group(0) @binding(3) var stats_in: texture_3d<f32>;
-@group(0) @binding(4) var stats_out: texture_storage_3d<rgba32float, write>;
+@group(0) @binding(1) var stats_in: texture_3d<f32>;
+@group(0) @binding(2) var stats_out: texture_storage_3d<rgba32float, write>;
 
 const BIG: f32 = 3.0e38;
 const SEGMENT_MAX: u32 = 64u;
@@ -25,13 +25,9 @@ const SEGMENT_MAX: u32 = 64u;
 // `Source::value`.
 fn source_value(norm: f32) -> f32 {
     if p.source.w == 0.0 {
-        return norm * p.source.x + p.source.y;
+        return data_value(norm);
     }
-    let t = clamp(norm * p.source.x + p.source.y, 0.0, p.source.z);
-    let i0 = u32(floor(t));
-    let i1 = min(i0 + 1u, u32(p.source.z));
-    let a0 = lut_alpha[i0];
-    return a0 + (lut_alpha[i1] - a0) * (t - floor(t));
+    return opacity(norm);
 }
 
 fn combine(a: vec4<f32>, b: vec4<f32>) -> vec4<f32> {
@@ -46,7 +42,7 @@ fn at(line: vec3<u32>, k: u32) -> vec3<u32> {
 
 fn fetch(pos: vec3<u32>) -> vec4<f32> {
     if p.run.w == 1u {
-        let v = source_value(textureLoad(volume, pos, 0).r);
+        let v = source_value(value_of_voxel(vec3<i32>(pos)));
         return vec4<f32>(v, v, v, v * v);
     }
     return textureLoad(stats_in, pos, 0);

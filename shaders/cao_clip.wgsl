@@ -8,13 +8,13 @@
 //!include clip_common.wgsl
 //!include bricks.wgsl
 //!include cao_format.wgsl
+//!include volume.wgsl
 
 struct Params {
     dims: vec4<u32>,      // x, y, z, unused
     chunk: vec4<u32>,     // first brick, bricks, workgroups per row, unused
     spacing: vec4<f32>,   // mm per voxel, w: N extra MSAA samples
     half: vec4<f32>,      // half the volume's extent (mm)
-    lut_map: vec4<f32>,   // a, b, entries − 1
     mode: vec4<u32>,      // full (0/1), V_PAO marks unreadable voxels (0/1), clipped → 1 (0/1),
                           // per-ray test (0 off, else 1 + balls)
     lao: vec4<f32>,       // LAO rays K, samples M, step (mm), the longest ray step (mm)
@@ -25,24 +25,19 @@ struct Params {
 const RECOMPUTE: f32 = -1.0;
 const CLIPPED: f32 = -2.0;
 
+// The density and the LAO table: volume.wgsl (group 3).
 @group(0) @binding(0) var<uniform> p: Params;
-@group(0) @binding(1) var volume: texture_3d<f32>;
-@group(0) @binding(2) var<storage, read> lut_alpha: array<f32>;
-@group(0) @binding(3) var<storage, read> msaa: array<vec4<f32>>;  // offsets in voxels
-@group(0) @binding(4) var v_o: CaoWrite;
-@group(0) @binding(5) var v_ao: CaoWrite;
-@group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>; // recompute, clipped
-@group(0) @binding(7) var<storage, read> bricks: array<u32>;
-@group(0) @binding(8) var v_pao: texture_3d<f32>;
-@group(0) @binding(9) var<storage, read> rays: array<vec4<f32>>;  // LAO rays: xyz direction, w weight
+@group(0) @binding(1) var<storage, read> msaa: array<vec4<f32>>;  // offsets in voxels
+@group(0) @binding(2) var v_o: CaoWrite;
+@group(0) @binding(3) var v_ao: CaoWrite;
+@group(0) @binding(4) var<storage, read_write> counters: array<atomic<u32>, 4>; // recompute, clipped
+@group(0) @binding(5) var<storage, read> bricks: array<u32>;
+@group(0) @binding(6) var v_pao: texture_3d<f32>;
+@group(0) @binding(7) var<storage, read> rays: array<vec4<f32>>;  // LAO rays: xyz direction, w weight
 
 // TF_o: the transfer function's opacity (for a 1 mm step) of the voxel itself.
 fn voxel_opacity(v: vec3<u32>) -> f32 {
-    let norm = textureLoad(volume, v, 0).r;
-    let t = clamp(norm * p.lut_map.x + p.lut_map.y, 0.0, p.lut_map.z);
-    let i0 = u32(floor(t));
-    let i1 = min(i0 + 1u, u32(p.lut_map.z));
-    return mix(lut_alpha[i0], lut_alpha[i1], t - floor(t));
+    return opacity(value_of_voxel(vec3<i32>(v)));
 }
 
 fn position_mm(v: vec3<u32>, offset: vec3<f32>) -> vec3<f32> {

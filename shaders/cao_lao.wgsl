@@ -24,6 +24,7 @@ override FRAME: bool = false;
 
 //!include cao_params.wgsl
 //!include cao_format.wgsl
+//!include volume.wgsl
 
 @group(0) @binding(0) var<uniform> p: Params;
 @group(0) @binding(1) var v_o: texture_3d<f32>;
@@ -33,8 +34,8 @@ override FRAME: bool = false;
 @group(0) @binding(5) var<storage, read> bricks: array<u32>;
 @group(0) @binding(6) var<storage, read> occupied: array<u32>;
 @group(0) @binding(7) var<storage, read_write> counters: array<atomic<u32>, 4>; // [2]: ray cast
-@group(0) @binding(8) var volume: texture_3d<f32>;
-@group(0) @binding(9) var<storage, read> readable_prefix: array<u32>;
+// The density for the readable-voxel test: volume.wgsl (group 3), its voxels alone.
+@group(0) @binding(8) var<storage, read> readable_prefix: array<u32>;
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {

@@ -6,19 +6,20 @@
 // with one fetch what its six-fetch central differences give, rounded to f16.
 // CPU twin: render::gradient::central_differences.
 //!include common.wgsl
+//!include volume.wgsl
 
 struct Params {
     dims: vec4<u32>,   // the volume's dims (the output has two more per axis)
     scale: vec4<f32>,  // x: 1 / M (render::gradient::GradientVolume::scale)
 }
 
+// The density: volume.wgsl (group 3), its voxels alone.
 @group(0) @binding(0) var<uniform> p: Params;
-@group(0) @binding(1) var volume: texture_3d<f32>;
-@group(0) @binding(2) var gradient: texture_storage_3d<rgba16float, write>;
+@group(0) @binding(1) var gradient: texture_storage_3d<rgba16float, write>;
 
 fn texel(k: vec3<i32>) -> f32 {
     let hi = vec3<i32>(p.dims.xyz) - vec3<i32>(1);
-    return textureLoad(volume, clamp(k, vec3<i32>(0), hi), 0).r;
+    return value_of_voxel(clamp(k, vec3<i32>(0), hi));
 }
 
 @compute @workgroup_size(4, 4, 4)

@@ -12,6 +12,7 @@
 // the volume are empty. a_i comes from the transfer function's opacity, corrected for a
 // 1 mm step. Rays step over empty cells (lao_ray.wgsl).
 //!include lao_ray.wgsl
+//!include volume.wgsl
 
 const NONE: u32 = 0xffffffffu;
 
@@ -19,26 +20,19 @@ struct Params {
     dims: vec4<u32>,       // x, y, z, unused
     chunk: vec4<u32>,      // first group, groups, workgroups per row, unused
     mm_to_uvw: vec4<f32>,  // 1 / extent in mm per axis
-    lut_map: vec4<f32>,    // a, b, entries - 1
     counts: vec4<u32>,     // rays K, samples M, unused, unused
     grid: vec4<u32>,       // ray cells per axis, skipping (0/1)
 }
 
 @group(0) @binding(0) var<uniform> p: Params;
-@group(0) @binding(1) var volume: texture_3d<f32>;
-@group(0) @binding(2) var linear_clamp: sampler;
-@group(0) @binding(3) var<storage, read> lut_alpha: array<f32>;
-@group(0) @binding(4) var<storage, read> rays: array<vec4<f32>>;  // xyz direction, w weight
-@group(0) @binding(5) var<storage, read_write> v_pao: array<f32>;
-@group(0) @binding(6) var<storage, read> voxels: array<u32>;  // this submission's, x fastest
-@group(0) @binding(7) var<storage, read> occupied: array<u32>;
+@group(0) @binding(1) var<storage, read> rays: array<vec4<f32>>;  // xyz direction, w weight
+@group(0) @binding(2) var<storage, read_write> v_pao: array<f32>;
+@group(0) @binding(3) var<storage, read> voxels: array<u32>;  // this submission's, x fastest
+@group(0) @binding(4) var<storage, read> occupied: array<u32>;
 
+// The density's opacity under the LAO table (volume.wgsl: group 3).
 fn opacity_in_box(uvw: vec3<f32>) -> f32 {
-    let norm = textureSampleLevel(volume, linear_clamp, uvw, 0.0).r;
-    let t = clamp(norm * p.lut_map.x + p.lut_map.y, 0.0, p.lut_map.z);
-    let i0 = u32(floor(t));
-    let i1 = min(i0 + 1u, u32(p.lut_map.z));
-    return mix(lut_alpha[i0], lut_alpha[i1], t - floor(t));
+    return opacity_at(uvw);
 }
 
 @compute @workgroup_size(8, 8, 1)

@@ -27,7 +27,7 @@ fn in_box(uvw: vec3<f32>) -> bool {
 }
 
 // A sample's opacity: 0 outside the volume.
-fn opacity_at(uvw: vec3<f32>) -> f32 {
+fn ray_opacity(uvw: vec3<f32>) -> f32 {
     if !in_box(uvw) {
         return 0.0;
     }
@@ -92,7 +92,7 @@ fn lao_ray(centre: vec3<f32>, step: vec3<f32>, samples: u32) -> f32 {
                 continue;
             }
         }
-        transmittance = transmittance * (1.0 - opacity_at(centre + step * f32(m)));
+        transmittance = transmittance * (1.0 - ray_opacity(centre + step * f32(m)));
         m = m + 1u;
         sum = sum + transmittance;
     }
@@ -143,7 +143,7 @@ fn dense_ray(centre: vec3<f32>, step: vec3<f32>, samples: u32) -> f32 {
     for (var m = 1u; m <= samples; m = m + 1u) {
         sum = sum + transmittance;
         if m < samples {
-            transmittance = transmittance * (1.0 - opacity_at(centre + step * f32(m)));
+            transmittance = transmittance * (1.0 - ray_opacity(centre + step * f32(m)));
         }
     }
     return sum;

@@ -3,6 +3,7 @@
 //!include common.wgsl
 //!include clip_common.wgsl
 //!include vao_common.wgsl
+//!include volume.wgsl
 
 struct Params {
     inv_view_proj: mat4x4<f32>,
@@ -10,7 +11,7 @@ struct Params {
     background: vec4<f32>,
     shading: vec4<f32>,   // ambient k, specular, shininess, phong on
     voxel_uvw: vec4<f32>, // one voxel in uvw per axis, smallest spacing (mm)
-    lut_map: vec4<f32>,   // a, b, entries - 1, edge scale
+    edge: vec4<f32>,      // x: the gradient scale for "is this an edge"; yzw unused
     step: vec4<f32>,      // dt (mm), jitter on, max steps, skipping on
     image: vec4<u32>,     // width, height, tile x0, tile y0
     grid: vec4<u32>,      // occupancy grid dims, block edge (voxels)
@@ -56,20 +57,19 @@ const MODE_MINIP: u32 = 2u;
 const MODE_AVERAGE: u32 = 3u;
 const MODE_ISO: u32 = 4u;
 
+// The density and the transfer function are read through volume.wgsl (group 3).
 @group(0) @binding(0) var<uniform> p: Params;
-@group(0) @binding(1) var volume: texture_3d<f32>;
-@group(0) @binding(2) var linear_clamp: sampler;
-@group(0) @binding(3) var<storage, read> lut: array<vec4<f32>>;
-@group(0) @binding(4) var ambient_occlusion: texture_3d<f32>;
-@group(0) @binding(5) var occupancy: texture_3d<u32>;
-@group(0) @binding(6) var out_image: texture_storage_2d<rgba8unorm, write>;
+@group(0) @binding(1) var linear_clamp: sampler;
+@group(0) @binding(2) var ambient_occlusion: texture_3d<f32>;
+@group(0) @binding(3) var occupancy: texture_3d<u32>;
+@group(0) @binding(4) var out_image: texture_storage_2d<rgba8unorm, write>;
 // min(σ²/σ²_max, 1) per voxel (Ruiz et al. §4.2); a single texel of 1 when off.
-@group(0) @binding(7) var opacity_modulation: texture_3d<f32>;
+@group(0) @binding(5) var opacity_modulation: texture_3d<f32>;
 // (min, max) of the texel values a trilinear sample in each occupancy block can read.
-@group(0) @binding(8) var block_range: texture_3d<f32>;
+@group(0) @binding(6) var block_range: texture_3d<f32>;
 // The density's central differences per voxel ÷ M, with a border of one voxel
 // (render::gradient); a single texel when there is none.
-@group(0) @binding(9) var gradient_volume: texture_3d<f32>;
+@group(0) @binding(7) var gradient_volume: texture_3d<f32>;
 
 // Group 2 (src/render/shadow.rs): live positional AO (vao_common.wgsl, bindings 0–4)
 // and the light volume for shadows.
@@ -155,34 +155,22 @@ fn meets_change(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32) ->
     return false;
 }
 
-// Transfer function: linear interpolation between the two nearest LUT entries.
-fn classify(norm: f32) -> vec4<f32> {
-    let t = clamp(norm * p.lut_map.x + p.lut_map.y, 0.0, p.lut_map.z);
-    let i0 = u32(floor(t));
-    let i1 = min(i0 + 1u, u32(p.lut_map.z));
-    return mix(lut[i0], lut[i1], t - floor(t));
-}
-
-fn sample_norm(uvw: vec3<f32>) -> f32 {
-    return textureSampleLevel(volume, linear_clamp, uvw, 0.0).r;
-}
-
 // The density's gradient by central differences one voxel either side, in texel units
 // per mm: from the gradient volume (the same differences interpolated, rounded to f16;
 // render::gradient) when one is bound, else from six samples (CPU twin:
 // render::cpu::shade, which takes the six).
 fn gradient(uvw: vec3<f32>) -> vec3<f32> {
     if GRADIENT == 1u || (GRADIENT == 2u && p.box_half.w > 0.0) {
-        let n = vec3<f32>(textureDimensions(volume));
+        let n = vec3<f32>(volume_dims());
         let at = (uvw * n + 1.0) / (n + 2.0);
         let g = textureSampleLevel(gradient_volume, linear_clamp, at, 0.0).xyz;
         return g * (p.box_half.w / (2.0 * p.voxel_uvw.w));
     }
     let d = p.voxel_uvw.xyz;
     return vec3<f32>(
-        sample_norm(uvw + vec3<f32>(d.x, 0.0, 0.0)) - sample_norm(uvw - vec3<f32>(d.x, 0.0, 0.0)),
-        sample_norm(uvw + vec3<f32>(0.0, d.y, 0.0)) - sample_norm(uvw - vec3<f32>(0.0, d.y, 0.0)),
-        sample_norm(uvw + vec3<f32>(0.0, 0.0, d.z)) - sample_norm(uvw - vec3<f32>(0.0, 0.0, d.z)),
+        value_at(uvw + vec3<f32>(d.x, 0.0, 0.0)) - value_at(uvw - vec3<f32>(d.x, 0.0, 0.0)),
+        value_at(uvw + vec3<f32>(0.0, d.y, 0.0)) - value_at(uvw - vec3<f32>(0.0, d.y, 0.0)),
+        value_at(uvw + vec3<f32>(0.0, 0.0, d.z)) - value_at(uvw - vec3<f32>(0.0, 0.0, d.z)),
     ) / (2.0 * p.voxel_uvw.w);
 }
 
@@ -220,7 +208,7 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>, cut: bool) -> vec3<f32
     if phong || ((AO_VOLUME || (LIVE_VAO && extras.flags.x != 0u)) && p.ao.z > 0.0) {
         let g = gradient(uvw);
         // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
-        let strength = length(g) * abs(p.lut_map.x) * p.voxel_uvw.w * p.lut_map.w;
+        let strength = length(g) * abs(volume_map.lut.x) * p.voxel_uvw.w * p.edge.x;
         var edge = clamp(strength, 0.0, 1.0);
         if MODE == MODE_ISO && strength > 0.0 {
             edge = 1.0;  // an isosurface is a surface however soft its gradient
@@ -270,7 +258,7 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>, cut: bool) -> vec3<f32
 // The mode's value at a sample: projections map the TF's window to [0, 1]; iso puts
 // the surface at 0.
 fn mode_value(uvw: vec3<f32>) -> f32 {
-    return sample_norm(uvw) * p.mode.y + p.mode.z;
+    return value_at(uvw) * p.mode.y + p.mode.z;
 }
 
 fn visible(pos: vec3<f32>) -> bool {
@@ -336,7 +324,7 @@ fn project(origin: vec3<f32>, dir: vec3<f32>, t_enter: f32, t_exit: f32, offset:
 
 // The occupancy block of a sample.
 fn block_at(uvw: vec3<f32>) -> vec3<u32> {
-    let dims = vec3<f32>(textureDimensions(volume));
+    let dims = vec3<f32>(volume_dims());
     // The block edge is a power of two: a shift, not a division (exact for u32).
     return min(vec3<u32>(clamp(uvw, vec3<f32>(0.0), vec3<f32>(1.0)) * dims) >> vec3<u32>(countTrailingZeros(p.grid.w)), p.grid.xyz - vec3<u32>(1u));
 }
@@ -351,7 +339,7 @@ fn block_u(block: vec3<u32>) -> vec2<f32> {
 
 // The first regular sample index past `block` along the ray (as compositing skips).
 fn past_block(origin: vec3<f32>, dir: vec3<f32>, block: vec3<u32>, t_enter: f32, offset: f32) -> u32 {
-    let dims = vec3<f32>(textureDimensions(volume));
+    let dims = vec3<f32>(volume_dims());
     let half = p.box_half.xyz;
     let lo = vec3<f32>(block * p.grid.w) / dims * 2.0 * half - half;
     let hi = vec3<f32>((block + vec3<u32>(1u)) * p.grid.w) / dims * 2.0 * half - half;
@@ -471,7 +459,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // hit is on a cut face.
                 let lo = origin + dir * hit.y;
                 let cut = !visible(lo) && mode_value(lo / (2.0 * half) + 0.5) >= 0.0;
-                result = vec4<f32>(shade(classify(sample_norm(uvw)).rgb, uvw, -dir, cut), 1.0);
+                result = vec4<f32>(shade(classify(value_at(uvw)).rgb, uvw, -dir, cut), 1.0);
             }
         } else {
             result = project(origin, dir, t_enter, t_exit, offset, max_steps, mode);
@@ -551,7 +539,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     k = k + 1u;
                     continue;
                 }
-                let norm = sample_norm(uvw);
+                let norm = value_at(uvw);
                 rgba = classify(norm);
                 if rgba.a > 0.0 {
                     found = true;

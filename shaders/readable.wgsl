@@ -7,7 +7,7 @@
 // (7³) may give non-zero opacity under the rendering LUT (`readable_prefix[i]`: entries
 // before i with opacity > 0). The index margin is one entry wider than the CPU's test
 // (ao::sparse::Bricks::readable_mask), so the GPU computes every voxel the twin does.
-// The including shader declares `volume: texture_3d<f32>`, `readable_prefix:
+// The including shader includes volume.wgsl and declares `readable_prefix:
 // array<u32>`, `p.dims: vec4<u32>` and `p.readable: vec4<f32>` (LUT index =
 // norm · x + y, last entry z; w: 0 off, else 1 + the texels taken below v on each
 // axis, 1 + reach, as many above (at least 1) — tests take fewer to show that exactness
@@ -25,7 +25,7 @@ fn voxel_readable(v: vec3<u32>) -> bool {
         for (var dy = below; dy <= above; dy = dy + 1) {
             for (var dx = below; dx <= above; dx = dx + 1) {
                 let t = clamp(vec3<i32>(v) + vec3<i32>(dx, dy, dz), vec3<i32>(0), top);
-                let n = textureLoad(volume, t, 0).r;
+                let n = value_of_voxel(t);
                 lo = min(lo, n);
                 hi = max(hi, n);
             }

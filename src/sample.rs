@@ -5,9 +5,10 @@
 //! Every twin in `stage`-like modules (`ao::lao`, `render::shadow`, `ao::vao`, `ao::cao`,
 //! `render::cpu`, …) samples through these, so the GPU and CPU paths read the same values.
 
+use crate::texels::gpu_data::VolumeMap;
 use crate::texels::{TexelFormat, VolumeTexels};
 use crate::tf::{Lut, TransferFunction, correct_opacity};
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 
 /// The largest AO read offset ([`crate::render::RenderSettings::ao_offset`]), in voxels:
@@ -51,6 +52,58 @@ pub fn lut_lerp(table: &[f32], map: [f32; 3], norm: f32) -> f32 {
     let i0 = t.floor() as usize;
     let i1 = (i0 + 1).min(map[2] as usize);
     table[i0] + (table[i1] - table[i0]) * (t - t.floor())
+}
+
+/// The CPU twin of `shaders/volume.wgsl`: texel values (x fastest) of a volume of `dims`,
+/// read through a [`VolumeMap`] and a table as the shaders' reader reads them.
+#[derive(Debug, Clone, Copy)]
+pub struct VolumeSampler<'a> {
+    pub values: &'a [f32],
+    pub dims: [usize; 3],
+    pub map: VolumeMap,
+    pub table: &'a [[f32; 4]],
+}
+
+impl VolumeSampler<'_> {
+    /// `value_at`: the texel value at `uvw`, trilinear, clamped at the edges.
+    pub fn value_at(&self, uvw: Vec3) -> f32 {
+        trilinear(self.values, self.dims, uvw)
+    }
+
+    /// `lut_index`: the fractional table index of `value`, clamped to the table.
+    fn index(&self, value: f32) -> (usize, usize, f32) {
+        let [a, b, last] = self.map.lut_map();
+        let t = (value * a + b).clamp(0.0, last);
+        let i0 = t.floor() as usize;
+        (i0, (i0 + 1).min(last as usize), t - t.floor())
+    }
+
+    /// `classify`: the transfer function's colour and opacity at `value` (interpolated
+    /// as `c0 · (1 − f) + c1 · f`; [`Self::opacity`] as `a0 + (a1 − a0) · f`: the GPU's
+    /// `mix` gives either within rounding).
+    pub fn classify(&self, value: f32) -> [f32; 4] {
+        let (i0, i1, f) = self.index(value);
+        Vec4::from(self.table[i0])
+            .lerp(Vec4::from(self.table[i1]), f)
+            .to_array()
+    }
+
+    /// `opacity`: the transfer function's opacity at `value`.
+    pub fn opacity(&self, value: f32) -> f32 {
+        let (i0, i1, f) = self.index(value);
+        let (a0, a1) = (self.table[i0][3], self.table[i1][3]);
+        a0 + (a1 - a0) * f
+    }
+
+    /// `opacity_at`: the opacity at `uvw` (inside the box).
+    pub fn opacity_at(&self, uvw: Vec3) -> f32 {
+        self.opacity(self.value_at(uvw))
+    }
+
+    /// `data_value`: the stage's value of texel value `value`.
+    pub fn data_value(&self, value: f32) -> f32 {
+        value * self.map.value[0] + self.map.value[1]
+    }
 }
 
 /// The alpha column of a baked table (what the compute passes upload).

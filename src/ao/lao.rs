@@ -10,11 +10,14 @@
 use super::sparse::{Bricks, brick_voxels, empty_run};
 use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
 use crate::gpu::{
-    Gpu, GpuError, output_buffer, read_buffer, readback_buffer, storage_buffer, validated,
+    Gpu, GpuError, output_buffer, read_buffer, readback_buffer, storage_buffer, uniform_group,
+    validated,
 };
 use crate::render::gpu::GpuVolume;
-use crate::sample::{alpha_column, lut_lerp, trilinear, voxel_centre};
+use crate::sample::{VolumeSampler, voxel_centre};
 use crate::texels::VolumeTexels;
+use crate::texels::gpu_data::VolumeMap;
+use crate::texels::reader::{self, Reading, VOLUME_GROUP};
 use crate::tf::Lut;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -58,11 +61,6 @@ pub struct LaoParams {
     /// One LAO step (1 mm) in texture coordinates per axis.
     pub mm_to_uvw: [f32; 3],
     pub _pad0: f32,
-    /// LUT index = norm · lut_scale + lut_offset, clamped to lut_last.
-    pub lut_scale: f32,
-    pub lut_offset: f32,
-    pub lut_last: f32,
-    pub _pad1: f32,
     /// K and M.
     pub rays: u32,
     pub samples: u32,
@@ -71,7 +69,7 @@ pub struct LaoParams {
     pub grid: [u32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<LaoParams>() == 96);
+const _: () = assert!(std::mem::size_of::<LaoParams>() == 80);
 
 chunk_fields!(LaoParams);
 
@@ -85,22 +83,11 @@ pub fn mm_to_uvw(texels: &VolumeTexels) -> [f32; 3] {
     ]
 }
 
-fn params(
-    texels: &VolumeTexels,
-    lut: &Lut,
-    rays: &Rays,
-    samples: u32,
-    bricks: &Bricks,
-) -> LaoParams {
-    let (a, b) = texels.lut_map(lut);
+fn params(texels: &VolumeTexels, rays: &Rays, samples: u32, bricks: &Bricks) -> LaoParams {
     LaoParams {
         bricks: BrickChunk::of(texels.dims.map(|d| d as u32)),
         mm_to_uvw: mm_to_uvw(texels),
         _pad0: 0.0,
-        lut_scale: a,
-        lut_offset: b,
-        lut_last: (lut.rgba.len().max(2) - 1) as f32,
-        _pad1: 0.0,
         rays: rays.directions.len() as u32,
         samples: samples.max(1),
         _pad2: [0; 2],
@@ -108,23 +95,23 @@ fn params(
     }
 }
 
-fn alpha_at(p: &LaoParams, alpha: &[f32], norm: &[f32], dims: [usize; 3], uvw: Vec3) -> f32 {
+/// A ray sample's opacity (`ray_opacity` in `lao_ray.wgsl`): 0 outside the volume.
+fn alpha_at(volume: &VolumeSampler, uvw: Vec3) -> f32 {
     if uvw.cmplt(Vec3::ZERO).any() || uvw.cmpgt(Vec3::ONE).any() {
         return 0.0;
     }
-    let n = trilinear(norm, dims, uvw);
-    lut_lerp(alpha, [p.lut_scale, p.lut_offset, p.lut_last], n)
+    volume.opacity_at(uvw)
 }
 
 /// CPU twin of one invocation of `lao.wgsl`: A(x) of the voxel at `voxel`.
 fn lao_voxel(
     p: &LaoParams,
-    (alpha, norm): (&[f32], &[f32]),
-    dims: [usize; 3],
+    volume: &VolumeSampler,
     rays: &[[f32; 4]],
     bricks: &Bricks,
     voxel: [usize; 3],
 ) -> f32 {
+    let dims = volume.dims;
     let centre = voxel_centre(voxel, dims);
     let samples = p.samples;
     let scale = Vec3::from(p.mm_to_uvw);
@@ -132,7 +119,7 @@ fn lao_voxel(
     for ray in rays {
         let step = Vec3::new(ray[0], ray[1], ray[2]) * scale;
         let sum = ray_sum(centre, step, samples, (bricks, dims), |uvw| {
-            alpha_at(p, alpha, norm, dims, uvw)
+            alpha_at(volume, uvw)
         });
         total += ray[3] * sum / samples as f32;
     }
@@ -179,9 +166,14 @@ pub fn lao_cpu(
     bricks: &Bricks,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Vec<f32> {
-    let p = params(texels, lut, rays, samples, bricks);
-    let alpha = alpha_column(lut);
+    let p = params(texels, rays, samples, bricks);
     let norm = texels.norm_values();
+    let volume = VolumeSampler {
+        values: &norm,
+        dims: texels.dims,
+        map: VolumeMap::new(texels, lut),
+        table: &lut.rgba,
+    };
     let packed = rays.packed();
     let dims = texels.dims;
     let list = bricks.list(|i| bricks.readable[i] != 0);
@@ -193,7 +185,7 @@ pub fn lao_cpu(
             let v = brick_voxels(b, dims)
                 .map(|v| {
                     if readable[v[0] + dims[0] * (v[1] + dims[1] * v[2])] {
-                        lao_voxel(&p, (&alpha, &norm), dims, &packed, bricks, v)
+                        lao_voxel(&p, &volume, &packed, bricks, v)
                     } else {
                         1.0
                     }
@@ -276,7 +268,7 @@ impl LaoGpu {
         } else {
             &self.sparse
         };
-        let base = params(texels, lut, rays, samples, bricks);
+        let base = params(texels, rays, samples, bricks);
         let list = bricks.voxel_list(texels);
         let groups = list.len().div_ceil(GROUP);
         let per_voxel = rays.directions.len() as u64 * samples.max(1) as u64;
@@ -287,14 +279,11 @@ impl LaoGpu {
             return Ok(out_values);
         }
         let occupied = bricks.rays.words();
-        let alpha = alpha_column(lut);
-        let (uniforms, out, readback, group, list_buf) = validated(device, "Lao::buffers", || {
-            let lut_buf = storage_buffer(
-                gpu,
-                "Lao::lut_alpha",
-                bytemuck::cast_slice(&alpha),
-                wgpu::BufferUsages::empty(),
-            );
+        let (uniforms, out, readback, bound, list_buf) = validated(device, "Lao::buffers", || {
+            let table = reader::table(gpu, "Lao::lut", lut);
+            let map = VolumeMap::new(texels, lut);
+            let reading = Reading::sampled(vol.volume_view(), &stage.sampler, map, &table);
+            let volume_group = reading.group_of(gpu, "Lao", &stage.pipeline);
             let ray_buf = storage_buffer(
                 gpu,
                 "Lao::rays",
@@ -316,11 +305,9 @@ impl LaoGpu {
             );
             let out = output_buffer(device, "Lao::v_pao", size);
             let readback = readback_buffer(device, "Lao::readback", size);
-            let bound =
-                [&lut_buf, &ray_buf, &out, &list_buf, &occupied_buf].map(|b| b.as_entire_binding());
-            let (uniforms, group) =
-                stage.sampling_group(gpu, "Lao", &base, vol.volume_view(), &bound);
-            (uniforms, out, readback, group, list_buf)
+            let bound = [&ray_buf, &out, &list_buf, &occupied_buf].map(|b| b.as_entire_binding());
+            let (uniforms, group) = uniform_group(gpu, "Lao", &stage.pipeline, &base, &bound);
+            (uniforms, out, readback, [group, volume_group], list_buf)
         })?;
         // Submission `first`'s part of the list, padded to whole groups with NONE.
         let part = |first: u32, count: u32| {
@@ -332,7 +319,7 @@ impl LaoGpu {
         let pass = Pass {
             label: "Lao::voxels",
             pipeline: &stage.pipeline,
-            bind_groups: &[&group],
+            bind_groups: &[(0, &bound[0]), (VOLUME_GROUP, &bound[1])],
             uniforms: &uniforms,
         };
         chunks.run(

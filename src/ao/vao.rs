@@ -485,7 +485,7 @@ impl VaoGpu {
         let pass = Pass {
             label: "Vao::slab",
             pipeline: &self.pipeline,
-            bind_groups: &[&group0, &self.no_clip, &group2],
+            bind_groups: &[(0, &group0), (1, &self.no_clip), (2, &group2)],
             uniforms: &uniforms,
         };
         slabs.run_readback(gpu, &pass, base, (&out, &readback), progress)

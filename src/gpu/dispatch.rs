@@ -259,13 +259,13 @@ impl SlabDispatch {
     }
 }
 
-/// What one slab pass binds: its pipeline, its bind groups (0, 1, … in order) and the
+/// What one slab pass binds: its pipeline, its bind groups (index, group) and the
 /// uniform buffer the dispatcher rewrites for every slab (bound in one of the groups).
 #[derive(Debug, Clone, Copy)]
 pub struct Pass<'a> {
     pub label: &'a str,
     pub pipeline: &'a wgpu::ComputePipeline,
-    pub bind_groups: &'a [&'a wgpu::BindGroup],
+    pub bind_groups: &'a [(u32, &'a wgpu::BindGroup)],
     pub uniforms: &'a wgpu::Buffer,
 }
 

@@ -437,15 +437,15 @@ pub fn uniform_group<P: bytemuck::Pod>(
     (uniforms, group)
 }
 
-/// Encodes one compute dispatch of `groups` workgroups with bind groups 0, 1, … set from
-/// `bound`, then whatever `after` adds (typically copies to a readback buffer), and
+/// Encodes one compute dispatch of `groups` workgroups with the bind groups `bound`
+/// (index, group), then whatever `after` adds (typically copies to a readback buffer), and
 /// submits it.
 pub fn submit_compute_with(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     label: &str,
     pipeline: &wgpu::ComputePipeline,
-    bound: &[&wgpu::BindGroup],
+    bound: &[(u32, &wgpu::BindGroup)],
     groups: [u32; 3],
     after: impl FnOnce(&mut wgpu::CommandEncoder),
 ) {
@@ -457,8 +457,8 @@ pub fn submit_compute_with(
             timestamp_writes: None,
         });
         pass.set_pipeline(pipeline);
-        for (i, g) in bound.iter().enumerate() {
-            pass.set_bind_group(i as u32, *g, &[]);
+        for &(i, g) in bound {
+            pass.set_bind_group(i, g, &[]);
         }
         pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
     }
@@ -476,7 +476,15 @@ pub fn submit_compute(
     groups: [u32; 3],
     after: impl FnOnce(&mut wgpu::CommandEncoder),
 ) {
-    submit_compute_with(device, queue, label, pipeline, &[bind_group], groups, after);
+    submit_compute_with(
+        device,
+        queue,
+        label,
+        pipeline,
+        &[(0, bind_group)],
+        groups,
+        after,
+    );
 }
 
 /// How long a map callback may lag behind the wait that completed its map.

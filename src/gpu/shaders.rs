@@ -46,6 +46,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     shader!("surface.wgsl"),
     shader!("vao.wgsl"),
     shader!("vao_common.wgsl"),
+    shader!("volume.wgsl"),
 ];
 
 const DIRECTIVE: &str = "//!include ";

@@ -2,7 +2,8 @@
 //! rayon. Tests compare it with the GPU; it is also the fallback without an adapter.
 
 use super::{Frame, Image, OPAQUE, RaycastParams, jitter};
-use crate::sample::trilinear;
+use crate::sample::{VolumeSampler, trilinear};
+use crate::texels::gpu_data::VolumeMap;
 use crate::texels::{BlockRanges, VolumeTexels};
 use crate::tf::Lut;
 use glam::{Mat4, Vec3, Vec4};
@@ -40,6 +41,11 @@ pub struct CpuSurfaces {
     pub texels: VolumeTexels,
 }
 
+/// The colour of `value` (`classify(value).rgb` in raycast.wgsl).
+fn classify(volume: &Reader, value: f32) -> Vec3 {
+    Vec4::from(volume.classify(value)).truncate()
+}
+
 fn over(acc: Vec4, rgb: Vec3, a: f32) -> Vec4 {
     (acc.truncate() + (1.0 - acc.w) * a * rgb).extend(acc.w + (1.0 - acc.w) * a)
 }
@@ -69,15 +75,22 @@ fn intersect_box(origin: Vec3, dir: Vec3, lo: Vec3, hi: Vec3) -> (f32, f32) {
     (near.max_element(), far.min_element())
 }
 
-fn classify(p: &RaycastParams, lut: &Lut, norm: f32) -> Vec4 {
-    let t = (norm * p.lut_map[0] + p.lut_map[1]).clamp(0.0, p.lut_map[2]);
-    let i0 = t.floor() as usize;
-    let i1 = (i0 + 1).min(p.lut_map[2] as usize);
-    let (a, b) = (Vec4::from(lut.rgba[i0]), Vec4::from(lut.rgba[i1]));
-    a.lerp(b, t - t.floor())
-}
+/// The density and the transfer function as `volume.wgsl` reads them.
+type Reader<'a> = VolumeSampler<'a>;
 
-fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3, cut: bool) -> Vec3 {
+#[allow(
+    clippy::too_many_arguments,
+    reason = "raycast.wgsl's `shade` and what it reads"
+)]
+fn shade(
+    p: &RaycastParams,
+    vol: &CpuVolume,
+    volume: &Reader,
+    rgb: Vec3,
+    uvw: Vec3,
+    view: Vec3,
+    cut: bool,
+) -> Vec3 {
     let lit_at = |cos_theta: f32| {
         vol.light.as_ref().map_or(1.0, |l| {
             super::shadow::shadow_factor(&l.values, vol.dims, p, uvw, view, l.direction, cos_theta)
@@ -90,13 +103,13 @@ fn shade(p: &RaycastParams, vol: &CpuVolume, rgb: Vec3, uvw: Vec3, view: Vec3, c
     let mut ao_at = uvw;
     if phong || ((vol.ao.is_some() || vol.live_vao.is_some()) && p.ao[2] > 0.0) {
         let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
-        let s = |o: Vec3| trilinear(&vol.norm, vol.dims, uvw + o);
+        let s = |o: Vec3| volume.value_at(uvw + o);
         let g = Vec3::new(
             s(Vec3::new(d.x, 0.0, 0.0)) - s(Vec3::new(-d.x, 0.0, 0.0)),
             s(Vec3::new(0.0, d.y, 0.0)) - s(Vec3::new(0.0, -d.y, 0.0)),
             s(Vec3::new(0.0, 0.0, d.z)) - s(Vec3::new(0.0, 0.0, -d.z)),
         ) / (2.0 * p.voxel_uvw[3]);
-        let strength = g.length() * p.lut_map[0].abs() * p.voxel_uvw[3] * p.lut_map[3];
+        let strength = g.length() * volume.map.lut[0].abs() * p.voxel_uvw[3] * p.edge[0];
         let mut edge = strength.clamp(0.0, 1.0);
         if p.mode[0] as u32 == MODE_ISO && strength > 0.0 {
             edge = 1.0; // an isosurface is a surface however soft its gradient
@@ -205,6 +218,7 @@ const ISO_REFINE: u32 = 6;
 struct Ray<'a> {
     p: &'a RaycastParams,
     vol: &'a CpuVolume,
+    volume: &'a Reader<'a>,
     origin: Vec3,
     dir: Vec3,
     t_enter: f32,
@@ -251,7 +265,7 @@ impl Ray<'_> {
 
     fn mode_value(&self, pos: Vec3) -> f32 {
         let uvw = pos / (2.0 * self.half()) + Vec3::splat(0.5);
-        trilinear(&self.vol.norm, self.vol.dims, uvw) * self.p.mode[1] + self.p.mode[2]
+        self.volume.value_at(uvw) * self.p.mode[1] + self.p.mode[2]
     }
 
     /// MIP, MinIP or average over the unclipped samples (raycast.wgsl's `project`).
@@ -375,7 +389,7 @@ pub fn ray(p: &RaycastParams, px: u32, py: u32) -> (Vec3, Vec3, f32, f32) {
 pub fn pixel(
     p: &RaycastParams,
     vol: &CpuVolume,
-    lut: &Lut,
+    volume: &Reader,
     occupancy: &[u8],
     px: u32,
     py: u32,
@@ -398,6 +412,7 @@ pub fn pixel(
         let ray = Ray {
             p,
             vol,
+            volume,
             origin,
             dir,
             t_enter,
@@ -412,12 +427,12 @@ pub fn pixel(
             match ray.iso_hit() {
                 Some((t_hit, t_lo)) => {
                     let uvw = (origin + dir * t_hit) / (2.0 * half) + Vec3::splat(0.5);
-                    let norm = trilinear(&vol.norm, vol.dims, uvw);
+                    let norm = volume.value_at(uvw);
                     // Just before the hit the ray was inside the material but clipped:
                     // the hit is on a cut face.
                     let lo = origin + dir * t_lo;
                     let cut = !ray.visible(lo) && ray.mode_value(lo) >= 0.0;
-                    let rgb = shade(p, vol, classify(p, lut, norm).truncate(), uvw, -dir, cut);
+                    let rgb = shade(p, vol, volume, classify(volume, norm), uvw, -dir, cut);
                     (t_hit, rgb.extend(1.0))
                 }
                 None => (3.0e38, Vec4::ZERO),
@@ -480,15 +495,15 @@ pub fn pixel(
                 k += 1;
                 continue;
             }
-            let norm = trilinear(&vol.norm, vol.dims, uvw);
-            let mut rgba = classify(p, lut, norm);
+            let norm = volume.value_at(uvw);
+            let mut rgba = Vec4::from(volume.classify(norm));
             if rgba.w > 0.0 {
                 if let Some(m) = &vol.modulation {
                     rgba.w *= trilinear(m, vol.dims, uvw);
                 }
                 let len = dt.min(t_exit - t);
                 let cut = t - cut_t <= CUT_SHELL * p.voxel_uvw[3];
-                let rgb = shade(p, vol, rgba.truncate(), uvw, -dir, cut);
+                let rgb = shade(p, vol, volume, rgba.truncate(), uvw, -dir, cut);
                 if pending && t_surf < t + len {
                     let before = (t_surf - t).max(0.0);
                     acc = over(acc, rgb, 1.0 - (1.0 - rgba.w).powf(before / dt));
@@ -553,10 +568,16 @@ pub fn render_reusing(
         }
         super::reuse::set_balls(&mut p, balls);
     }
+    let volume = VolumeSampler {
+        values: &vol.norm,
+        dims: vol.dims,
+        map: VolumeMap::new(texels, lut),
+        table: &lut.rgba,
+    };
     let (w, h) = (frame.width, frame.height);
     let pixels: Vec<[u8; 4]> = (0..w * h)
         .into_par_iter()
-        .map(|i| match pixel(&p, vol, lut, occupancy, i % w, i / w) {
+        .map(|i| match pixel(&p, vol, &volume, occupancy, i % w, i / w) {
             // Round to nearest, as the GPU's unorm8 store does.
             Some(c) => c.to_array().map(|x| (x * 255.0).round() as u8),
             None => previous.map_or([0; 4], |(old, _)| old.pixels[i as usize]),

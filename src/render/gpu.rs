@@ -10,6 +10,8 @@ use crate::gpu::{
     Gpu, GpuError, bind_group, copy_texture_out, read_buffer, shaders, texture_readback,
     uniform_buffer, unpad, validated,
 };
+use crate::texels::gpu_data::VolumeMap;
+use crate::texels::reader::{self, Reading, VOLUME_GROUP};
 
 /// Largest tile rendered in one submission: keeps each dispatch short (no driver
 /// watchdog on real GPUs) and lets any image size fit the 2-D texture limit.
@@ -31,6 +33,8 @@ pub struct RayCaster {
     sampler: wgpu::Sampler,
     /// Group 2: live positional AO and shadows (`render::shadow`).
     layout_2: wgpu::BindGroupLayout,
+    /// The volume reader's group (`volume.wgsl`).
+    volume_layout: wgpu::BindGroupLayout,
     placeholders: super::extras::Placeholders,
     surfaces: super::surface::SurfaceRenderer,
     /// Uniform buffers and bind groups per render target, written each frame and
@@ -59,6 +63,7 @@ struct Bound {
     layer: Option<(wgpu::TextureView, wgpu::TextureView)>,
     group: wgpu::BindGroup,
     group_2: wgpu::BindGroup,
+    group_3: wgpu::BindGroup,
 }
 
 impl RayCaster {
@@ -73,15 +78,13 @@ impl RayCaster {
                 label: Some("RayCaster::layout"),
                 entries: &[
                     entry::uniform(0, c),
-                    entry::texture(1, c, D3, Some(true)),
-                    entry::sampler(2, c),
-                    entry::storage(3, c, true),
-                    entry::texture(4, c, D3, Some(true)),
-                    entry::texture(5, c, D3, None),
-                    entry::storage_texture(6, c, wgpu::TextureFormat::Rgba8Unorm, D2),
+                    entry::sampler(1, c),
+                    entry::texture(2, c, D3, Some(true)),
+                    entry::texture(3, c, D3, None),
+                    entry::storage_texture(4, c, wgpu::TextureFormat::Rgba8Unorm, D2),
+                    entry::texture(5, c, D3, Some(true)),
+                    entry::texture(6, c, D3, Some(false)),
                     entry::texture(7, c, D3, Some(true)),
-                    entry::texture(8, c, D3, Some(false)),
-                    entry::texture(9, c, D3, Some(true)),
                 ],
             });
             let clip_layout = crate::clip::gpu::bind_group_layout(device);
@@ -89,9 +92,15 @@ impl RayCaster {
                 label: Some("RayCaster::layout_2"),
                 entries: &super::extras::layout_entries(),
             });
+            let volume_layout = reader::layout(device);
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("RayCaster::pipeline_layout"),
-                bind_group_layouts: &[Some(&layout), Some(&clip_layout), Some(&layout_2)],
+                bind_group_layouts: &[
+                    Some(&layout),
+                    Some(&clip_layout),
+                    Some(&layout_2),
+                    Some(&volume_layout),
+                ],
                 immediate_size: 0,
             });
             let sampler = crate::gpu::linear_sampler(device, "RayCaster::linear_clamp");
@@ -105,6 +114,7 @@ impl RayCaster {
                 no_clip,
                 sampler,
                 layout_2,
+                volume_layout,
                 placeholders: super::extras::Placeholders::new(device),
                 surfaces,
                 bound: Default::default(),
@@ -253,8 +263,8 @@ impl RayCaster {
                         "RayCaster::extras",
                         bytemuck::bytes_of(&vol.extras.params()),
                     );
-                    let (group, group_2) = self.bind_groups(
-                        device,
+                    let [group, group_2, group_3] = self.bind_groups(
+                        (device, queue),
                         (vol, lut),
                         target,
                         &params_buffer,
@@ -271,6 +281,7 @@ impl RayCaster {
                         layer: layer_views.clone(),
                         group,
                         group_2,
+                        group_3,
                     });
                     bound.len() - 1
                 }
@@ -281,10 +292,17 @@ impl RayCaster {
                 || b.step_lut != step_lut
                 || b.stand_in != stand_in
             {
-                let (group, group_2) =
-                    self.bind_groups(device, (vol, lut), target, &b.params, &b.extras, layer);
+                let [group, group_2, group_3] = self.bind_groups(
+                    (device, queue),
+                    (vol, lut),
+                    target,
+                    &b.params,
+                    &b.extras,
+                    layer,
+                );
                 b.group = group;
                 b.group_2 = group_2;
+                b.group_3 = group_3;
                 b.generation = vol.generation;
                 b.step_lut = step_lut;
                 b.stand_in = stand_in;
@@ -300,21 +318,22 @@ impl RayCaster {
             pass.set_bind_group(0, &b.group, &[]);
             pass.set_bind_group(1, clip_group, &[]);
             pass.set_bind_group(2, &b.group_2, &[]);
+            pass.set_bind_group(VOLUME_GROUP, &b.group_3, &[]);
             pass.dispatch_workgroups(tw.div_ceil(8), th.div_ceil(8), 1);
         })
     }
 
-    /// Bind groups 0 (volume, LUT, AO, occupancy, target, modulation, block ranges,
-    /// gradient) and 2 (extras).
+    /// Bind groups 0 (AO, occupancy, target, modulation, block ranges, gradient), 2
+    /// (extras) and 3 (the volume and its LUT, `volume.wgsl`).
     fn bind_groups(
         &self,
-        device: &wgpu::Device,
+        (device, queue): (&wgpu::Device, &wgpu::Queue),
         (vol, lut): (&GpuVolume, &wgpu::Buffer),
         target: &wgpu::Texture,
         params: &wgpu::Buffer,
         extras: &wgpu::Buffer,
         layer: Option<&super::surface::SurfaceLayer>,
-    ) -> (wgpu::BindGroup, wgpu::BindGroup) {
+    ) -> [wgpu::BindGroup; 3] {
         let target_view = target.create_view(&Default::default());
         let group = bind_group(
             device,
@@ -322,9 +341,7 @@ impl RayCaster {
             &self.layout,
             &[
                 params.as_entire_binding(),
-                wgpu::BindingResource::TextureView(&vol.volume_view),
                 wgpu::BindingResource::Sampler(&self.sampler),
-                lut.as_entire_binding(),
                 wgpu::BindingResource::TextureView(vol.ao_view_read()),
                 wgpu::BindingResource::TextureView(&vol.occupancy_view),
                 wgpu::BindingResource::TextureView(&target_view),
@@ -345,7 +362,10 @@ impl RayCaster {
             &self.placeholders,
             &self.sampler,
         );
-        (group, group_2)
+        let map = VolumeMap::new(&vol.texels, &vol.lut);
+        let reading = Reading::sampled(&vol.volume_view, &self.sampler, map, lut);
+        let group_3 = reading.bind_group((device, queue), "RayCaster", &self.volume_layout);
+        [group, group_2, group_3]
     }
 
     /// Renders a frame in tiles of at most [`TILE`]², with shadow-test clipping against

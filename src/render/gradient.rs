@@ -10,6 +10,7 @@
 //! [`GRADIENT_BUDGET`] (or the adapter's 3-D texture size) keeps the six fetches.
 
 use crate::gpu::{Gpu, GpuError, validated};
+use crate::texels::reader::{Reading, VOLUME_GROUP};
 use crate::texels::{BlockRanges, TexelFormat, VolumeTexels};
 
 /// The most GPU memory a gradient volume may take (8 bytes per texel).
@@ -109,17 +110,20 @@ impl GradientVolume {
                 "Gradient",
                 &stage.0.pipeline,
                 &params,
-                &[
-                    wgpu::BindingResource::TextureView(volume),
-                    wgpu::BindingResource::TextureView(&view),
-                ],
+                &[wgpu::BindingResource::TextureView(&view)],
             );
+            let reading = Reading {
+                texels: volume,
+                sampler: None,
+                lut: None,
+            };
+            let volume_group = reading.group_of(gpu, "Gradient", &stage.0.pipeline);
             crate::gpu::submit_compute_with(
                 device,
                 &gpu.queue,
                 "Gradient::compute",
                 &stage.0.pipeline,
-                &[&group],
+                &[(0, &group), (VOLUME_GROUP, &volume_group)],
                 dims.map(|d| d.div_ceil(4)),
                 |_| {},
             );

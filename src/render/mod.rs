@@ -28,6 +28,7 @@ pub use camera::Camera;
 pub use image::Image;
 
 use crate::sample::AO_READ_REACH;
+use crate::texels::gpu_data::VolumeMap;
 use crate::texels::{BLOCK, VolumeTexels};
 use crate::tf::Lut;
 
@@ -293,8 +294,9 @@ pub struct RaycastParams {
     pub shading: [f32; 4],
     /// One voxel in texture coordinates along x, y, z; w = smallest spacing (mm).
     pub voxel_uvw: [f32; 4],
-    /// LUT map `t = norm · a + b`: a, b, entries − 1, gradient scale for "is this an edge".
-    pub lut_map: [f32; 4],
+    /// x: the gradient scale for "is this an edge" (with the LUT map's scale,
+    /// [`crate::texels::gpu_data::VolumeMap`]); yzw unused.
+    pub edge: [f32; 4],
     /// dt (mm), jitter on (0/1), max steps, skipping on (0/1).
     pub step: [f32; 4],
     /// Full image width, height; this tile's x0, y0.
@@ -335,8 +337,7 @@ impl Frame {
         let inv = self.camera.view_proj(radius, aspect).inverse();
         let min_spacing = texels.spacing.iter().copied().fold(f32::INFINITY, f32::min);
         let dt = self.settings.step_voxels.max(0.01) * min_spacing;
-        let (a, b) = texels.lut_map(lut);
-        let entries = (lut.rgba.len().max(2) - 1) as f32;
+        let entries = VolumeMap::last_entry(lut);
         let diag = 2.0 * radius;
         let s = &self.settings;
         let grid: [usize; 3] = std::array::from_fn(|i| texels.dims[i].div_ceil(BLOCK));
@@ -358,7 +359,7 @@ impl Frame {
                 min_spacing,
             ],
             // A gradient of 2 % of the LUT's range per voxel counts as a full edge.
-            lut_map: [a, b, entries, 1.0 / (0.02 * entries)],
+            edge: [1.0 / (0.02 * entries), 0.0, 0.0, 0.0],
             step: [
                 dt,
                 f32::from(u8::from(s.jitter)),

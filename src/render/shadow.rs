@@ -11,10 +11,12 @@
 //! the half-step positions between neighbouring samples on the valid sampling path).
 
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
-use crate::gpu::{Gpu, GpuError, output_buffer, readback_buffer, storage_buffer, validated};
+use crate::gpu::{Gpu, GpuError, output_buffer, readback_buffer, uniform_group, validated};
 use crate::sample::bake_lut;
-use crate::sample::{alpha_column, lut_lerp, per_voxel, trilinear, voxel_centre};
+use crate::sample::{VolumeSampler, per_voxel, trilinear, voxel_centre};
 use crate::texels::VolumeTexels;
+use crate::texels::gpu_data::VolumeMap;
+use crate::texels::reader::{self, Reading, VOLUME_GROUP};
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
 
@@ -62,12 +64,9 @@ pub struct LightParams {
     /// One step towards the light in texture coordinates; `h`, its length in mm.
     pub step_uvw: [f32; 3],
     pub h: f32,
-    /// LUT index = stored · lut_scale + lut_offset, clamped to lut_last.
-    pub lut_scale: f32,
-    pub lut_offset: f32,
-    pub lut_last: f32,
     /// Where light rays start, in steps from the voxel centre ([`LIGHT_START_STEPS`]).
     pub start: f32,
+    pub _pad1: [f32; 3],
     /// Half the volume's extent (mm), for the clip test.
     pub half: [f32; 3],
     pub _pad2: f32,
@@ -77,11 +76,10 @@ const _: () = assert!(std::mem::size_of::<LightParams>() == 80);
 
 slab_fields!(LightParams, linear);
 
-fn params(texels: &VolumeTexels, lut: &Lut, direction: Vec3) -> LightParams {
+fn params(texels: &VolumeTexels, direction: Vec3) -> LightParams {
     let extent = texels.extent();
     let h = LIGHT_STEP_VOXELS * texels.spacing.iter().copied().fold(f32::INFINITY, f32::min);
     let diag = Vec3::from(extent).length();
-    let (a, b) = crate::sample::f16_lut_map(texels, lut);
     let step = direction * h / Vec3::from(extent);
     LightParams {
         slab: SlabOrigin::of(texels.dims.map(|d| d as u32)),
@@ -91,24 +89,27 @@ fn params(texels: &VolumeTexels, lut: &Lut, direction: Vec3) -> LightParams {
         _pad0: 0,
         step_uvw: step.into(),
         h,
-        lut_scale: a,
-        lut_offset: b,
-        lut_last: (lut.rgba.len().max(2) - 1) as f32,
         start: LIGHT_START_STEPS,
+        _pad1: [0.0; 3],
         half: [extent[0] * 0.5, extent[1] * 0.5, extent[2] * 0.5],
         _pad2: 0.0,
     }
 }
 
+/// How the light pass reads the f16 copy of the density through `lut`.
+fn f16_map(texels: &VolumeTexels, lut: &Lut) -> VolumeMap {
+    let (a, b) = crate::sample::f16_lut_map(texels, lut);
+    VolumeMap::with_lut_map(a, b, lut)
+}
+
 /// CPU twin of one invocation of `light.wgsl`: T at the centre of `voxel`.
 fn light_voxel(
     p: &LightParams,
-    alpha: &[f32],
-    norm: &[f32],
-    dims: [usize; 3],
+    volume: &VolumeSampler,
     voxel: [usize; 3],
     clip: Option<&crate::clip::cpu::ClipMapsCpu>,
 ) -> f32 {
+    let dims = volume.dims;
     let centre = voxel_centre(voxel, dims);
     let step = Vec3::from(p.step_uvw);
     let mut t = 1.0f32;
@@ -125,8 +126,7 @@ fn light_voxel(
         {
             continue;
         }
-        let n = trilinear(norm, dims, uvw);
-        t *= 1.0 - lut_lerp(alpha, [p.lut_scale, p.lut_offset, p.lut_last], n);
+        t *= 1.0 - volume.opacity_at(uvw);
     }
     t
 }
@@ -140,12 +140,15 @@ pub fn light_cpu(
     clip: Option<&crate::clip::cpu::ClipMapsCpu>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Vec<f32> {
-    let p = params(texels, lut, direction);
-    let alpha = alpha_column(lut);
+    let p = params(texels, direction);
     let norm = crate::sample::f16_texels(texels);
-    per_voxel(texels.dims, progress, |v| {
-        light_voxel(&p, &alpha, &norm, texels.dims, v, clip)
-    })
+    let volume = VolumeSampler {
+        values: &norm,
+        dims: texels.dims,
+        map: f16_map(texels, lut),
+        table: &lut.rgba,
+    };
+    per_voxel(texels.dims, progress, |v| light_voxel(&p, &volume, v, clip))
 }
 
 crate::gpu::compute_stage!(
@@ -173,7 +176,7 @@ impl LightGpu {
             Some(c) => c.bind_group(device, &clip_layout),
             None => crate::clip::gpu::empty_bind_group(device, &clip_layout),
         };
-        let base = params(texels, lut, direction);
+        let base = params(texels, direction);
         let max_storage = device.limits().max_storage_buffer_binding_size / 4;
         let slabs = SlabDispatch::new(
             base.slab.dims,
@@ -182,28 +185,25 @@ impl LightGpu {
             budget::COSTLY_SAMPLES,
             max_storage,
         );
-        let alpha = alpha_column(lut);
         let size = slabs.max_slab_voxels() * 4;
         let chain = crate::sample::mip_chain(texels, 0);
         let (uniforms, out, readback, group) = validated(device, "Light::buffers", || {
             let volume = crate::gpu::f16_texture(device, &gpu.queue, "Light::texels", &chain)
                 .create_view(&Default::default());
-            let lut_buf = storage_buffer(
-                gpu,
-                "Light::lut_alpha",
-                bytemuck::cast_slice(&alpha),
-                wgpu::BufferUsages::empty(),
-            );
+            let table = reader::table(gpu, "Light::lut", lut);
+            let map = f16_map(texels, lut);
+            let reading = Reading::sampled(&volume, &self.0.sampler, map, &table);
+            let volume_group = reading.group_of(gpu, "Light", &self.0.pipeline);
             let out = output_buffer(device, "Light::transmittance", size);
             let readback = readback_buffer(device, "Light::readback", size);
-            let bound = [&lut_buf, &out].map(|b| b.as_entire_binding());
-            let (uniforms, group) = self.0.sampling_group(gpu, "Light", &base, &volume, &bound);
-            (uniforms, out, readback, group)
+            let bound = [out.as_entire_binding()];
+            let (uniforms, group) = uniform_group(gpu, "Light", &self.0.pipeline, &base, &bound);
+            (uniforms, out, readback, [group, volume_group])
         })?;
         let pass = Pass {
             label: "Light::slab",
             pipeline: &self.0.pipeline,
-            bind_groups: &[&group, &clip_group],
+            bind_groups: &[(0, &group[0]), (1, &clip_group), (VOLUME_GROUP, &group[1])],
             uniforms: &uniforms,
         };
         slabs.run_readback(gpu, &pass, base, (&out, &readback), progress)

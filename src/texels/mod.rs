@@ -5,6 +5,9 @@
 //! same numbers.
 
 use crate::tf::Lut;
+
+pub mod gpu_data;
+pub mod reader;
 use crate::volume::{Volume, VoxelData};
 
 /// Texture format chosen to keep the data's precision.

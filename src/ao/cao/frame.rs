@@ -14,6 +14,7 @@ use super::{CaoGpu, CaoMode, CaoStats, Lists};
 use crate::gpu::dispatch::{BrickDispatch, ChunkParams, Pass};
 use crate::gpu::pacer::{Pacer, Stamp};
 use crate::gpu::{Gpu, GpuError, readback_buffer, validated};
+use crate::texels::reader::VOLUME_GROUP;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -244,7 +245,11 @@ impl CaoGpu {
             let pass = Pass {
                 label: "Cao::step_iv",
                 pipeline: self.clip_pipeline(),
-                bind_groups: &[&self.clip_group, &clip_group],
+                bind_groups: &[
+                    (0, &self.clip_group),
+                    (1, &clip_group),
+                    (VOLUME_GROUP, &self.clip_volume),
+                ],
                 uniforms: &self.clip_uniforms,
             };
             if !submit_paced(gpu, pacer, (&pass, params), &iv, &mut frame.next[0])? {
@@ -259,11 +264,11 @@ impl CaoGpu {
         }
         if frame.listing.as_ref().is_none_or(|l| l.over_bricks) {
             let v = self.v_dispatch(&frame.lists);
-            let (pipeline, group, uniforms) = self.v_parts(true);
+            let (pipeline, groups, uniforms) = self.v_parts(true);
             let pass = Pass {
                 label: "Cao::step_v",
                 pipeline,
-                bind_groups: &[group],
+                bind_groups: &groups,
                 uniforms,
             };
             let step_v = (&pass, self.lao_params);
@@ -331,7 +336,7 @@ impl CaoGpu {
             listing.over_bricks = true;
             return Ok(true);
         };
-        let group = [parts.2];
+        let group = [(0, parts.2)];
         let pass = super::voxel_list::pass(&parts, &group);
         let gather = (&pass, self.lao_params);
         if !submit_paced(gpu, pacer, gather, &chunks, &mut listing.gathered)? {
@@ -360,7 +365,7 @@ impl CaoGpu {
             listing.over_bricks = true;
             return Ok(true);
         };
-        let group = [parts.2];
+        let group = [(0, parts.2)];
         let pass = super::voxel_list::pass(&parts, &group);
         submit_paced(gpu, pacer, (&pass, params), &chunks, &mut listing.traced)
     }

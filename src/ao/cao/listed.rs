@@ -115,7 +115,7 @@ impl CaoGpu {
             self.step_v(gpu, lists, true, &|_, _| {})?;
             return Ok(None);
         };
-        let group = [parts.2];
+        let group = [(0, parts.2)];
         let gather = pass(&parts, &group);
         chunks.run(
             gpu,
@@ -128,7 +128,7 @@ impl CaoGpu {
         let count = self.read_counters(gpu)?[3];
         match self.trace_parts(count) {
             Some((parts, chunks, params)) => {
-                let group = [parts.2];
+                let group = [(0, parts.2)];
                 let trace = pass(&parts, &group);
                 chunks.run(gpu, &trace, params, true, |_, _| Ok(()), |_, _, _| {})?;
                 Ok(Some(count))

@@ -37,6 +37,8 @@ use crate::gpu::{
 };
 use crate::render::gpu::GpuVolume;
 use crate::texels::VolumeTexels;
+use crate::texels::gpu_data::VolumeMap;
+use crate::texels::reader::{self, Reading, VOLUME_GROUP};
 use crate::tf::TransferFunction;
 use glam::Vec3;
 use std::time::Instant;
@@ -98,11 +100,6 @@ struct ClipParams {
     /// Half the volume's extent (mm).
     half: [f32; 3],
     _pad0: f32,
-    /// LUT index = norm · lut_scale + lut_offset, clamped to lut_last.
-    lut_scale: f32,
-    lut_offset: f32,
-    lut_last: f32,
-    _pad1: f32,
     /// 1: the baseline (every unclipped voxel marked for a ray cast), 0: CAO.
     full: u32,
     /// 1: `V_PAO` marks the voxels the ray caster cannot read (a frame with skipping,
@@ -127,7 +124,7 @@ struct ClipParams {
     balls: [[f32; 4]; MAX_CUT_BALLS],
 }
 
-const _: () = assert!(std::mem::size_of::<ClipParams>() == 240);
+const _: () = assert!(std::mem::size_of::<ClipParams>() == 224);
 
 chunk_fields!(ClipParams);
 
@@ -254,6 +251,10 @@ pub struct CaoGpu {
     lao_uniforms: [wgpu::Buffer; 2],
     clip_group: wgpu::BindGroup,
     lao_group: [wgpu::BindGroup; 2],
+    /// The volume reader's groups (`volume.wgsl`) of step IV and of step V (\[0\]
+    /// `V_PAO`, \[1\] frames).
+    clip_volume: wgpu::BindGroup,
+    lao_volume: [wgpu::BindGroup; 2],
     clip_params: ClipParams,
     lao_params: LaoParams,
     dims: [u32; 3],
@@ -314,7 +315,6 @@ impl CaoGpu {
         assert_eq!(bricks.grid, super::sparse::grid_of(texels.dims));
         let pipelines = gpu.stage::<CaoPipelines>()?;
         let lut = lao_lut(tf, texels);
-        let alpha = crate::sample::alpha_column(&lut);
         let offsets: Vec<[f32; 4]> = msaa_offsets(msaa.max(1))
             .iter()
             .map(|o| [o.x, o.y, o.z, 0.0])
@@ -328,17 +328,12 @@ impl CaoGpu {
         let occupied = bricks.rays.words();
         let clip = ClipMaps::new(gpu)?;
         let extent = texels.extent();
-        let (a, b) = texels.lut_map(&lut);
         let clip_params = ClipParams {
             bricks: BrickChunk::of(dims),
             spacing: texels.spacing,
             msaa: msaa as f32,
             half: [extent[0] * 0.5, extent[1] * 0.5, extent[2] * 0.5],
             _pad0: 0.0,
-            lut_scale: a,
-            lut_offset: b,
-            lut_last: (lut.rgba.len().max(2) - 1) as f32,
-            _pad1: 0.0,
             full: 0,
             unread_marked: 0,
             clipped_one: 0,
@@ -373,7 +368,7 @@ impl CaoGpu {
             let v_pao = volume_texture(device, "Cao::v_pao", dims, format);
             let v_ao = volume_texture(device, "Cao::v_ao", dims, format);
             let views = [&v_o, &v_pao, &v_ao].map(|t| t.create_view(&Default::default()));
-            let lut_buffer = storage("Cao::lut_alpha", bytemuck::cast_slice(&alpha));
+            let table = reader::table(gpu, "Cao::lut", &lut);
             let msaa_buffer = storage("Cao::msaa", bytemuck::cast_slice(&offsets));
             let ray_buffer = storage("Cao::rays", bytemuck::cast_slice(&packed));
             let occupied_buffer = storage("Cao::occupied", bytemuck::cast_slice(&occupied));
@@ -398,8 +393,6 @@ impl CaoGpu {
                 pipelines.clip_for(&bricks).any(),
                 &clip_params,
                 &[
-                    wgpu::BindingResource::TextureView(volume_view),
-                    lut_buffer.as_entire_binding(),
                     msaa_buffer.as_entire_binding(),
                     wgpu::BindingResource::TextureView(&views[0]),
                     wgpu::BindingResource::TextureView(&views[2]),
@@ -423,11 +416,22 @@ impl CaoGpu {
                         lists.as_entire_binding(),
                         occupied_buffer.as_entire_binding(),
                         counters.as_entire_binding(),
-                        wgpu::BindingResource::TextureView(volume_view),
                         prefix_buffer.as_entire_binding(),
                     ],
                 )
             };
+            // Step V reads the density's voxels alone (the readable-voxel test).
+            let voxels = Reading {
+                texels: volume_view,
+                sampler: None,
+                lut: None,
+            };
+            let lao_volume = [false, true]
+                .map(|frame| voxels.group_of(gpu, "Cao::lao", pipelines.lao_for(&bricks, frame)));
+            let map = VolumeMap::new(texels, &lut);
+            let reading = Reading::sampled(volume_view, &pipelines.sampler, map, &table);
+            let clip_volume =
+                reading.bind_group((device, &gpu.queue), "Cao::clip", &pipelines.volume_layout);
             // Auto layouts are per pipeline: one bind group (and uniforms) for each.
             let lao_groups = [lao_group(false), lao_group(true)];
             CaoGpu {
@@ -447,6 +451,8 @@ impl CaoGpu {
                 lao_uniforms: [lao_groups[0].0.clone(), lao_groups[1].0.clone()],
                 clip_group,
                 lao_group: [lao_groups[0].1.clone(), lao_groups[1].1.clone()],
+                clip_volume,
+                lao_volume,
                 clip_params,
                 lao_params,
                 dims,
@@ -714,11 +720,18 @@ impl CaoGpu {
     }
 
     /// Step V's pipeline, bind group and uniforms, for a frame or for `V_PAO`.
-    fn v_parts(&self, frame: bool) -> (&wgpu::ComputePipeline, &wgpu::BindGroup, &wgpu::Buffer) {
+    fn v_parts(
+        &self,
+        frame: bool,
+    ) -> (
+        &wgpu::ComputePipeline,
+        [(u32, &wgpu::BindGroup); 2],
+        &wgpu::Buffer,
+    ) {
         let i = usize::from(frame);
         (
             self.pipelines.lao_for(&self.bricks, frame),
-            &self.lao_group[i],
+            [(0, &self.lao_group[i]), (VOLUME_GROUP, &self.lao_volume[i])],
             &self.lao_uniforms[i],
         )
     }
@@ -748,7 +761,11 @@ impl CaoGpu {
         let pass = Pass {
             label: "Cao::step_iv",
             pipeline,
-            bind_groups: &[&self.clip_group, &clip_group],
+            bind_groups: &[
+                (0, &self.clip_group),
+                (1, &clip_group),
+                (VOLUME_GROUP, &self.clip_volume),
+            ],
             uniforms: &self.clip_uniforms,
         };
         chunks.run(gpu, &pass, params, false, |_, _| Ok(()), |_, _, _| {})
@@ -763,11 +780,11 @@ impl CaoGpu {
         progress: &dyn Fn(usize, usize),
     ) -> Result<(), GpuError> {
         let chunks = self.v_dispatch(lists);
-        let (pipeline, group, uniforms) = self.v_parts(frame);
+        let (pipeline, groups, uniforms) = self.v_parts(frame);
         let pass = Pass {
             label: "Cao::step_v",
             pipeline,
-            bind_groups: &[group],
+            bind_groups: &groups,
             uniforms,
         };
         let total = chunks.len() as usize;

@@ -22,6 +22,8 @@ pub struct CaoPipelines {
     /// A frame's step V over a list of its voxels.
     pub(super) listed: ListedPipelines,
     pub(super) sampler: wgpu::Sampler,
+    /// The volume reader's group of step IV (`volume.wgsl`).
+    pub(super) volume_layout: wgpu::BindGroupLayout,
     /// The format of `V_o`, `V_PAO` and `V_AO`: R16Float (2 bytes per voxel each) where
     /// the adapter can write it from a shader, else R32Float.
     pub(super) format: wgpu::TextureFormat,
@@ -38,7 +40,11 @@ pub(super) struct ClipPipelines([wgpu::ComputePipeline; 3]);
 impl ClipPipelines {
     /// The one layout of every step IV pipeline (`cao_clip.wgsl`'s groups 0 and 1), so
     /// that the bind groups made for one serve the others, skipping or dense.
-    fn layout(device: &wgpu::Device, format: wgpu::TextureFormat) -> wgpu::PipelineLayout {
+    fn layout(
+        device: &wgpu::Device,
+        format: wgpu::TextureFormat,
+        volume: &wgpu::BindGroupLayout,
+    ) -> wgpu::PipelineLayout {
         use crate::gpu::entry;
         use wgpu::TextureViewDimension::D3;
         let c = wgpu::ShaderStages::COMPUTE;
@@ -46,21 +52,19 @@ impl ClipPipelines {
             label: Some("Cao::clip"),
             entries: &[
                 entry::uniform(0, c),
-                entry::texture(1, c, D3, Some(false)),
-                entry::storage(2, c, true),
-                entry::storage(3, c, true),
-                entry::storage_texture(4, c, format, D3),
-                entry::storage_texture(5, c, format, D3),
-                entry::storage(6, c, false),
+                entry::storage(1, c, true),
+                entry::storage_texture(2, c, format, D3),
+                entry::storage_texture(3, c, format, D3),
+                entry::storage(4, c, false),
+                entry::storage(5, c, true),
+                entry::texture(6, c, D3, Some(false)),
                 entry::storage(7, c, true),
-                entry::texture(8, c, D3, Some(false)),
-                entry::storage(9, c, true),
             ],
         });
         let group_1 = crate::clip::gpu::bind_group_layout(device);
         device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("Cao::clip"),
-            bind_group_layouts: &[Some(&group_0), Some(&group_1)],
+            bind_group_layouts: &[Some(&group_0), Some(&group_1), None, Some(volume)],
             immediate_size: 0,
         })
     }
@@ -104,7 +108,8 @@ impl crate::gpu::Stage for CaoPipelines {
                 specialised_pipeline(device, label, &lao_module, None, constants, "main")
             };
             let listed = ListedPipelines::create(device, swaps)?;
-            let clip_layout = ClipPipelines::layout(device, format);
+            let volume_layout = crate::texels::reader::layout(device);
+            let clip_layout = ClipPipelines::layout(device, format, &volume_layout);
             let clip = |label: &str, constants: Constants| {
                 ClipPipelines::new(device, label, &clip_module, &clip_layout, constants)
             };
@@ -116,6 +121,7 @@ impl crate::gpu::Stage for CaoPipelines {
                 lao_readable: lao("Cao::lao_readable", sparse::READABLE),
                 lao_frame: lao("Cao::lao_frame", sparse::FRAME),
                 listed,
+                volume_layout,
                 sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
                 format,
             })

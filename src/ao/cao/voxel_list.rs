@@ -16,7 +16,7 @@ pub(super) type Parts<'a> = (
 );
 
 /// The [`Pass`] of `parts`, binding `group` (`&parts.2`).
-pub(super) fn pass<'a>(parts: &Parts<'a>, group: &'a [&'a wgpu::BindGroup]) -> Pass<'a> {
+pub(super) fn pass<'a>(parts: &Parts<'a>, group: &'a [(u32, &'a wgpu::BindGroup)]) -> Pass<'a> {
     Pass {
         label: parts.0,
         pipeline: parts.1,

@@ -27,11 +27,13 @@
 use crate::gpu::dispatch::{Grid, SlabDispatch, fold_linear};
 use crate::gpu::{
     Gpu, GpuError, compute_pipeline, copy_texture_out, read_buffer, shaders, storage_buffer,
-    submit_compute, texture_3d, texture_readback, uniform_group, unpad, validated,
+    submit_compute_with, texture_3d, texture_readback, uniform_group, unpad, validated,
 };
 use crate::render::gpu::GpuVolume;
 use crate::sample::bake_lut;
 use crate::texels::VolumeTexels;
+use crate::texels::gpu_data::VolumeMap;
+use crate::texels::reader::{Reading, VOLUME_GROUP};
 use crate::tf::{Lut, TransferFunction};
 use rayon::prelude::*;
 
@@ -127,6 +129,31 @@ impl Source {
         Source {
             params: [a, b, (lut.rgba.len().max(2) - 1) as f32, 1.0],
             alpha: lut.rgba.iter().map(|e| e[3]).collect(),
+        }
+    }
+
+    /// How the shaders read the source (`volume.wgsl`): the value map and the opacity
+    /// table share `(a, b)`.
+    pub fn map(&self) -> VolumeMap {
+        let [a, b, last, _] = self.params;
+        VolumeMap {
+            lut: [a, b, last, 0.0],
+            value: [a, b, 0.0, 0.0],
+        }
+    }
+
+    /// The opacity table as the reader binds it (its colour unused).
+    pub fn table(&self) -> Vec<[f32; 4]> {
+        self.alpha.iter().map(|&a| [0.0, 0.0, 0.0, a]).collect()
+    }
+
+    /// What the box-statistics and ambient-map passes bind to read `vol` through
+    /// `table` ([`Self::table`] on the GPU): its voxels, unfiltered.
+    fn reading<'a>(&self, vol: &'a GpuVolume, table: &'a wgpu::Buffer) -> Reading<'a> {
+        Reading {
+            texels: vol.volume_view(),
+            sampler: None,
+            lut: Some((self.map(), table)),
         }
     }
 
@@ -524,8 +551,8 @@ impl FilterGpu {
         let (tex_a, tex_b, lut) = validated(device, "Filter::buffers", || {
             let lut = storage_buffer(
                 gpu,
-                "Filter::lut_alpha",
-                bytemuck::cast_slice(&source.alpha),
+                "Filter::lut",
+                bytemuck::cast_slice(&source.table()),
                 wgpu::BufferUsages::empty(),
             );
             (
@@ -569,18 +596,20 @@ impl FilterGpu {
                     &self.box_pipeline,
                     &p,
                     &[
-                        wgpu::BindingResource::TextureView(vol.volume_view()),
-                        lut.as_entire_binding(),
                         wgpu::BindingResource::TextureView(input),
                         wgpu::BindingResource::TextureView(output),
                     ],
                 );
-                submit_compute(
+                let volume =
+                    source
+                        .reading(vol, &lut)
+                        .group_of(gpu, "Filter::box", &self.box_pipeline);
+                submit_compute_with(
                     device,
                     &gpu.queue,
                     "Filter::box_stats",
                     &self.box_pipeline,
-                    &group,
+                    &[(0, &group), (VOLUME_GROUP, &volume)],
                     groups,
                     |_| {},
                 );
@@ -629,18 +658,18 @@ impl FilterGpu {
                     &self.map_pipeline,
                     &p,
                     &[
-                        wgpu::BindingResource::TextureView(vol.volume_view()),
-                        st.lut.as_entire_binding(),
                         wgpu::BindingResource::TextureView(&stats_view),
                         wgpu::BindingResource::TextureView(&out_view),
                     ],
                 );
-                submit_compute(
+                let volume = source.reading(vol, &st.lut);
+                let volume = volume.group_of(gpu, "Filter::map", &self.map_pipeline);
+                submit_compute_with(
                     device,
                     &gpu.queue,
                     "Filter::ambient_map",
                     &self.map_pipeline,
-                    &group,
+                    &[(0, &group), (VOLUME_GROUP, &volume)],
                     whole_volume,
                     |encoder| copy_texture_out(encoder, &out, &readback, row, dims),
                 );
