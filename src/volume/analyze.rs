@@ -90,7 +90,11 @@ pub fn load(
         progress,
     } = reading;
     let (h, origin) = parse_header(buf, header_path)?;
-    let lay: Layout = nifti::layout(&h, 0, header_path, max_bytes)?;
+    let want = super::FrameRequest {
+        frame: 0,
+        max_bytes,
+    };
+    let lay: Layout = nifti::layout(&h, want, header_path)?;
     if lay.frames > 1 {
         warnings.push(format!(
             "Analyze file holds {} frames; showing frame 0",

@@ -13,7 +13,7 @@
 use super::gzip::{MAX_DEFLATE_RATIO, check_holds, finish_gzip, read_all, skip};
 use super::nifti::{self, Layout};
 use super::orient::{AffineSource, Orientation};
-use super::{Reading, Scaling, Volume, VolumeError, VoxelType, fmt_bytes, fmt_dims};
+use super::{FrameRequest, Reading, Scaling, Volume, VolumeError, VoxelType, fmt_bytes, fmt_dims};
 use glam::{DMat3, DVec3};
 use std::io::Read;
 use std::path::Path;
@@ -132,13 +132,8 @@ fn voxel_type(code: i32, path: &Path) -> Result<VoxelType, VolumeError> {
     })
 }
 
-/// Checks the header and where frame `frame` lies, before anything is allocated.
-pub fn layout(
-    h: &Header,
-    frame: usize,
-    path: &Path,
-    max_bytes: u64,
-) -> Result<Layout, VolumeError> {
+/// Checks the header and where frame `want.frame` lies, before anything is allocated.
+pub fn layout(h: &Header, want: FrameRequest, path: &Path) -> Result<Layout, VolumeError> {
     if h.version != 1 {
         return Err(VolumeError::invalid(
             path,
@@ -164,7 +159,7 @@ pub fn layout(
     let frame_bytes = dims.iter().fold(ty.size() as u128, |p, &d| p * d as u128);
     let all_frames_fit = frame_bytes * u128::from(frames) < 1 << 62;
     let frame_bytes = u64::try_from(frame_bytes).unwrap_or(u64::MAX);
-    if !all_frames_fit && frame_bytes <= max_bytes {
+    if !all_frames_fit && frame_bytes <= want.max_bytes {
         return Err(VolumeError::invalid(
             path,
             format!(
@@ -173,8 +168,7 @@ pub fn layout(
             ),
         ));
     }
-    let ty_name = ty.to_string();
-    super::check_frame(path, dims, ty_name, frame_bytes, max_bytes, frame, frames)?;
+    want.check(path, dims, ty.to_string(), frame_bytes, frames)?;
     Ok(Layout {
         dims,
         ty,
@@ -235,7 +229,7 @@ fn read(
     let mut buf = [0u8; HEADER_LEN];
     read_all(&mut r, &mut buf, path, "MGH header", 0)?;
     let h = Header::parse(&buf);
-    let lay = layout(&h, frame, path, max_bytes)?;
+    let lay = layout(&h, FrameRequest { frame, max_bytes }, path)?;
     let start = DATA_OFFSET + frame as u64 * lay.frame_bytes;
     let end = start + lay.frame_bytes;
     let what = format!("{} {} voxels", fmt_dims(lay.dims), lay.ty);

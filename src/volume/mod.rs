@@ -343,33 +343,43 @@ pub fn display_path(path: &Path) -> String {
     format!("{head}…{tail}")
 }
 
-/// Refuses, before anything is allocated, a frame of `frame_bytes` (`dims` voxels of
-/// type `ty`) larger than `max_bytes`, or frame `frame` of a file of `frames` frames.
-pub fn check_frame(
-    path: &Path,
-    dims: [usize; 3],
-    ty: String,
-    frame_bytes: u64,
-    max_bytes: u64,
-    frame: usize,
-    frames: u64,
-) -> Result<(), VolumeError> {
-    if frame_bytes > max_bytes {
-        return Err(VolumeError::TooLarge {
-            path: path.to_owned(),
-            dims: fmt_dims(dims),
-            ty,
-            bytes: fmt_bytes(frame_bytes),
-            limit: fmt_bytes(max_bytes),
-        });
+/// Which 3-D frame a loader wants and the most voxel bytes it may allocate for it: what
+/// each format's `layout` is given and checks before anything is allocated.
+#[derive(Debug, Clone, Copy)]
+pub struct FrameRequest {
+    pub frame: usize,
+    pub max_bytes: u64,
+}
+
+impl FrameRequest {
+    /// Refuses a frame of `frame_bytes` (`dims` voxels of type `ty`) larger than
+    /// `max_bytes`, or frame `frame` of a file of `frames` frames.
+    pub fn check(
+        self,
+        path: &Path,
+        dims: [usize; 3],
+        ty: String,
+        frame_bytes: u64,
+        frames: u64,
+    ) -> Result<(), VolumeError> {
+        let Self { frame, max_bytes } = self;
+        if frame_bytes > max_bytes {
+            return Err(VolumeError::TooLarge {
+                path: path.to_owned(),
+                dims: fmt_dims(dims),
+                ty,
+                bytes: fmt_bytes(frame_bytes),
+                limit: fmt_bytes(max_bytes),
+            });
+        }
+        if frame as u64 >= frames {
+            return Err(VolumeError::invalid(
+                path,
+                frame_out_of_range(frame, frames),
+            ));
+        }
+        Ok(())
     }
-    if frame as u64 >= frames {
-        return Err(VolumeError::invalid(
-            path,
-            frame_out_of_range(frame, frames),
-        ));
-    }
-    Ok(())
 }
 
 /// "frame 3 requested but the file has 3 frames (frames count from 0: 0 … 2)".

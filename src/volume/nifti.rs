@@ -8,7 +8,9 @@
 use super::gzip::check_holds;
 pub use super::gzip::{MAX_DEFLATE_RATIO, read_all, skip};
 use super::orient::{AffineSource, Orientation};
-use super::{Scaling, Volume, VolumeError, VoxelData, VoxelType, fmt_bytes, fmt_dims};
+use super::{
+    FrameRequest, Scaling, Volume, VolumeError, VoxelData, VoxelType, fmt_bytes, fmt_dims,
+};
 use glam::{DMat3, DVec3};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -273,12 +275,7 @@ pub struct Layout {
 }
 
 /// Checks every header field the reader relies on, before anything is allocated.
-pub fn layout(
-    h: &Header,
-    frame: usize,
-    path: &Path,
-    max_bytes: u64,
-) -> Result<Layout, VolumeError> {
+pub fn layout(h: &Header, want: FrameRequest, path: &Path) -> Result<Layout, VolumeError> {
     let ndim = h.dim[0];
     if !(1..=7).contains(&ndim) {
         return Err(VolumeError::invalid(
@@ -339,8 +336,7 @@ pub fn layout(
             format!("dimensions {:?} overflow", &h.dim[1..=ndim]),
         ));
     };
-    let ty_name = ty.name().to_owned();
-    super::check_frame(path, dims, ty_name, frame_bytes, max_bytes, frame, frames)?;
+    want.check(path, dims, ty.name().to_owned(), frame_bytes, frames)?;
     let vo = h.vox_offset;
     if !vo.is_finite() || vo < 0.0 || vo.fract() != 0.0 {
         return Err(VolumeError::invalid(
@@ -604,7 +600,7 @@ pub fn load(
     let paths = resolve_paths(path);
     let (mut hr, header_len, header_bound) = open_maybe_gz(&paths.header)?;
     let h = read_header(&mut hr, &paths.header)?;
-    let lay = layout(&h, frame, &paths.header, max_bytes)?;
+    let lay = layout(&h, FrameRequest { frame, max_bytes }, &paths.header)?;
     let start = lay.vox_offset + frame as u64 * lay.frame_bytes;
     let end = start + lay.frame_bytes;
     let pair = paths.image != paths.header;
@@ -665,7 +661,11 @@ pub fn load_bytes(
         Box::new(bytes)
     };
     let h = read_header(&mut r, path)?;
-    let lay = layout(&h, frame, path, max_bytes.min(bound))?;
+    let want = FrameRequest {
+        frame,
+        max_bytes: max_bytes.min(bound),
+    };
+    let lay = layout(&h, want, path)?;
     let start = lay.vox_offset + frame as u64 * lay.frame_bytes;
     if start + lay.frame_bytes > bound {
         return Err(VolumeError::Truncated {

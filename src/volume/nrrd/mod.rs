@@ -10,7 +10,8 @@
 use crate::volume::gzip::{MAX_DEFLATE_RATIO, finish_gzip, read_all, skip};
 use crate::volume::orient::{AffineSource, Orientation};
 use crate::volume::{
-    Volume, VolumeError, VoxelData, VoxelType, fmt_bytes, fmt_dims, short_name, with_voxels,
+    FrameRequest, Volume, VolumeError, VoxelData, VoxelType, fmt_bytes, fmt_dims, short_name,
+    with_voxels,
 };
 use glam::{DMat3, DVec3};
 use std::io::{BufRead, Read, Write};
@@ -22,12 +23,7 @@ use header::*;
 pub use header::{Encoding, Header, Layout, Space, parse_header};
 
 /// Chooses x, y, z (and the frame axis) from the header axes.
-pub fn layout(
-    h: &Header,
-    frame: usize,
-    path: &Path,
-    max_bytes: u64,
-) -> Result<Layout, VolumeError> {
+pub fn layout(h: &Header, want: FrameRequest, path: &Path) -> Result<Layout, VolumeError> {
     let kind = |a: usize| h.kinds.get(a).map(|k| k.to_ascii_lowercase());
     let is_domain = |a: usize| {
         kind(a).is_none_or(|k| DOMAIN_KINDS.contains(&k.as_str()) || k == "none" || k == "???")
@@ -109,21 +105,7 @@ pub fn layout(
         .try_fold(h.ty.size() as u64, |acc, &d| acc.checked_mul(d as u64))
         .filter(|b| b.checked_mul(frames as u64).is_some_and(|t| t < 1 << 62))
         .ok_or_else(|| invalid(path, format!("sizes {:?} overflow", h.sizes)))?;
-    if frame_bytes > max_bytes {
-        return Err(VolumeError::TooLarge {
-            path: path.to_owned(),
-            dims: fmt_dims(dims),
-            ty: h.ty.name().into(),
-            bytes: fmt_bytes(frame_bytes),
-            limit: fmt_bytes(max_bytes),
-        });
-    }
-    if frame >= frames {
-        return Err(invalid(
-            path,
-            super::frame_out_of_range(frame, frames as u64),
-        ));
-    }
+    want.check(path, dims, h.ty.name().into(), frame_bytes, frames as u64)?;
     Ok(Layout {
         dims,
         axes: ax,
@@ -332,7 +314,7 @@ pub fn load(
 ) -> Result<(Volume, PathBuf), VolumeError> {
     let max_bytes = reading.max_bytes;
     let h = read_header_file(path)?;
-    let lay = layout(&h, frame, path, max_bytes)?;
+    let lay = layout(&h, FrameRequest { frame, max_bytes }, path)?;
     let parts = data_paths(&h, path);
     let attached = h.data_files.is_empty();
     let total = lay.frame_bytes * lay.frames as u64;
@@ -590,7 +572,14 @@ pub fn load_bytes(bytes: &[u8], max_bytes: u64, path: &Path) -> Result<Volume, V
             "detached data files are not read from memory",
         ));
     }
-    let lay = layout(&h, 0, path, max_bytes)?;
+    let lay = layout(
+        &h,
+        FrameRequest {
+            frame: 0,
+            max_bytes,
+        },
+        path,
+    )?;
     let body = &bytes[data_at..];
     let n = lay.dims.iter().product::<usize>();
     let mut warnings = Vec::new();
@@ -714,7 +703,11 @@ mod tests {
         assert_eq!(v.data, VoxelData::U8(vec![1, 2]));
         let header = text.split("\n\n").next().unwrap_or_default();
         let h = parse_header(header, p()).expect("header");
-        let err = layout(&h, 3, p(), 1 << 20).expect_err("frame 3 of 3");
+        let want = FrameRequest {
+            frame: 3,
+            max_bytes: 1 << 20,
+        };
+        let err = layout(&h, want, p()).expect_err("frame 3 of 3");
         assert!(err.to_string().contains("count from 0"), "{err}");
     }
 
