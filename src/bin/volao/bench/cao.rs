@@ -429,8 +429,9 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
             args.table2_max_dim, args.max_dim, args.frames, args.size, args.clip_resolution
         );
     }
-    let load = |s: &Scene| -> Result<volume::Volume> {
-        Ok(volume::load(
+    // A scene's volume (RAS) uploaded to a fresh device at up to `max_dim` voxels a side.
+    let bench = |s: &Scene, max_dim: usize| -> Result<Bench> {
+        let volume = volume::load(
             &args.data.join(s.file),
             &LoadOptions {
                 raw: s.raw.clone(),
@@ -438,7 +439,14 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
             },
         )?
         .volume
-        .to_ras())
+        .to_ras();
+        Bench::new(
+            volao::gpu::request_device()?,
+            &volume,
+            max_dim,
+            args.size,
+            args.clip_resolution,
+        )
     };
     let chosen: Vec<Scene> = scenes()
         .into_iter()
@@ -465,14 +473,7 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
         println!("|---|---|---|---|---|---|---|");
     }
     for s in table2 {
-        let volume = load(s)?;
-        let mut b = Bench::new(
-            volao::gpu::request_device()?,
-            &volume,
-            args.table2_max_dim,
-            args.size,
-            args.clip_resolution,
-        )?;
+        let mut b = bench(s, args.table2_max_dim)?;
         let (half, frames) = (b.half(), args.frames);
         let base = s.base_shape(half);
         let runs = compare(
@@ -508,14 +509,7 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
     let mut memory = Vec::new();
     for s in &chosen {
         let mut list_bytes = 0;
-        let volume = load(s)?;
-        let mut b = Bench::new(
-            volao::gpu::request_device()?,
-            &volume,
-            args.max_dim,
-            args.size,
-            args.clip_resolution,
-        )?;
+        let mut b = bench(s, args.max_dim)?;
         let (half, frames) = (b.half(), args.frames);
         let base = s.base_shape(half);
         let rays: &[RaySet] = if args.tables.contains(&3) {
