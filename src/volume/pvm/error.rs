@@ -6,10 +6,12 @@ use std::fmt;
 /// the ASCII header and the PVM3 strings.
 pub const HEADER_ALLOWANCE: u64 = 1 << 20;
 
-/// "301×324×56 × 1 byte", for messages.
-pub(super) struct Layout {
-    pub(super) dims: [u64; 3],
-    pub(super) components: u64,
+/// How a PVM file lays out its voxels: dimensions and bytes per voxel (components),
+/// "301×324×56 × 1 byte" in messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Layout {
+    pub dims: [u64; 3],
+    pub components: u64,
 }
 
 impl fmt::Display for Layout {
@@ -52,22 +54,18 @@ pub enum PvmError {
     )]
     UnsupportedComponents(u64),
     #[error(
-        "truncated: header says {} = {expected} bytes of voxels but only {actual} follow",
-        Layout { dims: *dims, components: *components }
+        "truncated: header says {layout} = {expected} bytes of voxels but only {actual} follow"
     )]
     Truncated {
-        dims: [u64; 3],
-        components: u64,
+        layout: Layout,
         expected: u128,
         actual: u64,
     },
     #[error(
-        "volume too large: header says {} = {bytes} bytes of voxels, more than the limit of {limit} bytes",
-        Layout { dims: *dims, components: *components }
+        "volume too large: header says {layout} = {bytes} bytes of voxels, more than the limit of {limit} bytes"
     )]
     TooLarge {
-        dims: [u64; 3],
-        components: u64,
+        layout: Layout,
         bytes: u128,
         limit: u64,
     },

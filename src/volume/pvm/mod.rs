@@ -52,7 +52,7 @@ mod dds;
 mod error;
 
 use dds::{Planes, dds_decode_with, dds_decoded_len};
-pub use error::{HEADER_ALLOWANCE, PvmError};
+pub use error::{HEADER_ALLOWANCE, Layout, PvmError};
 use error::{copy_bytes, try_with_capacity, u16_from_be, zeroed};
 use std::borrow::Cow;
 use std::io::Write;
@@ -303,6 +303,13 @@ struct Header {
 
 impl Header {
     /// Voxel payload in bytes; cannot overflow because each dimension fits in 32 bits.
+    fn layout(&self) -> Layout {
+        Layout {
+            dims: self.dims,
+            components: self.components,
+        }
+    }
+
     fn voxel_bytes(&self) -> u128 {
         self.dims.iter().map(|&d| u128::from(d)).product::<u128>() * u128::from(self.components)
     }
@@ -448,16 +455,14 @@ fn parse_pvm(
     let available = len.saturating_sub(header.data_offset);
     if expected > available as u128 {
         return Err(PvmError::Truncated {
-            dims: header.dims,
-            components: header.components,
+            layout: header.layout(),
             expected,
             actual: available as u64,
         });
     }
     if expected > u128::from(max_voxel_bytes) {
         return Err(PvmError::TooLarge {
-            dims: header.dims,
-            components: header.components,
+            layout: header.layout(),
             bytes: expected,
             limit: max_voxel_bytes,
         });
@@ -648,8 +653,7 @@ fn decompress_dds(
             let header = parse_header(&prefix, true)?;
             if header.voxel_bytes() > u128::from(max_voxel_bytes) {
                 return Err(PvmError::TooLarge {
-                    dims: header.dims,
-                    components: header.components,
+                    layout: header.layout(),
                     bytes: header.voxel_bytes(),
                     limit: max_voxel_bytes,
                 });
