@@ -3,10 +3,11 @@
 //! [`Viewer`] owns what the user sees (a [`Document`]: volume, transfer function,
 //! camera, AO settings — everything a scene file holds) and the background [`jobs`]
 //! (loading, AO precomputation, writing screenshots). The GPU side of the viewport
-//! ([`viewport::ViewportGpu`]) lives in egui_wgpu's callback resources and is the same
+//! ([`viewport::ViewportGpu`]) is the viewer's too, the same
 //! [`RayCaster`](crate::render::gpu::RayCaster) +
 //! [`GpuVolume`](crate::render::gpu::GpuVolume) pair `volao render` uses, on a device
-//! requested with [`crate::gpu::device_descriptor`].
+//! requested with [`crate::gpu::device_descriptor`]; egui_wgpu's callback resources hold
+//! only the pipelines that draw its images ([`viewport::ViewportPaint`]).
 //!
 //! `document.rs` holds the document and its loading, `derived.rs` keeps what is derived
 //! from it on the GPU (AO, opacity modulation, shadows, clipping), `panels.rs` draws the
@@ -53,7 +54,7 @@ use screenshot::{Screenshots, Shot};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use viewport::ViewportGpu;
+use viewport::{ViewportGpu, ViewportPaint};
 
 /// Entries kept in the recent-files list.
 const RECENT_MAX: usize = 10;
@@ -97,7 +98,6 @@ enum Pending {
 /// The viewer application.
 pub struct Viewer {
     gpu: Arc<Gpu>,
-    render_state: egui_wgpu::RenderState,
     ctx: egui::Context,
     options: ViewerOptions,
     doc: Option<Document>,
@@ -105,6 +105,8 @@ pub struct Viewer {
     /// The scene as last loaded or saved (for the unsaved-changes prompt).
     saved: Option<Scene>,
     load_job: Option<Job<LoadedDocument>>,
+    /// The viewport's GPU side: ray caster, volume, CAO, clip maps, the image being made.
+    viewport: ViewportGpu,
     /// AO, opacity modulation and shadows, computed in the background.
     derived: Derived,
     tf_editor: tf_editor::TfEditor,
@@ -263,12 +265,13 @@ impl Viewer {
         if gpu.info.backend == wgpu::Backend::Gl && std::env::var_os("VOLAO_ALLOW_GL").is_none() {
             return Err(AppError::OpenGl(gpu.info.name.clone()));
         }
-        let viewport = ViewportGpu::new(&gpu.device, render_state.target_format)?;
+        let (paint, binding) = ViewportPaint::new(&gpu.device, render_state.target_format)?;
         render_state
             .renderer
             .write()
             .callback_resources
-            .insert(viewport);
+            .insert(paint);
+        let viewport = ViewportGpu::new(&gpu.device, binding)?;
         let gpu_errors: Arc<Mutex<Vec<String>>> = Arc::default();
         let sink = Arc::clone(&gpu_errors);
         let repaint = ctx.clone();
@@ -287,12 +290,12 @@ impl Viewer {
         let pacer = crate::gpu::pacer::Pacer::new(&gpu, VIEWPORT_SLICE);
         let mut viewer = Viewer {
             gpu: Arc::new(gpu),
-            render_state,
             ctx: ctx.clone(),
             doc: None,
             doc_generation: 0,
             saved: None,
             load_job: None,
+            viewport,
             derived: Derived::default(),
             tf_editor: Default::default(),
             clip_editor: Default::default(),
@@ -407,24 +410,24 @@ impl Viewer {
     /// Whether an update of CAO for moved clip shapes is being submitted or is still
     /// running on the GPU (the viewport shows the previous pose meanwhile).
     pub fn cao_update_in_flight(&self) -> bool {
-        self.with_viewport(|v| v.cao_in_flight()).unwrap_or(false)
+        self.viewport.cao_in_flight()
     }
 
     /// Whether the image drawn read CAO's exact `V_AO` for its clip shapes (true without
     /// CAO); false: it read `V_PAO`, while CAO's update for the shapes was on its way.
     pub fn viewport_ao_exact(&self) -> bool {
-        self.with_viewport(|v| v.shown_ao_exact()).unwrap_or(true)
+        self.viewport.shown_ao_exact()
     }
 
     /// Images the viewport has completed so far.
     pub fn viewport_images(&self) -> u64 {
-        self.with_viewport(|v| v.frames_rendered).unwrap_or(0)
+        self.viewport.frames_rendered
     }
 
     /// Of those, images that cast only the rays near a change since an earlier image
     /// of the same view and kept its other pixels ([`crate::render::reuse`]).
     pub fn viewport_images_reused(&self) -> u64 {
-        self.with_viewport(|v| v.frames_reused).unwrap_or(0)
+        self.viewport.frames_reused
     }
 
     /// Voxels CAO recomputed in its last frame, in percent (`None` without CAO).
@@ -553,7 +556,7 @@ impl Viewer {
                     self.push_recent(p);
                 }
                 self.derived.uploaded_tf = Some((doc.tf.clone(), doc.render.step_voxels));
-                self.with_viewport(|v| v.set_volume(loaded.gpu_volume));
+                self.viewport.set_volume(loaded.gpu_volume);
                 self.doc = Some(doc);
                 self.doc_generation += 1;
                 // The new volume has no AO yet; what was computed for the old one is gone.
@@ -579,11 +582,6 @@ impl Viewer {
                 }
             }
         }
-    }
-
-    fn with_viewport<R>(&self, f: impl FnOnce(&mut ViewportGpu) -> R) -> Option<R> {
-        let mut renderer = self.render_state.renderer.write();
-        renderer.callback_resources.get_mut::<ViewportGpu>().map(f)
     }
 
     /// Ends the run with an error: the process exits non-zero (`--exit-after-frames`,
@@ -647,8 +645,11 @@ impl Viewer {
         }
 
         if self.options.bench_clip_drag.is_some() {
-            egui::CentralPanel::no_frame().show(ui, |ui| self.viewport(ui));
+            let slot = egui::CentralPanel::no_frame()
+                .show(ui, |ui| self.viewport(ui))
+                .inner;
             self.pump_viewport();
+            self.paint_viewport(slot);
             self.bench_step(ui.ctx());
             return;
         }
@@ -662,9 +663,12 @@ impl Viewer {
                     .auto_shrink([false, false])
                     .show(ui, |ui| self.side_panel(ui));
             });
-        egui::CentralPanel::no_frame().show(ui, |ui| self.viewport(ui));
+        let slot = egui::CentralPanel::no_frame()
+            .show(ui, |ui| self.viewport(ui))
+            .inner;
         // After the panels: the camera and shapes as this frame's input left them.
         self.pump_viewport();
+        self.paint_viewport(slot);
         self.show_prompt(ui.ctx());
         self.show_toasts(ui.ctx());
         self.update_title(ui.ctx());

@@ -10,6 +10,14 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use viewport::ViewportCallback;
 
+/// The place of this frame's viewport image among the shapes: reserved while the UI is
+/// laid out, under the clip outlines, and filled after the viewport's pump.
+pub(super) struct ViewportSlot {
+    painter: egui::Painter,
+    index: egui::layers::ShapeIdx,
+    rect: egui::Rect,
+}
+
 impl Viewer {
     pub(super) fn handle_input(&mut self, ui: &egui::Ui) {
         let ctx = ui.ctx().clone();
@@ -346,9 +354,7 @@ impl Viewer {
                 None => "waiting for the transfer function to rest".into(),
             },
         };
-        let frames = self
-            .with_viewport(|v| v.frames_rendered)
-            .unwrap_or_default();
+        let frames = self.viewport.frames_rendered;
         ao_panel::AoStats {
             frame_ms: self.frame_ms,
             frames,
@@ -419,7 +425,7 @@ impl Viewer {
             }
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
                 ui.weak(&self.gpu.info.name);
-                if let Some(e) = self.with_viewport(|v| v.last_error.clone()).flatten() {
+                if let Some(e) = &self.viewport.last_error {
                     ui.colored_label(ui.visuals().error_fg_color, e);
                 }
             });
@@ -429,9 +435,8 @@ impl Viewer {
     /// The viewport's image: how far a slow one is (on a CPU adapter an image with CAO's
     /// update takes seconds), and whether the one drawn is at interactive quality.
     fn view_status(&self, ui: &mut egui::Ui) {
-        let (work, scale, ao_exact) = self
-            .with_viewport(|v| (v.work_fraction(), v.shown_scale(), v.shown_ao_exact()))
-            .unwrap_or((None, 1, true));
+        let v = &self.viewport;
+        let (work, scale, ao_exact) = (v.work_fraction(), v.shown_scale(), v.shown_ao_exact());
         let waited = self
             .scripted
             .images
@@ -452,7 +457,9 @@ impl Viewer {
         }
     }
 
-    pub(super) fn viewport(&mut self, ui: &mut egui::Ui) {
+    /// The viewport: its input, a place for its image under the clip outlines (filled by
+    /// [`Self::paint_viewport`] once the frame's pump has run), the outlines.
+    pub(super) fn viewport(&mut self, ui: &mut egui::Ui) -> Option<ViewportSlot> {
         let rect = ui.available_rect_before_wrap();
         self.viewport_rect = rect;
         let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
@@ -468,7 +475,7 @@ impl Viewer {
         let hovering_files = ui.ctx().input(|i| !i.raw.hovered_files.is_empty());
         let Some(doc) = &mut self.doc else {
             ui.put(rect, egui::Spinner::new().size(32.0));
-            return;
+            return None;
         };
         let used =
             self.clip_editor
@@ -476,10 +483,11 @@ impl Viewer {
         if !used {
             camera_input::handle(ui, &response, &mut doc.camera, doc.radius);
         }
-        ui.painter().add(egui_wgpu::Callback::new_paint_callback(
+        let slot = ViewportSlot {
+            painter: ui.painter().clone(),
+            index: ui.painter().add(egui::Shape::Noop),
             rect,
-            ViewportCallback { rect },
-        ));
+        };
         if self.show_outlines {
             self.clip_editor.paint(
                 &ui.painter().with_clip_rect(rect),
@@ -501,9 +509,7 @@ impl Viewer {
             );
         }
         // Frame time: the interval between frames that ray-cast something new.
-        let frames = self
-            .with_viewport(|v| v.frames_rendered)
-            .unwrap_or_default();
+        let frames = self.viewport.frames_rendered;
         if frames > self.frames_seen {
             let dt = ui.ctx().input(|i| i.unstable_dt) * 1e3;
             if self.frames_seen > 0 && frames == self.frames_seen + 1 {
@@ -514,6 +520,25 @@ impl Viewer {
             }
             self.frames_seen = frames;
         }
+        Some(slot)
+    }
+
+    /// Puts this frame's paint callback in the viewport's place: the last complete image,
+    /// as this frame's pump left it.
+    pub(super) fn paint_viewport(&self, slot: Option<ViewportSlot>) {
+        let Some(ViewportSlot {
+            painter,
+            index,
+            rect,
+        }) = slot
+        else {
+            return;
+        };
+        let image = self.viewport.paint_image();
+        painter.set(
+            index,
+            egui_wgpu::Callback::new_paint_callback(rect, ViewportCallback { rect, image }),
+        );
     }
 
     pub(super) fn show_prompt(&mut self, ctx: &egui::Context) {

@@ -81,16 +81,17 @@ impl Viewer {
             Polled::Nothing => {}
             Polled::Ready(key, values) => {
                 let gpu = Arc::clone(&self.gpu);
-                let shown = self.with_viewport(|v| {
-                    let g = v.volume.as_mut()?;
-                    if values.len() != g.texels.dims.iter().product::<usize>() {
-                        return None;
-                    }
+                let v = &mut self.viewport;
+                let fits = v
+                    .volume
+                    .as_mut()
+                    .filter(|g| values.len() == g.texels.dims.iter().product::<usize>());
+                let shown = fits.is_some();
+                if let Some(g) = fits {
                     g.set_ambient_occlusion(&gpu, &values);
                     v.set_cao(None);
-                    Some(())
-                });
-                if shown.flatten().is_some() {
+                }
+                if shown {
                     self.derived.preview.uploaded(key);
                     self.derived.shown = AoShown::Approximate;
                 }

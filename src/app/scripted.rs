@@ -203,8 +203,7 @@ impl Viewer {
             "no {} for {:.0} s: {}; {}",
             what.join(" and no "),
             since.as_secs_f64(),
-            self.with_viewport(|v| v.describe_work())
-                .unwrap_or_else(|| "no viewport".into()),
+            self.viewport.describe_work(),
             self.pacer.describe(),
         );
         if since >= STALL_FAIL {

@@ -4,11 +4,9 @@
 use super::document::file_name;
 use super::jobs::Job;
 use super::screenshot::*;
-use super::viewport::ViewportGpu;
 use super::{ShotSize, Viewer};
 use crate::render::Frame;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Duration;
 
 impl Viewer {
@@ -87,17 +85,10 @@ impl Viewer {
             }
         }
         if let Some(shot) = &mut self.shots.pending {
-            let gpu = Arc::clone(&self.gpu);
-            let mut renderer = self.render_state.renderer.write();
-            let parts = renderer
-                .callback_resources
-                .get_mut::<ViewportGpu>()
-                .and_then(ViewportGpu::for_screenshot);
-            let result = match parts {
-                Some((ray_caster, vol, clip)) => shot.pump(&gpu, ray_caster, vol, clip),
+            let result = match self.viewport.for_screenshot() {
+                Some((ray_caster, vol, clip)) => shot.pump(&self.gpu, ray_caster, vol, clip),
                 None => Err("no volume to render".into()),
             };
-            drop(renderer);
             match result {
                 Ok(None) => self.ctx.request_repaint_after(Duration::from_millis(5)),
                 Ok(Some(done)) => {

@@ -6,7 +6,6 @@
 use super::ao_job::{AoData, AoInput, compute_ao};
 use super::derived::*;
 use super::jobs::{Job, Keyed, Polled};
-use super::viewport::ViewportGpu;
 use super::viewport::{ClipSetup, INTERACTIVE_REST, MAX_INTERACTIVE_SCALE, Want};
 use super::{Viewer, ao_panel};
 use crate::ao::AoMethod;
@@ -56,28 +55,27 @@ impl Viewer {
             Polled::Nothing => {}
             Polled::Ready(key, r) => {
                 let gpu = Arc::clone(&self.gpu);
-                let applied = self
-                    .with_viewport(|v| match (r.kind, &mut v.volume) {
-                        (AoData::Volume(values), Some(g)) => {
-                            if values.len() != g.texels.dims.iter().product::<usize>() {
-                                return Err("the AO volume does not match the uploaded \
-                                            volume (it was halved to fit the GPU); AO \
-                                            needs the full resolution"
-                                    .to_owned());
-                            }
+                let v = &mut self.viewport;
+                let applied = match (r.kind, &mut v.volume) {
+                    (AoData::Volume(values), Some(g)) => {
+                        if values.len() != g.texels.dims.iter().product::<usize>() {
+                            Err("the AO volume does not match the uploaded volume (it was \
+                                 halved to fit the GPU); AO needs the full resolution"
+                                .to_owned())
+                        } else {
                             g.set_ambient_occlusion(&gpu, &values);
                             v.set_cao(None);
                             Ok(())
                         }
-                        (AoData::Cao(cao), Some(_)) => {
-                            // Its V_AO is posed for the current shapes by the next image
-                            // (until then the approximation stays on screen).
-                            v.set_cao(Some(*cao));
-                            Ok(())
-                        }
-                        (_, None) => Err("no volume".to_owned()),
-                    })
-                    .unwrap_or_else(|| Err("no viewport".into()));
+                    }
+                    (AoData::Cao(cao), Some(_)) => {
+                        // Its V_AO is posed for the current shapes by the next image
+                        // (until then the approximation stays on screen).
+                        v.set_cao(Some(*cao));
+                        Ok(())
+                    }
+                    (_, None) => Err("no volume".to_owned()),
+                };
                 match applied {
                     Ok(()) => {
                         self.derived.ao_seconds = Some((r.seconds, r.device));
@@ -111,15 +109,15 @@ impl Viewer {
                 return;
             };
             let vao = key.settings.vao;
-            let applied = self.with_viewport(|v| {
-                let g = v.volume.as_mut()?;
-                let r = g
-                    .set_live_vao(&gpu, &tf, Some(&vao))
-                    .map_err(|e| e.to_string());
-                v.touch();
-                Some(r)
+            let v = &mut self.viewport;
+            let applied = v.volume.as_mut().map(|g| {
+                g.set_live_vao(&gpu, &tf, Some(&vao))
+                    .map_err(|e| e.to_string())
             });
-            match applied.flatten() {
+            if applied.is_some() {
+                v.touch();
+            }
+            match applied {
                 Some(Ok(())) => {
                     self.derived.ao.uploaded(key);
                     self.derived.shown = AoShown::Exact;
@@ -185,19 +183,18 @@ impl Viewer {
             self.preview_key(want).is_some() && self.derived.shown != AoShown::Nothing && !was_live;
         let gpu = Arc::clone(&self.gpu);
         let tf = self.doc.as_ref().map(|d| d.tf.clone());
-        self.with_viewport(|v| {
-            v.set_cao(None);
-            if let Some(g) = &mut v.volume {
-                if !keep {
-                    g.clear_ambient_occlusion(&gpu);
-                }
-                if let Some(tf) = &tf {
-                    // Turning live positional AO off cannot fail (nothing is uploaded).
-                    let _ = g.set_live_vao(&gpu, tf, None);
-                }
-                v.touch();
+        let v = &mut self.viewport;
+        v.set_cao(None);
+        if let Some(g) = &mut v.volume {
+            if !keep {
+                g.clear_ambient_occlusion(&gpu);
             }
-        });
+            if let Some(tf) = &tf {
+                // Turning live positional AO off cannot fail (nothing is uploaded).
+                let _ = g.set_live_vao(&gpu, tf, None);
+            }
+            v.touch();
+        }
         self.derived.shown = if keep {
             AoShown::Previous
         } else {
@@ -402,19 +399,16 @@ impl Viewer {
 
     /// A copy of the texels the viewport's volume was made from.
     pub(super) fn uploaded_texels(&self) -> Option<VolumeTexels> {
-        self.with_viewport(|v| v.volume.as_ref().map(|g| g.texels.clone()))
-            .flatten()
+        self.viewport.volume.as_ref().map(|g| g.texels.clone())
     }
 
     /// Runs `f` on the viewport's volume and redraws; false when there is none or `f`
     /// says the values did not fit.
-    fn upload(&self, f: impl FnOnce(&mut GpuVolume) -> bool) -> bool {
-        self.with_viewport(|v| {
-            let done = v.volume.as_mut().is_some_and(f);
-            v.touch();
-            done
-        })
-        .unwrap_or(false)
+    fn upload(&mut self, f: impl FnOnce(&mut GpuVolume) -> bool) -> bool {
+        let v = &mut self.viewport;
+        let done = v.volume.as_mut().is_some_and(f);
+        v.touch();
+        done
     }
 
     fn tf_editor_dragging(&self) -> bool {
@@ -432,18 +426,17 @@ impl Viewer {
         }
         // An image being ray-cast would start again with every edit while a curve is
         // dragged: edits go in between images, and count as motion (interactive quality).
-        if self.with_viewport(|v| v.working()).unwrap_or(false) {
+        if self.viewport.working() {
             self.ctx.request_repaint();
             return;
         }
         self.motion.changed_at = Instant::now();
         let gpu = Arc::clone(&self.gpu);
-        self.with_viewport(|v| {
-            if let Some(g) = &mut v.volume {
-                g.set_transfer_function(&gpu, &want.0, want.1);
-                v.touch();
-            }
-        });
+        let v = &mut self.viewport;
+        if let Some(g) = &mut v.volume {
+            g.set_transfer_function(&gpu, &want.0, want.1);
+            v.touch();
+        }
         self.derived.uploaded_tf = Some(want);
     }
 
@@ -504,26 +497,13 @@ impl Viewer {
                 self.interactive.target_fps,
             )));
         }
-        let gpu = Arc::clone(&self.gpu);
-        let pacer = &mut self.pacer;
-        let Some(pumped) = ({
-            let mut renderer = self.render_state.renderer.write();
-            renderer
-                .callback_resources
-                .get_mut::<ViewportGpu>()
-                .map(|v| {
-                    let pumped = v.pump(&gpu, &want, pacer);
-                    let busy = v.working()
-                        || !v.is_current(&Want {
-                            scale: 1,
-                            ..want.clone()
-                        });
-                    (pumped, busy)
-                })
-        }) else {
-            return;
-        };
-        let (pumped, busy) = pumped;
+        let v = &mut self.viewport;
+        let pumped = v.pump(&self.gpu, &want, &mut self.pacer);
+        let busy = v.working()
+            || !v.is_current(&Want {
+                scale: 1,
+                ..want.clone()
+            });
         // A transfer function waiting for the image being made to finish is not shown yet.
         let tf_waiting = self.doc.as_ref().is_some_and(|d| {
             self.derived.uploaded_tf.as_ref() != Some(&(d.view_tf(), d.render.step_voxels))

@@ -2,19 +2,20 @@
 //! through an `egui_wgpu` paint callback (`shaders/viewport.wgsl`). Same scene, same
 //! pixels.
 //!
-//! [`ViewportGpu`] is the long-lived part and lives in egui_wgpu's callback resources.
-//! The picture is made off the paint path, in slices (`viewport/pump.rs`): each UI
-//! frame submits the part of CAO's update and of the ray cast (in strips of rows) that
-//! fits in the [`Pacer`]'s slice into a back image, and the paint callback draws the last complete image — 1:1 at full quality, scaled up while
-//! the view moves at interactive quality. A [`ViewportCallback`] carries only the
-//! rectangle to draw into.
+//! [`ViewportGpu`] is the viewer's own: the ray caster, the volume, CAO and the clip
+//! maps, and the image being made. The picture is made off the paint path, in slices
+//! (`viewport/pump.rs`): each UI frame submits the part of CAO's update and of the ray
+//! cast (in strips of rows) that fits in the [`Pacer`]'s slice into a back image. egui's
+//! callback resources hold only the draw pipelines ([`ViewportPaint`]); each frame's
+//! [`ViewportCallback`] carries the rectangle to draw into and the last complete image,
+//! drawn 1:1 at full quality, scaled up while the view moves at interactive quality.
 
 use super::tiles::{RECENT_TILES, Tile, TileCosts, next_tile, strip_texture};
 use crate::ao::cao::{CaoFrame, CaoGpu, CaoMode, CaoStats, Pose};
 use crate::clip::ClipShape;
 use crate::clip::gpu::ClipMaps;
 use crate::gpu::pacer::Pacer;
-use crate::gpu::{Gpu, GpuError, shaders, validated};
+use crate::gpu::{Gpu, GpuError};
 use crate::render::Frame;
 use crate::render::gpu::{GpuVolume, RayCaster, Variant};
 use crate::render::reuse::{Ball, ImageInputs};
@@ -22,7 +23,7 @@ use std::time::Instant;
 
 mod paint;
 mod pump;
-pub use paint::{ViewportCallback, size_in_pixels};
+pub use paint::{ImageBinding, PaintImage, ViewportCallback, ViewportPaint, size_in_pixels};
 
 /// Set by the thread building a pipeline: `Some(error)` when it failed.
 type Compiled = std::sync::Arc<std::sync::Mutex<Option<Option<String>>>>;
@@ -37,10 +38,8 @@ pub struct ViewportGpu {
     pub ray_caster: std::sync::Arc<RayCaster>,
     /// The ray caster's pipeline being built on a worker thread, and how that went.
     compiling: Option<(Variant, Compiled)>,
-    /// Draws an image 1:1 (exact) or scaled up (interactive quality).
-    pipelines: [wgpu::RenderPipeline; 2],
-    layout: wgpu::BindGroupLayout,
-    sampler: wgpu::Sampler,
+    /// Binds each image for the paint callback's draw pipelines.
+    binding: ImageBinding,
     /// The last complete image and what it shows.
     pub(super) shown: Option<Shown>,
     /// The last complete image of another scale than [`Self::shown`] (the full-quality
@@ -151,91 +150,44 @@ pub(super) struct Shown {
 }
 
 impl ViewportGpu {
-    /// Builds the pipelines; `target_format` is egui's render target format.
-    pub fn new(
-        device: &wgpu::Device,
-        target_format: wgpu::TextureFormat,
-    ) -> Result<Self, GpuError> {
+    /// Builds the ray caster; its images are bound for drawing with `binding`.
+    pub fn new(device: &wgpu::Device, binding: ImageBinding) -> Result<Self, GpuError> {
         let ray_caster = RayCaster::new(device)?;
-        let module = shaders::module(device, "viewport.wgsl")?;
-        validated(device, "Viewport::new", || {
-            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("Viewport::layout"),
-                entries: &[
-                    crate::gpu::entry::texture(
-                        0,
-                        wgpu::ShaderStages::FRAGMENT,
-                        wgpu::TextureViewDimension::D2,
-                        Some(true),
-                    ),
-                    crate::gpu::entry::sampler(1, wgpu::ShaderStages::FRAGMENT),
-                ],
-            });
-            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("Viewport::pipeline_layout"),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            });
-            let srgb = target_format.is_srgb();
-            let pipeline = |fragment: &str| {
-                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                    label: Some("Viewport::pipeline"),
-                    layout: Some(&pipeline_layout),
-                    vertex: wgpu::VertexState {
-                        module: &module,
-                        entry_point: Some("vs_main"),
-                        compilation_options: Default::default(),
-                        buffers: &[],
-                    },
-                    primitive: wgpu::PrimitiveState::default(),
-                    depth_stencil: None,
-                    multisample: wgpu::MultisampleState::default(),
-                    fragment: Some(wgpu::FragmentState {
-                        module: &module,
-                        entry_point: Some(fragment),
-                        compilation_options: Default::default(),
-                        targets: &[Some(wgpu::ColorTargetState {
-                            format: target_format,
-                            blend: None,
-                            write_mask: wgpu::ColorWrites::ALL,
-                        })],
-                    }),
-                    multiview_mask: None,
-                    cache: None,
-                })
-            };
-            let pipelines = match srgb {
-                true => [pipeline("fs_srgb"), pipeline("fs_scaled_srgb")],
-                false => [pipeline("fs_main"), pipeline("fs_scaled")],
-            };
-            ViewportGpu {
-                ray_caster: std::sync::Arc::new(ray_caster),
-                compiling: None,
-                pipelines,
-                layout,
-                sampler: crate::gpu::linear_sampler(device, "Viewport::sampler"),
-                shown: None,
-                kept: None,
-                work: None,
-                spare: None,
-                strips: Vec::new(),
-                tile_costs: TileCosts::default(),
-                tiles_in_flight: Vec::new(),
-                next_strip_tag: 0,
-                volume: None,
-                clip: None,
-                cao: None,
-                cao_generation: 0,
-                synced_clip: None,
-                cao_work: None,
-                ao_exact_for: None,
-                stats_pending: None,
-                revision: 0,
-                last_error: None,
-                frames_rendered: 0,
-                frames_reused: 0,
-                last_start: None,
-            }
+        Ok(ViewportGpu {
+            ray_caster: std::sync::Arc::new(ray_caster),
+            compiling: None,
+            binding,
+            shown: None,
+            kept: None,
+            work: None,
+            spare: None,
+            strips: Vec::new(),
+            tile_costs: TileCosts::default(),
+            tiles_in_flight: Vec::new(),
+            next_strip_tag: 0,
+            volume: None,
+            clip: None,
+            cao: None,
+            cao_generation: 0,
+            synced_clip: None,
+            cao_work: None,
+            ao_exact_for: None,
+            stats_pending: None,
+            revision: 0,
+            last_error: None,
+            frames_rendered: 0,
+            frames_reused: 0,
+            last_start: None,
+        })
+    }
+
+    /// The last complete image, for this frame's paint callback.
+    pub fn paint_image(&self) -> Option<PaintImage> {
+        let shown = self.shown.as_ref()?;
+        let t = &shown.target.texture;
+        Some(PaintImage {
+            bind_group: shown.target.bind_group.clone(),
+            size: (t.width(), t.height()),
         })
     }
 
@@ -305,15 +257,7 @@ impl ViewportGpu {
                 | wgpu::TextureUsages::COPY_SRC,
         );
         let view = texture.create_view(&Default::default());
-        let bind_group = crate::gpu::bind_group(
-            device,
-            "Viewport::bind_group",
-            &self.layout,
-            &[
-                wgpu::BindingResource::TextureView(&view),
-                wgpu::BindingResource::Sampler(&self.sampler),
-            ],
-        );
+        let bind_group = self.binding.bind(device, &view);
         Target {
             texture,
             bind_group,
