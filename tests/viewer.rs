@@ -640,13 +640,13 @@ fn screenshots_write_png_and_scene_and_survive_a_failed_write() {
             .any(|t| t.error && t.text.contains("no-such-folder")),
         "error toast"
     );
-    assert!(h.state().failed_shot.is_some(), "the image is kept");
+    assert!(h.state().failed_shot().is_some(), "the image is kept");
     let retry = dir.path().join("retry.png");
     h.state_mut().retry_screenshot(retry.clone());
     settle(&mut h);
     let img = Image::load_png(&retry).expect("retried png");
     assert_eq!((img.width, img.height), (64, 48));
-    assert!(h.state().failed_shot.is_none());
+    assert!(h.state().failed_shot().is_none());
 }
 
 #[test]

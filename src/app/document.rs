@@ -1,7 +1,7 @@
 //! The document the viewer shows (what a scene file holds plus the loaded data) and
 //! how it is read: [`load_document`] runs on a worker thread and uploads the volume.
 
-use super::jobs::Progress;
+use super::jobs::{Job, Progress};
 use crate::ao::AoSettings;
 use crate::gpu::Gpu;
 use crate::render::gpu::GpuVolume;
@@ -210,6 +210,19 @@ pub struct LoadedDocument {
     pub doc: Document,
     pub gpu_volume: GpuVolume,
     pub warnings: Vec<String>,
+}
+
+/// What the viewer has open: the document, the load on its way and the scene as last
+/// saved.
+#[derive(Default)]
+pub(super) struct Opened {
+    /// The document shown (`None` until the first load finishes).
+    pub(super) doc: Option<Document>,
+    /// Bumped by every load: what was derived from an earlier document is stale.
+    pub(super) generation: u64,
+    /// The scene as last loaded or saved (for the unsaved-changes prompt).
+    pub(super) saved: Option<Scene>,
+    pub(super) load_job: Option<Job<LoadedDocument>>,
 }
 
 /// Reads and uploads what `request` names (runs on a worker thread).

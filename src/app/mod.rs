@@ -9,10 +9,12 @@
 //! requested with [`crate::gpu::device_descriptor`]; egui_wgpu's callback resources hold
 //! only the pipelines that draw its images ([`viewport::ViewportPaint`]).
 //!
-//! `document.rs` holds the document and its loading, `derived.rs` keeps what is derived
-//! from it on the GPU (AO, opacity modulation, shadows, clipping), `panels.rs` draws the
-//! UI around the viewport and `screenshot.rs` takes screenshots; this file has the
-//! viewer's state, its API and one frame's wiring.
+//! The viewer's state comes in parts that name themselves: what is open (`Opened`: the
+//! document and its loading, in `document.rs`), what is derived from it on the GPU
+//! (`Derived`: AO, opacity modulation, shadows; kept in step by `sync.rs`), the
+//! viewport's image and the work that makes it (`Viewport`), the UI around it
+//! (`Chrome`, drawn by `panels.rs`) and the screenshots (`screenshot.rs`, `shots.rs`);
+//! this file has the viewer's API and one frame's wiring.
 //!
 //! The UI thread never waits for a file, for AO or for the GPU: loads and AO run on
 //! worker threads (whose GPU work is cut into short submissions, [`crate::gpu::dispatch::Slicing`]),
@@ -47,14 +49,14 @@ pub use screenshot::ShotSize;
 
 use crate::gpu::Gpu;
 use crate::render::Frame;
-use crate::scene::Scene;
 use derived::Derived;
+use document::Opened;
 use jobs::{Job, JobError};
 use screenshot::{Screenshots, Shot};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use viewport::{ViewportGpu, ViewportPaint};
+use viewport::{Viewport, ViewportGpu, ViewportPaint};
 
 /// Entries kept in the recent-files list.
 const RECENT_MAX: usize = 10;
@@ -100,45 +102,35 @@ pub struct Viewer {
     gpu: Arc<Gpu>,
     ctx: egui::Context,
     options: ViewerOptions,
-    doc: Option<Document>,
-    doc_generation: u64,
-    /// The scene as last loaded or saved (for the unsaved-changes prompt).
-    saved: Option<Scene>,
-    load_job: Option<Job<LoadedDocument>>,
-    /// The viewport's GPU side: ray caster, volume, CAO, clip maps, the image being made.
-    viewport: ViewportGpu,
+    /// The document and its loading.
+    opened: Opened,
     /// AO, opacity modulation and shadows, computed in the background.
     derived: Derived,
-    tf_editor: tf_editor::TfEditor,
-    clip_editor: clip_panel::ClipEditor,
+    /// The viewport's image and the work that makes it.
+    viewport: Viewport,
+    /// The UI around the viewport.
+    chrome: Chrome,
+    shots: Screenshots,
+    scripted: Scripted,
     /// Draw the clip shapes' outlines over the viewport.
     pub show_outlines: bool,
-    shots: Screenshots,
-    /// A screenshot whose write failed, kept for "Save elsewhere…".
-    pub failed_shot: Option<Shot>,
-    /// The viewport's size in physical pixels and its rectangle in points, as of the
-    /// last frame.
-    viewport_px: (u32, u32),
-    viewport_rect: egui::Rect,
+    /// GPU errors reported outside any error scope.
+    gpu_errors: Arc<Mutex<Vec<String>>>,
+    /// Set when a `--screenshot` could not be written (the process exits non-zero).
+    pub exit_error: Arc<Mutex<Option<String>>>,
+}
+
+/// The UI around the viewport: the editors' state, the toasts, the unsaved-changes
+/// prompt, the recent files and the window's title.
+#[derive(Default)]
+struct Chrome {
+    tf_editor: tf_editor::TfEditor,
+    clip_editor: clip_panel::ClipEditor,
     toasts: Vec<Toast>,
     recent: Vec<PathBuf>,
     prompt: Option<Pending>,
+    /// Quitting was confirmed (or a scripted run ended): the window may close.
     quit_confirmed: bool,
-    /// GPU errors reported outside any error scope.
-    gpu_errors: Arc<Mutex<Vec<String>>>,
-    frame_ms: Option<f32>,
-    frames_seen: u64,
-    /// The per-frame budget of GPU work the viewport may submit.
-    pacer: crate::gpu::pacer::Pacer,
-    /// Interactive quality while the view moves (the Rendering panel).
-    pub interactive: viewport::Interactive,
-    /// When the view (camera, clip shapes) last changed.
-    motion: Motion,
-    /// The viewport shows the full-quality image of what the document says.
-    viewport_current: bool,
-    scripted: Scripted,
-    /// Set when a `--screenshot` could not be written (the process exits non-zero).
-    pub exit_error: Arc<Mutex<Option<String>>>,
     last_title: String,
 }
 
@@ -165,13 +157,6 @@ struct Scripted {
     stall_reported: bool,
 }
 
-/// The last view wanted and since when.
-#[derive(Debug)]
-struct Motion {
-    last: Option<(Frame, Vec<crate::clip::ClipShape>)>,
-    changed_at: Instant,
-}
-
 /// GPU time the viewport's work may take in one UI frame.
 const VIEWPORT_SLICE: std::time::Duration = std::time::Duration::from_millis(25);
 
@@ -184,7 +169,7 @@ const JOB_SLICE: std::time::Duration = std::time::Duration::from_millis(60);
 impl std::fmt::Debug for Viewer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Viewer")
-            .field("doc", &self.doc.as_ref().map(|d| &d.title))
+            .field("doc", &self.opened.doc.as_ref().map(|d| &d.title))
             .finish_non_exhaustive()
     }
 }
@@ -291,36 +276,18 @@ impl Viewer {
         let mut viewer = Viewer {
             gpu: Arc::new(gpu),
             ctx: ctx.clone(),
-            doc: None,
-            doc_generation: 0,
-            saved: None,
-            load_job: None,
-            viewport,
+            opened: Opened::default(),
             derived: Derived::default(),
-            tf_editor: Default::default(),
-            clip_editor: Default::default(),
-            show_outlines: true,
-            shots: Screenshots::default(),
-            failed_shot: None,
-            viewport_px: (0, 0),
-            viewport_rect: egui::Rect::NOTHING,
-            toasts: Vec::new(),
-            recent,
-            prompt: None,
-            quit_confirmed: false,
-            gpu_errors,
-            frame_ms: None,
-            frames_seen: 0,
-            pacer,
-            interactive: options.interactive,
-            motion: Motion {
-                last: None,
-                changed_at: Instant::now(),
+            viewport: Viewport::new(viewport, pacer, options.interactive),
+            chrome: Chrome {
+                recent,
+                ..Chrome::default()
             },
-            viewport_current: false,
+            shots: Screenshots::default(),
             scripted: Scripted::default(),
+            show_outlines: true,
+            gpu_errors,
             exit_error: Arc::default(),
-            last_title: String::new(),
             options: options.clone(),
         };
         viewer.start_load(options.open);
@@ -333,7 +300,7 @@ impl Viewer {
     /// changes.
     pub fn open(&mut self, request: OpenRequest) {
         if self.has_unsaved_changes() {
-            self.prompt = Some(Pending::Open(request));
+            self.chrome.prompt = Some(Pending::Open(request));
         } else {
             self.start_load(request);
         }
@@ -341,20 +308,20 @@ impl Viewer {
 
     /// The document shown (`None` until the first load finishes).
     pub fn document(&self) -> Option<&Document> {
-        self.doc.as_ref()
+        self.opened.doc.as_ref()
     }
 
     /// The document, for edits through the API (marks the transfer function as changed).
     pub fn document_mut(&mut self) -> Option<&mut Document> {
         self.derived.tf_changed_at = Instant::now();
-        self.doc.as_mut()
+        self.opened.doc.as_mut()
     }
 
     /// Whether a load, an AO computation, the viewport's full-quality image or a
     /// screenshot is still on its way.
     pub fn is_busy(&self) -> bool {
-        self.load_job.is_some()
-            || (self.doc.is_some() && !self.viewport_current)
+        self.opened.load_job.is_some()
+            || (self.opened.doc.is_some() && !self.viewport.current)
             || self.derived.ao.pending(self.ao_key().as_ref())
             || self
                 .derived
@@ -410,24 +377,24 @@ impl Viewer {
     /// Whether an update of CAO for moved clip shapes is being submitted or is still
     /// running on the GPU (the viewport shows the previous pose meanwhile).
     pub fn cao_update_in_flight(&self) -> bool {
-        self.viewport.cao_in_flight()
+        self.viewport.gpu.cao_in_flight()
     }
 
     /// Whether the image drawn read CAO's exact `V_AO` for its clip shapes (true without
     /// CAO); false: it read `V_PAO`, while CAO's update for the shapes was on its way.
     pub fn viewport_ao_exact(&self) -> bool {
-        self.viewport.shown_ao_exact()
+        self.viewport.gpu.shown_ao_exact()
     }
 
     /// Images the viewport has completed so far.
     pub fn viewport_images(&self) -> u64 {
-        self.viewport.frames_rendered
+        self.viewport.gpu.frames_rendered
     }
 
     /// Of those, images that cast only the rays near a change since an earlier image
     /// of the same view and kept its other pixels ([`crate::render::reuse`]).
     pub fn viewport_images_reused(&self) -> u64 {
-        self.viewport.frames_reused
+        self.viewport.gpu.frames_reused
     }
 
     /// Voxels CAO recomputed in its last frame, in percent (`None` without CAO).
@@ -439,37 +406,42 @@ impl Viewer {
     }
 
     pub fn toasts(&self) -> &[Toast] {
-        &self.toasts
+        &self.chrome.toasts
+    }
+
+    /// A screenshot whose write failed, kept for "Save elsewhere…".
+    pub fn failed_shot(&self) -> Option<&Shot> {
+        self.shots.failed.as_ref()
     }
 
     pub fn recent_files(&self) -> &[PathBuf] {
-        &self.recent
+        &self.chrome.recent
     }
 
     /// The viewport's size in physical pixels (as of the last frame).
     pub fn viewport_size(&self) -> (u32, u32) {
-        self.viewport_px
+        self.viewport.px
     }
 
     /// The viewport's rectangle in points (as of the last frame).
     pub fn viewport_rect(&self) -> egui::Rect {
-        self.viewport_rect
+        self.viewport.rect
     }
 
     /// The frame the viewport draws, at the viewport's size.
     pub fn view_frame(&self) -> Option<Frame> {
-        let doc = self.doc.as_ref()?;
+        let doc = self.opened.doc.as_ref()?;
         Some(Frame {
             camera: doc.camera,
             settings: doc.view_settings(),
-            width: self.viewport_px.0.max(1),
-            height: self.viewport_px.1.max(1),
+            width: self.viewport.px.0.max(1),
+            height: self.viewport.px.1.max(1),
         })
     }
 
     /// Whether the scene differs from the one last loaded or saved.
     pub fn has_unsaved_changes(&self) -> bool {
-        match (&self.doc, &self.saved) {
+        match (&self.opened.doc, &self.opened.saved) {
             (Some(doc), Some(saved)) => doc.scene(saved.width, saved.height, false) != *saved,
             _ => false,
         }
@@ -477,12 +449,12 @@ impl Viewer {
 
     /// Saves the scene (the same JSON `volao render` reads).
     pub fn save_scene(&mut self, path: &Path) -> Result<(), String> {
-        let (w, h) = self.viewport_px;
-        let doc = self.doc.as_mut().ok_or("nothing to save yet")?;
+        let (w, h) = self.viewport.px;
+        let doc = self.opened.doc.as_mut().ok_or("nothing to save yet")?;
         let scene = doc.scene(w.max(1), h.max(1), false);
         scene.save(path).map_err(|e| e.to_string())?;
         doc.scene_path = Some(path.to_owned());
-        self.saved = Some(scene);
+        self.opened.saved = Some(scene);
         self.push_recent(path.to_owned());
         self.toast(format!("Saved scene {}", path.display()), false);
         Ok(())
@@ -497,7 +469,7 @@ impl Viewer {
 
     /// Writes a screenshot whose first write failed to another path.
     pub fn retry_screenshot(&mut self, path: PathBuf) {
-        if let Some(mut shot) = self.failed_shot.take() {
+        if let Some(mut shot) = self.shots.failed.take() {
             shot.path = path;
             self.start_write(shot);
         }
@@ -511,24 +483,24 @@ impl Viewer {
     }
 
     fn start_load(&mut self, request: OpenRequest) {
-        if let Some(old) = self.load_job.take() {
+        if let Some(old) = self.opened.load_job.take() {
             old.cancel();
         }
         let gpu = Arc::clone(&self.gpu);
         let label = format!("Loading {}", request.label());
-        self.load_job = Some(Job::spawn(label, self.repaint_fn(), move |p| {
+        self.opened.load_job = Some(Job::spawn(label, self.repaint_fn(), move |p| {
             load_document(&gpu, &request, p)
         }));
     }
 
     fn poll_load(&mut self) {
-        let Some(job) = &mut self.load_job else {
+        let Some(job) = &mut self.opened.load_job else {
             return;
         };
         let Some(result) = job.poll() else {
             return;
         };
-        self.load_job = None;
+        self.opened.load_job = None;
         match result {
             Ok(loaded) => {
                 for w in &loaded.warnings {
@@ -550,31 +522,31 @@ impl Viewer {
                         false,
                     );
                 }
-                let (w, h) = (self.viewport_px.0.max(1), self.viewport_px.1.max(1));
-                self.saved = Some(doc.scene(w, h, false));
+                let (w, h) = (self.viewport.px.0.max(1), self.viewport.px.1.max(1));
+                self.opened.saved = Some(doc.scene(w, h, false));
                 if let Some(p) = doc.scene_path.clone().or(doc.source.path.clone()) {
                     self.push_recent(p);
                 }
                 self.derived.uploaded_tf = Some((doc.tf.clone(), doc.render.step_voxels));
-                self.viewport.set_volume(loaded.gpu_volume);
-                self.doc = Some(doc);
-                self.doc_generation += 1;
+                self.viewport.gpu.set_volume(loaded.gpu_volume);
+                self.opened.doc = Some(doc);
+                self.opened.generation += 1;
                 // The new volume has no AO yet; what was computed for the old one is gone.
                 self.derived.ao.reset();
                 self.derived.preview.reset();
                 self.derived.shown = AoShown::Nothing;
                 self.scripted.ready_frames = 0;
-                self.tf_editor = Default::default();
+                self.chrome.tf_editor = Default::default();
             }
             Err(JobError::Cancelled) => {}
             Err(JobError::Failed(e)) => {
-                let what = if self.doc.is_some() {
+                let what = if self.opened.doc.is_some() {
                     " (the current volume stays)"
                 } else {
                     ""
                 };
                 self.toast(format!("Could not open: {e}{what}"), true);
-                if self.doc.is_none()
+                if self.opened.doc.is_none()
                     && (self.options.exit_after_frames.is_some()
                         || self.options.bench_clip_drag.is_some())
                 {
@@ -599,7 +571,7 @@ impl Viewer {
         if error {
             eprintln!("volao: {text}");
         }
-        self.toasts.push(Toast {
+        self.chrome.toasts.push(Toast {
             text,
             error,
             born: Instant::now(),
@@ -609,11 +581,11 @@ impl Viewer {
 
     fn push_recent(&mut self, path: PathBuf) {
         let path = std::fs::canonicalize(&path).unwrap_or(path);
-        self.recent.retain(|p| *p != path);
-        self.recent.insert(0, path);
-        self.recent.truncate(RECENT_MAX);
+        self.chrome.recent.retain(|p| *p != path);
+        self.chrome.recent.insert(0, path);
+        self.chrome.recent.truncate(RECENT_MAX);
         if let Some(file) = &self.options.recent_file
-            && let Err(e) = save_recent(file, &self.recent)
+            && let Err(e) = save_recent(file, &self.chrome.recent)
         {
             eprintln!(
                 "volao: could not remember recent files in {}: {e}",
@@ -627,7 +599,7 @@ impl Viewer {
     /// One frame of the whole UI.
     pub fn show(&mut self, ui: &mut egui::Ui) {
         let gpu = Arc::clone(&self.gpu);
-        self.pacer.begin_frame(&gpu);
+        self.viewport.pacer.begin_frame(&gpu);
         self.poll_load();
         self.handle_input(ui);
         self.update_ao();

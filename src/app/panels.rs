@@ -50,10 +50,10 @@ impl Viewer {
         }
         if ctx.input(|i| i.viewport().close_requested())
             && self.has_unsaved_changes()
-            && !self.quit_confirmed
+            && !self.chrome.quit_confirmed
         {
             ctx.send_viewport_cmd(egui::ViewportCommand::CancelClose);
-            self.prompt = Some(Pending::Quit);
+            self.chrome.prompt = Some(Pending::Quit);
         }
     }
 
@@ -76,7 +76,7 @@ impl Viewer {
 
     /// Save dialog for the scene; with `then_quit`, closes after saving (the prompt).
     fn save_dialog(&mut self, then_quit: bool) -> bool {
-        let Some(doc) = &self.doc else {
+        let Some(doc) = &self.opened.doc else {
             return false;
         };
         let start = doc
@@ -94,7 +94,7 @@ impl Viewer {
         match self.save_scene(&path) {
             Ok(()) => {
                 if then_quit {
-                    self.quit_confirmed = true;
+                    self.chrome.quit_confirmed = true;
                     self.ctx.send_viewport_cmd(egui::ViewportCommand::Close);
                 }
                 true
@@ -133,10 +133,10 @@ impl Viewer {
                     }
                 }
                 ui.menu_button("Open recent", |ui| {
-                    if self.recent.is_empty() {
+                    if self.chrome.recent.is_empty() {
                         ui.weak("(none yet)");
                     }
-                    for p in self.recent.clone() {
+                    for p in self.chrome.recent.clone() {
                         if ui.button(p.display().to_string()).clicked() {
                             self.open(OpenRequest::for_path(p));
                         }
@@ -158,7 +158,7 @@ impl Viewer {
                 }
             });
             ui.menu_button("View", |ui| {
-                let Some(doc) = &mut self.doc else {
+                let Some(doc) = &mut self.opened.doc else {
                     ui.weak("(no volume)");
                     return;
                 };
@@ -177,7 +177,7 @@ impl Viewer {
     }
 
     pub(super) fn side_panel(&mut self, ui: &mut egui::Ui) {
-        let viewport_px = self.viewport_px;
+        let viewport_px = self.viewport.px;
         let ao_stats = self.ao_stats();
         let light_status = match self.light_error() {
             Some(e) => format!("failed: {e}"),
@@ -189,7 +189,7 @@ impl Viewer {
             None if self.derived.modulation.computing() => "computing…".to_owned(),
             None => String::new(),
         };
-        let Some(doc) = &mut self.doc else {
+        let Some(doc) = &mut self.opened.doc else {
             ui.spinner();
             return;
         };
@@ -218,6 +218,7 @@ impl Viewer {
             .default_open(true)
             .show(ui, |ui| {
                 if self
+                    .chrome
                     .tf_editor
                     .show(ui, &mut doc.tf, &doc.histogram, &doc.stats)
                 {
@@ -270,13 +271,15 @@ impl Viewer {
                 }
             });
             shadow_controls(ui, doc, &light_status);
-            interactive_controls(ui, &mut self.interactive);
+            interactive_controls(ui, &mut self.viewport.interactive);
         });
         let radius = doc.radius;
         egui::CollapsingHeader::new("Clipping")
             .default_open(true)
             .show(ui, |ui| {
-                self.clip_editor.panel(ui, &mut doc.clip_shapes, radius);
+                self.chrome
+                    .clip_editor
+                    .panel(ui, &mut doc.clip_shapes, radius);
             });
         egui::CollapsingHeader::new("Screenshot")
             .default_open(true)
@@ -322,7 +325,7 @@ impl Viewer {
                         self.request_screenshot(path, self.shots.size);
                     }
                 });
-                if let Some(shot) = &self.failed_shot
+                if let Some(shot) = &self.shots.failed
                     && self.shots.write_job.is_none()
                 {
                     let name = file_name(&shot.path);
@@ -354,9 +357,9 @@ impl Viewer {
                 None => "waiting for the transfer function to rest".into(),
             },
         };
-        let frames = self.viewport.frames_rendered;
+        let frames = self.viewport.gpu.frames_rendered;
         ao_panel::AoStats {
-            frame_ms: self.frame_ms,
+            frame_ms: self.viewport.frame_ms,
             frames,
             ao_seconds: self.derived.ao_seconds.as_ref().map(|(s, _)| *s),
             ao_device: self.derived.ao_seconds.as_ref().map(|(_, d)| d.clone()),
@@ -387,7 +390,7 @@ impl Viewer {
         ui.horizontal(|ui| {
             let mut cancel_load = false;
             let mut cancel_ao = false;
-            if let Some(job) = &self.load_job {
+            if let Some(job) = &self.opened.load_job {
                 ui.label(&job.label);
                 progress_bar(ui, job.fraction());
                 cancel_load = ui.button("Cancel").clicked();
@@ -401,7 +404,7 @@ impl Viewer {
                 ui.label(text);
             }
             self.view_status(ui);
-            if let Some(note) = self.doc.as_ref().and_then(|d| d.note.as_deref()) {
+            if let Some(note) = self.opened.doc.as_ref().and_then(|d| d.note.as_deref()) {
                 ui.weak(note);
             }
             if let Some(shot) = &self.shots.pending {
@@ -412,7 +415,7 @@ impl Viewer {
                 ui.label(&job.label);
                 ui.spinner();
             }
-            if cancel_load && let Some(job) = self.load_job.take() {
+            if cancel_load && let Some(job) = self.opened.load_job.take() {
                 job.cancel();
                 self.toast("Loading cancelled".into(), false);
             }
@@ -425,7 +428,7 @@ impl Viewer {
             }
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
                 ui.weak(&self.gpu.info.name);
-                if let Some(e) = &self.viewport.last_error {
+                if let Some(e) = &self.viewport.gpu.last_error {
                     ui.colored_label(ui.visuals().error_fg_color, e);
                 }
             });
@@ -435,7 +438,7 @@ impl Viewer {
     /// The viewport's image: how far a slow one is (on a CPU adapter an image with CAO's
     /// update takes seconds), and whether the one drawn is at interactive quality.
     fn view_status(&self, ui: &mut egui::Ui) {
-        let v = &self.viewport;
+        let v = &self.viewport.gpu;
         let (work, scale, ao_exact) = (v.work_fraction(), v.shown_scale(), v.shown_ao_exact());
         let waited = self
             .scripted
@@ -461,25 +464,29 @@ impl Viewer {
     /// [`Self::paint_viewport`] once the frame's pump has run), the outlines.
     pub(super) fn viewport(&mut self, ui: &mut egui::Ui) -> Option<ViewportSlot> {
         let rect = ui.available_rect_before_wrap();
-        self.viewport_rect = rect;
+        self.viewport.rect = rect;
         let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
         response
             .widget_info(|| egui::WidgetInfo::labeled(egui::Role::Canvas, true, "3-D viewport"));
         let ppp = ui.ctx().pixels_per_point();
         let screen = ui.ctx().content_rect().size() * ppp;
-        self.viewport_px = viewport::size_in_pixels(
+        self.viewport.px = viewport::size_in_pixels(
             rect,
             ppp,
             [screen.x.round() as u32, screen.y.round() as u32],
         );
         let hovering_files = ui.ctx().input(|i| !i.raw.hovered_files.is_empty());
-        let Some(doc) = &mut self.doc else {
+        let Some(doc) = &mut self.opened.doc else {
             ui.put(rect, egui::Spinner::new().size(32.0));
             return None;
         };
-        let used =
-            self.clip_editor
-                .handle(ui, &response, &doc.camera, doc.radius, &mut doc.clip_shapes);
+        let used = self.chrome.clip_editor.handle(
+            ui,
+            &response,
+            &doc.camera,
+            doc.radius,
+            &mut doc.clip_shapes,
+        );
         if !used {
             camera_input::handle(ui, &response, &mut doc.camera, doc.radius);
         }
@@ -489,7 +496,7 @@ impl Viewer {
             rect,
         };
         if self.show_outlines {
-            self.clip_editor.paint(
+            self.chrome.clip_editor.paint(
                 &ui.painter().with_clip_rect(rect),
                 rect,
                 &doc.camera,
@@ -509,16 +516,16 @@ impl Viewer {
             );
         }
         // Frame time: the interval between frames that ray-cast something new.
-        let frames = self.viewport.frames_rendered;
-        if frames > self.frames_seen {
+        let frames = self.viewport.gpu.frames_rendered;
+        if frames > self.viewport.frames_seen {
             let dt = ui.ctx().input(|i| i.unstable_dt) * 1e3;
-            if self.frames_seen > 0 && frames == self.frames_seen + 1 {
-                self.frame_ms = Some(match self.frame_ms {
+            if self.viewport.frames_seen > 0 && frames == self.viewport.frames_seen + 1 {
+                self.viewport.frame_ms = Some(match self.viewport.frame_ms {
                     Some(m) => 0.8 * m + 0.2 * dt,
                     None => dt,
                 });
             }
-            self.frames_seen = frames;
+            self.viewport.frames_seen = frames;
         }
         Some(slot)
     }
@@ -534,7 +541,7 @@ impl Viewer {
         else {
             return;
         };
-        let image = self.viewport.paint_image();
+        let image = self.viewport.gpu.paint_image();
         painter.set(
             index,
             egui_wgpu::Callback::new_paint_callback(rect, ViewportCallback { rect, image }),
@@ -542,7 +549,7 @@ impl Viewer {
     }
 
     pub(super) fn show_prompt(&mut self, ctx: &egui::Context) {
-        let Some(pending) = self.prompt.clone() else {
+        let Some(pending) = self.chrome.prompt.clone() else {
             return;
         };
         let what = match &pending {
@@ -569,23 +576,23 @@ impl Viewer {
         });
         match choice {
             Some(0) if self.save_dialog(false) => {
-                self.prompt = None;
+                self.chrome.prompt = None;
                 self.proceed(pending);
             }
             // Saving was cancelled or failed: keep asking.
             Some(0) | None => {}
             Some(1) => {
-                self.prompt = None;
+                self.chrome.prompt = None;
                 self.proceed(pending);
             }
-            Some(_) => self.prompt = None,
+            Some(_) => self.chrome.prompt = None,
         }
     }
 
     fn proceed(&mut self, pending: Pending) {
         match pending {
             Pending::Quit => {
-                self.quit_confirmed = true;
+                self.chrome.quit_confirmed = true;
                 self.ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             }
             Pending::Open(r) => self.start_load(r),
@@ -594,16 +601,18 @@ impl Viewer {
 
     pub(super) fn show_toasts(&mut self, ctx: &egui::Context) {
         const LIFE: Duration = Duration::from_secs(8);
-        self.toasts.retain(|t| t.error || t.born.elapsed() < LIFE);
-        self.toasts.truncate(8);
-        if self.toasts.is_empty() {
+        self.chrome
+            .toasts
+            .retain(|t| t.error || t.born.elapsed() < LIFE);
+        self.chrome.toasts.truncate(8);
+        if self.chrome.toasts.is_empty() {
             return;
         }
         let mut dismiss = None;
         egui::Area::new(egui::Id::unique("toasts"))
             .anchor(egui::Align2::RIGHT_BOTTOM, egui::vec2(-12.0, -36.0))
             .show(ctx, |ui| {
-                for (i, t) in self.toasts.iter().enumerate() {
+                for (i, t) in self.chrome.toasts.iter().enumerate() {
                     egui::Frame::popup(ui.style()).show(ui, |ui| {
                         ui.set_max_width(420.0);
                         ui.horizontal(|ui| {
@@ -620,15 +629,15 @@ impl Viewer {
                 }
             });
         if let Some(i) = dismiss {
-            self.toasts.remove(i);
+            self.chrome.toasts.remove(i);
         }
-        if self.toasts.iter().any(|t| !t.error) {
+        if self.chrome.toasts.iter().any(|t| !t.error) {
             ctx.request_repaint_after(Duration::from_secs(1));
         }
     }
 
     pub(super) fn update_title(&mut self, ctx: &egui::Context) {
-        let title = match &self.doc {
+        let title = match &self.opened.doc {
             Some(d) => format!(
                 "{}{} — volao",
                 d.title,
@@ -640,9 +649,9 @@ impl Viewer {
             ),
             None => "volao".into(),
         };
-        if title != self.last_title {
+        if title != self.chrome.last_title {
             ctx.send_viewport_cmd(egui::ViewportCommand::Title(title.clone()));
-            self.last_title = title;
+            self.chrome.last_title = title;
         }
     }
 }

@@ -81,7 +81,7 @@ impl Viewer {
             Polled::Nothing => {}
             Polled::Ready(key, values) => {
                 let gpu = Arc::clone(&self.gpu);
-                let v = &mut self.viewport;
+                let v = &mut self.viewport.gpu;
                 let fits = v
                     .volume
                     .as_mut()
@@ -113,7 +113,7 @@ impl Viewer {
             return;
         }
         self.derived.preview.reset();
-        let (Some(doc), Some(texels)) = (&self.doc, self.uploaded_texels()) else {
+        let (Some(doc), Some(texels)) = (&self.opened.doc, self.uploaded_texels()) else {
             return;
         };
         let (tf, settings) = (doc.tf.clone(), key.settings);
@@ -125,7 +125,7 @@ impl Viewer {
 
     /// The status bar's words for [`AoShown`], `None` with AO off.
     pub(super) fn ao_shown_text(&self) -> Option<String> {
-        let method = self.doc.as_ref()?.ao.method;
+        let method = self.opened.doc.as_ref()?.ao.method;
         match self.derived.shown {
             AoShown::Nothing if method == AoMethod::None => None,
             AoShown::Nothing => Some(format!("AO: none yet ({} computing)", method.label())),

@@ -251,7 +251,7 @@ impl PendingShot {
 // ----- the viewer's screenshots ---------------------------------------------------------
 
 /// The viewer's screenshots: the choices in the panel, a request waiting for the view to
-/// be ready, the shot being rendered and the one being written.
+/// be ready, the shot being rendered, the one being written and one whose write failed.
 #[derive(Debug)]
 pub(super) struct Screenshots {
     pub(super) size: ShotSize,
@@ -259,6 +259,8 @@ pub(super) struct Screenshots {
     pub(super) request: Option<(PathBuf, ShotSize)>,
     pub(super) pending: Option<PendingShot>,
     pub(super) write_job: Option<Job<(PathBuf, PathBuf)>>,
+    /// A screenshot whose write failed, kept for "Save elsewhere…".
+    pub(super) failed: Option<Shot>,
 }
 
 impl Default for Screenshots {
@@ -269,6 +271,7 @@ impl Default for Screenshots {
             request: None,
             pending: None,
             write_job: None,
+            failed: None,
         }
     }
 }

@@ -47,7 +47,7 @@ impl Viewer {
                 return;
             }
             b.bench_start = Some((now, b.images.len() as u64));
-            self.pacer.take_spent();
+            self.viewport.pacer.take_spent();
             b.bench_last = Some(now);
         }
         let Some((since, images_before)) = b.bench_start else {
@@ -90,8 +90,8 @@ impl Viewer {
                 "viewport {}×{}: {} images while dragging a clip shape, mean {:.0} ms, median \
                  {:.0} ms, min {:.0} ms between images; CAO recomputed {:.2} % of voxels in \
                  the last update; {}",
-                self.viewport_px.0,
-                self.viewport_px.1,
+                self.viewport.px.0,
+                self.viewport.px.1,
                 between.len(),
                 mean * 1e3,
                 between[between.len() / 2] * 1e3,
@@ -119,7 +119,7 @@ impl Viewer {
             );
             // Where the GPU's time went: each label's pieces, timed alone.
             let wall = since.elapsed().as_secs_f64();
-            let mut spent: Vec<_> = self.pacer.take_spent().into_iter().collect();
+            let mut spent: Vec<_> = self.viewport.pacer.take_spent().into_iter().collect();
             spent.sort_by_key(|s| std::cmp::Reverse(s.1.1));
             let busy: f64 = spent.iter().map(|s| s.1.1.as_secs_f64()).sum();
             let parts: Vec<String> = spent
@@ -156,7 +156,7 @@ impl Viewer {
             self.scripted.exit_requested = true;
             return;
         }
-        if let Some(doc) = &mut self.doc
+        if let Some(doc) = &mut self.opened.doc
             && let Some(s) = doc.clip_shapes.first_mut()
         {
             // Back and forth by 1 mm per UI frame, as a slow drag.
@@ -180,7 +180,8 @@ impl Viewer {
     fn watchdog(&mut self) -> bool {
         let now = Instant::now();
         // The background jobs (loading, AO, light) show their own progress.
-        let jobs_done = self.doc.is_some() && self.load_job.is_none() && self.derived_ready();
+        let jobs_done =
+            self.opened.doc.is_some() && self.opened.load_job.is_none() && self.derived_ready();
         let cao = self.cao_update_in_flight();
         let seen = [self.scripted.images.len(), self.scripted.cao_updates.len()];
         let last = self.scripted.progress.get_or_insert([(0, now); 2]);
@@ -203,8 +204,8 @@ impl Viewer {
             "no {} for {:.0} s: {}; {}",
             what.join(" and no "),
             since.as_secs_f64(),
-            self.viewport.describe_work(),
-            self.pacer.describe(),
+            self.viewport.gpu.describe_work(),
+            self.viewport.pacer.describe(),
         );
         if since >= STALL_FAIL {
             self.fail_exit(format!("the viewer stalled: {state}"));
@@ -248,7 +249,7 @@ impl Viewer {
     /// Closes the window once a scripted run has finished (or failed); true if it did.
     fn close_if_requested(&mut self, ctx: &egui::Context) -> bool {
         if self.scripted.exit_requested {
-            self.quit_confirmed = true;
+            self.chrome.quit_confirmed = true;
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
         }
         self.scripted.exit_requested
@@ -267,9 +268,9 @@ impl Viewer {
     /// The volume, the volumes derived from it and the full-quality image of what the
     /// document says are on screen.
     fn shows_ready_view(&self) -> bool {
-        self.doc.is_some()
-            && self.load_job.is_none()
+        self.opened.doc.is_some()
+            && self.opened.load_job.is_none()
             && self.derived_ready()
-            && self.viewport_current
+            && self.viewport.current
     }
 }

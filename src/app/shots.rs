@@ -19,7 +19,7 @@ impl Viewer {
             self.shots.write_job = None;
             match result {
                 Ok((png, scene)) => {
-                    self.failed_shot = None;
+                    self.shots.failed = None;
                     self.toast(
                         format!(
                             "Screenshot saved: {} (scene: {})",
@@ -48,16 +48,16 @@ impl Viewer {
         // The viewport's image must be current: CAO's V_AO is then posed for the shapes
         // the screenshot is clipped with (and the viewport leaves it alone meanwhile).
         if self.shots.pending.is_none()
-            && self.load_job.is_none()
+            && self.opened.load_job.is_none()
             && self.derived_ready()
-            && self.viewport_current
-            && self.doc.is_some()
+            && self.viewport.current
+            && self.opened.doc.is_some()
             && let Some((path, size)) = self.shots.request.take()
-            && let Some(doc) = &self.doc
+            && let Some(doc) = &self.opened.doc
         {
             {
                 let (w, h) = match size {
-                    ShotSize::Window => (self.viewport_px.0.max(1), self.viewport_px.1.max(1)),
+                    ShotSize::Window => (self.viewport.px.0.max(1), self.viewport.px.1.max(1)),
                     ShotSize::Fixed(w, h) => (w, h),
                 };
                 if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
@@ -79,13 +79,13 @@ impl Viewer {
                         width: w,
                         height: h,
                     };
-                    let tile = shot_tile(self.pacer.rate(super::viewport::STRIP));
+                    let tile = shot_tile(self.viewport.pacer.rate(super::viewport::STRIP));
                     self.shots.pending = Some(PendingShot::new(frame, scene, path, tile));
                 }
             }
         }
         if let Some(shot) = &mut self.shots.pending {
-            let result = match self.viewport.for_screenshot() {
+            let result = match self.viewport.gpu.for_screenshot() {
                 Some((ray_caster, vol, clip)) => shot.pump(&self.gpu, ray_caster, vol, clip),
                 None => Err("no volume to render".into()),
             };
@@ -109,10 +109,10 @@ impl Viewer {
     pub(super) fn start_write(&mut self, shot: Shot) {
         let label = format!("Saving {}", file_name(&shot.path));
         let kept = shot.clone();
-        self.failed_shot = None;
+        self.shots.failed = None;
         self.shots.write_job = Some(Job::spawn(label, self.repaint_fn(), move |_| shot.write()));
         // Kept until the write succeeds: a failure loses nothing.
-        self.failed_shot = Some(kept);
+        self.shots.failed = Some(kept);
     }
 
     /// The next free `volao-N.png` in the screenshot folder (F12).

@@ -35,14 +35,14 @@ struct DerivedVolume<'a, K> {
 
 impl Viewer {
     pub(super) fn ao_key(&self) -> Option<AoKey> {
-        let doc = self.doc.as_ref()?;
+        let doc = self.opened.doc.as_ref()?;
         (doc.ao.method != AoMethod::None).then(|| AoKey {
             settings: doc.ao,
             // CAO and its baseline keep the AO exact under clipping, as in `volao render`.
             clipping: matches!(doc.ao.method, AoMethod::Cao | AoMethod::LaoFull),
             opacity: doc.tf.opacity.clone(),
             coverage: crate::ao::sparse::Coverage::for_render(&doc.render),
-            doc_generation: self.doc_generation,
+            doc_generation: self.opened.generation,
         })
     }
 
@@ -55,7 +55,7 @@ impl Viewer {
             Polled::Nothing => {}
             Polled::Ready(key, r) => {
                 let gpu = Arc::clone(&self.gpu);
-                let v = &mut self.viewport;
+                let v = &mut self.viewport.gpu;
                 let applied = match (r.kind, &mut v.volume) {
                     (AoData::Volume(values), Some(g)) => {
                         if values.len() != g.texels.dims.iter().product::<usize>() {
@@ -105,11 +105,11 @@ impl Viewer {
         // sample, so it follows the transfer function and the clip shapes at once.
         if key.settings.method == AoMethod::VaoLive {
             let gpu = Arc::clone(&self.gpu);
-            let Some(tf) = self.doc.as_ref().map(|d| d.tf.clone()) else {
+            let Some(tf) = self.opened.doc.as_ref().map(|d| d.tf.clone()) else {
                 return;
             };
             let vao = key.settings.vao;
-            let v = &mut self.viewport;
+            let v = &mut self.viewport.gpu;
             let applied = v.volume.as_mut().map(|g| {
                 g.set_live_vao(&gpu, &tf, Some(&vao))
                     .map_err(|e| e.to_string())
@@ -133,7 +133,7 @@ impl Viewer {
         if !self.resting() {
             return;
         }
-        let Some(doc) = &self.doc else {
+        let Some(doc) = &self.opened.doc else {
             return;
         };
         let label = format!(
@@ -182,8 +182,8 @@ impl Viewer {
         let keep =
             self.preview_key(want).is_some() && self.derived.shown != AoShown::Nothing && !was_live;
         let gpu = Arc::clone(&self.gpu);
-        let tf = self.doc.as_ref().map(|d| d.tf.clone());
-        let v = &mut self.viewport;
+        let tf = self.opened.doc.as_ref().map(|d| d.tf.clone());
+        let v = &mut self.viewport.gpu;
         v.set_cao(None);
         if let Some(g) = &mut v.volume {
             if !keep {
@@ -203,12 +203,12 @@ impl Viewer {
     }
 
     pub(super) fn modulation_key(&self) -> Option<ModulationKey> {
-        let doc = self.doc.as_ref()?;
+        let doc = self.opened.doc.as_ref()?;
         let settings = doc.render.opacity_modulation?;
         Some(ModulationKey {
             settings,
             opacity: (settings.source == StatisticSource::Opacity).then(|| doc.tf.opacity.clone()),
-            doc_generation: self.doc_generation,
+            doc_generation: self.opened.generation,
         })
     }
 
@@ -236,7 +236,7 @@ impl Viewer {
         ) else {
             return;
         };
-        let Some(doc) = &self.doc else {
+        let Some(doc) = &self.opened.doc else {
             return;
         };
         let (gpu, tf, step, m) = (
@@ -257,12 +257,12 @@ impl Viewer {
 
     /// What the light volume of shadows must be computed for, if shadows are on.
     pub(super) fn light_key(&self) -> Option<LightKey> {
-        let doc = self.doc.as_ref()?;
+        let doc = self.opened.doc.as_ref()?;
         doc.render.shadows.then(|| LightKey {
             direction: doc.view_settings().light_direction,
             opacity: doc.tf.opacity.clone(),
             clip: doc.clip_shapes.clone(),
-            doc_generation: self.doc_generation,
+            doc_generation: self.opened.generation,
         })
     }
 
@@ -304,7 +304,7 @@ impl Viewer {
             self.ctx.request_repaint_after(AO_DEBOUNCE);
             return;
         }
-        let Some(doc) = &self.doc else {
+        let Some(doc) = &self.opened.doc else {
             return;
         };
         let (gpu, tf) = (Arc::clone(&self.gpu), doc.tf.clone());
@@ -399,13 +399,13 @@ impl Viewer {
 
     /// A copy of the texels the viewport's volume was made from.
     pub(super) fn uploaded_texels(&self) -> Option<VolumeTexels> {
-        self.viewport.volume.as_ref().map(|g| g.texels.clone())
+        self.viewport.gpu.volume.as_ref().map(|g| g.texels.clone())
     }
 
     /// Runs `f` on the viewport's volume and redraws; false when there is none or `f`
     /// says the values did not fit.
     fn upload(&mut self, f: impl FnOnce(&mut GpuVolume) -> bool) -> bool {
-        let v = &mut self.viewport;
+        let v = &mut self.viewport.gpu;
         let done = v.volume.as_mut().is_some_and(f);
         v.touch();
         done
@@ -417,7 +417,7 @@ impl Viewer {
 
     /// Sends the transfer function and step to the GPU volume when they changed.
     pub(super) fn sync_transfer_function(&mut self) {
-        let Some(doc) = &self.doc else {
+        let Some(doc) = &self.opened.doc else {
             return;
         };
         let want = (doc.view_tf(), doc.render.step_voxels);
@@ -426,13 +426,13 @@ impl Viewer {
         }
         // An image being ray-cast would start again with every edit while a curve is
         // dragged: edits go in between images, and count as motion (interactive quality).
-        if self.viewport.working() {
+        if self.viewport.gpu.working() {
             self.ctx.request_repaint();
             return;
         }
-        self.motion.changed_at = Instant::now();
+        self.viewport.motion.changed_at = Instant::now();
         let gpu = Arc::clone(&self.gpu);
-        let v = &mut self.viewport;
+        let v = &mut self.viewport.gpu;
         if let Some(g) = &mut v.volume {
             g.set_transfer_function(&gpu, &want.0, want.1);
             v.touch();
@@ -443,7 +443,7 @@ impl Viewer {
     /// What the viewport should show now: the document's frame and clip shapes, at
     /// interactive quality while the view moves.
     pub(super) fn want(&self) -> Option<Want> {
-        let doc = self.doc.as_ref()?;
+        let doc = self.opened.doc.as_ref()?;
         let cao_mode = if doc.ao.method == AoMethod::LaoFull {
             CaoMode::Full
         } else {
@@ -453,8 +453,8 @@ impl Viewer {
             frame: Frame {
                 camera: doc.camera,
                 settings: doc.view_settings(),
-                width: self.viewport_px.0.max(1),
-                height: self.viewport_px.1.max(1),
+                width: self.viewport.px.0.max(1),
+                height: self.viewport.px.1.max(1),
             },
             clip: doc.clip_shapes.clone(),
             setup: ClipSetup {
@@ -484,31 +484,31 @@ impl Viewer {
             return;
         }
         let view = (want.frame, want.clip.clone());
-        if self.motion.last.as_ref() != Some(&view) {
-            self.motion.last = Some(view);
-            self.motion.changed_at = Instant::now();
+        if self.viewport.motion.last.as_ref() != Some(&view) {
+            self.viewport.motion.last = Some(view);
+            self.viewport.motion.changed_at = Instant::now();
         }
-        let moving = self.motion.changed_at.elapsed() < INTERACTIVE_REST;
+        let moving = self.viewport.motion.changed_at.elapsed() < INTERACTIVE_REST;
         want.moving = moving;
-        if moving && self.interactive.on {
+        if moving && self.viewport.interactive.on {
             want.scale = self.interactive_scale(&want.frame);
-            want.step_factor = self.interactive.step_factor;
+            want.step_factor = self.viewport.interactive.step_factor;
             want.image_interval = Some(std::time::Duration::from_secs_f64(seconds_per_image(
-                self.interactive.target_fps,
+                self.viewport.interactive.target_fps,
             )));
         }
-        let v = &mut self.viewport;
-        let pumped = v.pump(&self.gpu, &want, &mut self.pacer);
+        let v = &mut self.viewport.gpu;
+        let pumped = v.pump(&self.gpu, &want, &mut self.viewport.pacer);
         let busy = v.working()
             || !v.is_current(&Want {
                 scale: 1,
                 ..want.clone()
             });
         // A transfer function waiting for the image being made to finish is not shown yet.
-        let tf_waiting = self.doc.as_ref().is_some_and(|d| {
+        let tf_waiting = self.opened.doc.as_ref().is_some_and(|d| {
             self.derived.uploaded_tf.as_ref() != Some(&(d.view_tf(), d.render.step_voxels))
         });
-        self.viewport_current = !busy && !moving && !tf_waiting;
+        self.viewport.current = !busy && !moving && !tf_waiting;
         if let Some(stats) = pumped.stats {
             self.derived.cao_stats = Some(stats);
             if self.options.bench_clip_drag.is_some() {
@@ -537,8 +537,8 @@ impl Viewer {
         let pixels = frame.width as f64 * frame.height as f64;
         interactive_scale(
             pixels,
-            self.pacer.rate(super::viewport::STRIP),
-            self.interactive.target_fps,
+            self.viewport.pacer.rate(super::viewport::STRIP),
+            self.viewport.interactive.target_fps,
         )
     }
 }

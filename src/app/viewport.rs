@@ -31,6 +31,56 @@ type Compiled = std::sync::Arc<std::sync::Mutex<Option<Option<String>>>>;
 /// Format of the ray caster's output (its storage texture is Rgba8Unorm).
 pub const IMAGE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
+/// The viewport's image and the work that makes it, as the viewer drives it: the GPU
+/// side, the pacer that budgets it, the interactive quality and the motion that asks for
+/// it, the viewport's size and its frame time.
+#[derive(Debug)]
+pub(super) struct Viewport {
+    pub(super) gpu: ViewportGpu,
+    /// The per-frame budget of GPU work the viewport may submit.
+    pub(super) pacer: Pacer,
+    /// Interactive quality while the view moves (the Rendering panel).
+    pub(super) interactive: Interactive,
+    /// When the view (camera, clip shapes) last changed.
+    pub(super) motion: Motion,
+    /// The viewport shows the full-quality image of what the document says.
+    pub(super) current: bool,
+    /// The viewport's size in physical pixels and its rectangle in points, as of the
+    /// last frame.
+    pub(super) px: (u32, u32),
+    pub(super) rect: egui::Rect,
+    /// The interval between frames that ray-cast something new (ms, smoothed), and the
+    /// images completed as of the last frame.
+    pub(super) frame_ms: Option<f32>,
+    pub(super) frames_seen: u64,
+}
+
+impl Viewport {
+    pub(super) fn new(gpu: ViewportGpu, pacer: Pacer, interactive: Interactive) -> Self {
+        Viewport {
+            gpu,
+            pacer,
+            interactive,
+            motion: Motion {
+                last: None,
+                changed_at: Instant::now(),
+            },
+            current: false,
+            px: (0, 0),
+            rect: egui::Rect::NOTHING,
+            frame_ms: None,
+            frames_seen: 0,
+        }
+    }
+}
+
+/// The last view wanted and since when.
+#[derive(Debug)]
+pub(super) struct Motion {
+    pub(super) last: Option<(Frame, Vec<ClipShape>)>,
+    pub(super) changed_at: Instant,
+}
+
 /// Everything the viewport keeps on the GPU between frames.
 #[derive(Debug)]
 pub struct ViewportGpu {
