@@ -617,11 +617,7 @@ impl Viewer {
         }
 
         if self.options.bench_clip_drag.is_some() {
-            let slot = egui::CentralPanel::no_frame()
-                .show(ui, |ui| self.viewport(ui))
-                .inner;
-            self.pump_viewport();
-            self.paint_viewport(slot);
+            self.central_viewport(ui);
             self.bench_step(ui.ctx());
             return;
         }
@@ -635,16 +631,21 @@ impl Viewer {
                     .auto_shrink([false, false])
                     .show(ui, |ui| self.side_panel(ui));
             });
-        let slot = egui::CentralPanel::no_frame()
-            .show(ui, |ui| self.viewport(ui))
-            .inner;
-        // After the panels: the camera and shapes as this frame's input left them.
-        self.pump_viewport();
-        self.paint_viewport(slot);
+        self.central_viewport(ui);
         self.show_prompt(ui.ctx());
         self.show_toasts(ui.ctx());
         self.update_title(ui.ctx());
         self.exit_logic(ui.ctx());
+    }
+
+    /// The viewport in the central panel: laid out, then (after the panels: the camera
+    /// and shapes as this frame's input left them) its GPU work pumped and painted.
+    fn central_viewport(&mut self, ui: &mut egui::Ui) {
+        let slot = egui::CentralPanel::no_frame()
+            .show(ui, |ui| self.viewport(ui))
+            .inner;
+        self.pump_viewport();
+        self.paint_viewport(slot);
     }
 }
 

@@ -264,22 +264,27 @@ impl GpuVolume {
         &self.volume_view
     }
 
+    /// A texture of one texel per voxel holding `bytes` (of `format`), and its view.
+    fn per_voxel(
+        &self,
+        gpu: &Gpu,
+        label: &str,
+        format: wgpu::TextureFormat,
+        bytes: &[u8],
+    ) -> wgpu::TextureView {
+        let dims = self.texels.dims.map(|d| d as u32);
+        filled(&gpu.device, &gpu.queue, label, dims, format, bytes).create_view(&Default::default())
+    }
+
     /// Uses `values` (one per voxel, x fastest, in [0, 1]) as the ambient factor A(x).
     ///
     /// Stored as R32Float (filtered with `FLOAT32_FILTERABLE`), the format CAO's compute
     /// passes write, so a precomputed and a per-frame AO volume shade alike.
     pub fn set_ambient_occlusion(&mut self, gpu: &Gpu, values: &[f32]) {
         self.generation = next_generation();
-        let dims = self.texels.dims.map(|d| d as u32);
-        let texture = filled(
-            &gpu.device,
-            &gpu.queue,
-            "GpuVolume::ambient_occlusion",
-            dims,
-            wgpu::TextureFormat::R32Float,
-            bytemuck::cast_slice(values),
-        );
-        self.ao_view = texture.create_view(&Default::default());
+        let format = wgpu::TextureFormat::R32Float;
+        let bytes = bytemuck::cast_slice(values);
+        self.ao_view = self.per_voxel(gpu, "GpuVolume::ambient_occlusion", format, bytes);
         self.ao_bound = true;
         self.ao_stand_in = None;
     }
@@ -340,20 +345,13 @@ impl GpuVolume {
     /// the GPU will sample them (for the CPU twin).
     pub fn set_opacity_modulation(&mut self, gpu: &Gpu, values: &[f32]) -> Vec<f32> {
         self.generation = next_generation();
-        let dims = self.texels.dims.map(|d| d as u32);
         let quantised: Vec<u16> = values
             .iter()
             .map(|&a| (a.clamp(0.0, 1.0) * 65535.0).round() as u16)
             .collect();
-        let texture = filled(
-            &gpu.device,
-            &gpu.queue,
-            "GpuVolume::opacity_modulation",
-            dims,
-            wgpu::TextureFormat::R16Unorm,
-            bytemuck::cast_slice(&quantised),
-        );
-        self.modulation_view = texture.create_view(&Default::default());
+        let format = wgpu::TextureFormat::R16Unorm;
+        let bytes = bytemuck::cast_slice(&quantised);
+        self.modulation_view = self.per_voxel(gpu, "GpuVolume::opacity_modulation", format, bytes);
         self.modulation_bound = true;
         quantised.iter().map(|&q| q as f32 / 65535.0).collect()
     }

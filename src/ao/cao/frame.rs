@@ -14,7 +14,6 @@ use super::{CaoGpu, CaoMode, CaoStats, Lists};
 use crate::gpu::dispatch::{BrickDispatch, ChunkParams, Pass};
 use crate::gpu::pacer::{Pacer, Stamp};
 use crate::gpu::{Gpu, GpuError, readback_buffer, validated};
-use crate::texels::reader::VOLUME_GROUP;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -241,18 +240,11 @@ impl CaoGpu {
         let device = &gpu.device;
         let (iv, params) = self.iv_dispatch(&frame.lists, frame.mode);
         if frame.next[0] < iv.len() {
-            let clip_group = self.iv_clip_group(device);
-            let pass = Pass {
-                label: "Cao::step_iv",
-                pipeline: self.clip_pipeline(),
-                bind_groups: &[
-                    (0, &self.clip_group),
-                    (1, &clip_group),
-                    (VOLUME_GROUP, &self.clip_volume),
-                ],
-                uniforms: &self.clip_uniforms,
-            };
-            if !submit_paced(gpu, pacer, (&pass, params), &iv, &mut frame.next[0])? {
+            let next = &mut frame.next[0];
+            let submitted = self.with_step_iv(device, self.clip_pipeline(), |pass| {
+                submit_paced(gpu, pacer, (pass, params), &iv, next)
+            })?;
+            if !submitted {
                 return Ok(false);
             }
         }
@@ -264,15 +256,11 @@ impl CaoGpu {
         }
         if frame.listing.as_ref().is_none_or(|l| l.over_bricks) {
             let v = self.v_dispatch(&frame.lists);
-            let (pipeline, groups, uniforms) = self.v_parts(true);
-            let pass = Pass {
-                label: "Cao::step_v",
-                pipeline,
-                bind_groups: &groups,
-                uniforms,
-            };
-            let step_v = (&pass, self.lao_params);
-            if !submit_paced(gpu, pacer, step_v, &v, &mut frame.next[1])? {
+            let next = &mut frame.next[1];
+            let submitted = self.with_step_v(true, |pass| {
+                submit_paced(gpu, pacer, (pass, self.lao_params), &v, next)
+            })?;
+            if !submitted {
                 return Ok(false);
             }
         }

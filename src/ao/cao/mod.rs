@@ -719,21 +719,37 @@ impl CaoGpu {
         )
     }
 
-    /// Step V's pipeline, bind group and uniforms, for a frame or for `V_PAO`.
-    fn v_parts(
-        &self,
-        frame: bool,
-    ) -> (
-        &wgpu::ComputePipeline,
-        [(u32, &wgpu::BindGroup); 2],
-        &wgpu::Buffer,
-    ) {
+    /// `f` of step V's pass, for a frame or for `V_PAO`.
+    fn with_step_v<R>(&self, frame: bool, f: impl FnOnce(&Pass<'_>) -> R) -> R {
         let i = usize::from(frame);
-        (
-            self.pipelines.lao_for(&self.bricks, frame),
-            [(0, &self.lao_group[i]), (VOLUME_GROUP, &self.lao_volume[i])],
-            &self.lao_uniforms[i],
-        )
+        let groups = [(0, &self.lao_group[i]), (VOLUME_GROUP, &self.lao_volume[i])];
+        f(&Pass {
+            label: "Cao::step_v",
+            pipeline: self.pipelines.lao_for(&self.bricks, frame),
+            bind_groups: &groups,
+            uniforms: &self.lao_uniforms[i],
+        })
+    }
+
+    /// `f` of step IV's pass with `pipeline` (CAO's for its bricks, or the dense one).
+    fn with_step_iv<R>(
+        &self,
+        device: &wgpu::Device,
+        pipeline: &wgpu::ComputePipeline,
+        f: impl FnOnce(&Pass<'_>) -> R,
+    ) -> R {
+        let clip_group = self.iv_clip_group(device);
+        let groups = [
+            (0, &self.clip_group),
+            (1, &clip_group),
+            (VOLUME_GROUP, &self.clip_volume),
+        ];
+        f(&Pass {
+            label: "Cao::step_iv",
+            pipeline,
+            bind_groups: &groups,
+            uniforms: &self.clip_uniforms,
+        })
     }
 
     /// Step IV over `lists.clip`.
@@ -757,18 +773,9 @@ impl CaoGpu {
         params: ClipParams,
         pipeline: &wgpu::ComputePipeline,
     ) -> Result<(), GpuError> {
-        let clip_group = self.iv_clip_group(&gpu.device);
-        let pass = Pass {
-            label: "Cao::step_iv",
-            pipeline,
-            bind_groups: &[
-                (0, &self.clip_group),
-                (1, &clip_group),
-                (VOLUME_GROUP, &self.clip_volume),
-            ],
-            uniforms: &self.clip_uniforms,
-        };
-        chunks.run(gpu, &pass, params, false, |_, _| Ok(()), |_, _, _| {})
+        self.with_step_iv(&gpu.device, pipeline, |pass| {
+            chunks.run(gpu, pass, params, false, |_, _| Ok(()), |_, _, _| {})
+        })
     }
 
     /// Step V over `lists.lao`, for a frame or for `V_PAO`; `progress` counts bricks.
@@ -780,25 +787,20 @@ impl CaoGpu {
         progress: &dyn Fn(usize, usize),
     ) -> Result<(), GpuError> {
         let chunks = self.v_dispatch(lists);
-        let (pipeline, groups, uniforms) = self.v_parts(frame);
-        let pass = Pass {
-            label: "Cao::step_v",
-            pipeline,
-            bind_groups: &groups,
-            uniforms,
-        };
         let total = chunks.len() as usize;
-        chunks.run(
-            gpu,
-            &pass,
-            self.lao_params,
-            true,
-            |first, count| {
-                progress((first + count) as usize, total);
-                Ok(())
-            },
-            |_, _, _| {},
-        )
+        self.with_step_v(frame, |pass| {
+            chunks.run(
+                gpu,
+                pass,
+                self.lao_params,
+                true,
+                |first, count| {
+                    progress((first + count) as usize, total);
+                    Ok(())
+                },
+                |_, _, _| {},
+            )
+        })
     }
 
     /// `V_AO` for the ray caster.

@@ -89,28 +89,29 @@ impl VoxelList {
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
-        let gather = uniform_group(
-            gpu,
+        // Both passes read the list and the same uniforms, each with its own bind group.
+        let group = |label, pipeline, resources: &[wgpu::BindingResource<'_>]| {
+            uniform_group(gpu, label, pipeline, params, resources)
+        };
+        let v_ao = wgpu::BindingResource::TextureView(bound.v_ao);
+        let gather = group(
             "Cao::gather",
             &pipelines.gather,
-            params,
             &[
-                wgpu::BindingResource::TextureView(bound.v_ao),
+                v_ao.clone(),
                 bound.bricks.as_entire_binding(),
                 bound.counters.as_entire_binding(),
                 list.as_entire_binding(),
             ],
         );
-        let trace = uniform_group(
-            gpu,
+        let trace = group(
             "Cao::listed",
             &pipelines.trace,
-            params,
             &[
                 wgpu::BindingResource::TextureView(bound.v_o),
                 wgpu::BindingResource::Sampler(bound.sampler),
                 bound.rays.as_entire_binding(),
-                wgpu::BindingResource::TextureView(bound.v_ao),
+                v_ao,
                 bound.occupied.as_entire_binding(),
                 list.as_entire_binding(),
             ],
