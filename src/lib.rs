@@ -9,9 +9,11 @@
 //!    settings, clip shapes and meshes, so any view can be reproduced headlessly.
 //! 3. [`texels`] turns the volume into texels for the GPU (halved until it fits), with
 //!    the block ranges every stage's skipping reads; it sits below [`ao`] and [`render`],
-//!    which both read it. [`sample`] is the CPU twins' vocabulary for reading them
-//!    (trilinear, LUT lookup, f16 mip chains, how far off a sample AO is read) exactly
-//!    as the shaders do.
+//!    which both read it. Every GPU stage reads the volume through one module,
+//!    `shaders/volume.wgsl` (bind group 3: texels, sampler, [`texels::gpu_data::VolumeMap`],
+//!    table; built by [`texels::reader`]), and every CPU twin through its twin
+//!    [`sample::VolumeSampler`]; [`sample`] also holds trilinear sampling, f16 mip
+//!    chains and how far off a sample AO is read, exactly as the shaders do them.
 //! 4. [`gpu`] owns the device (one path for viewer, CLI and tests), the shaders, the
 //!    resource helpers, [`gpu::dispatch::SlabDispatch`] (the z-slab loop of the dense
 //!    per-voxel compute stages) and [`gpu::dispatch::BrickDispatch`] (CAO's lists of
@@ -35,6 +37,8 @@
 //!    device it is given. [`render::reuse`] says where clip shapes that moved can change
 //!    an image, so a frame of the same view casts only the rays that pass there.
 //! 7. [`app`] is the eframe viewer: the same texels, stages and ray caster behind a UI
+//!    (the viewer owns its viewport's GPU work; egui's callback resources hold only the
+//!    draw pipelines, and each frame's paint callback carries the image to show)
 //!    whose background jobs compute AO (shown first as an ambient-map preview),
 //!    modulation and light volumes; the demo opens carved, with AO. Its viewport image
 //!    (the ray cast in strips and tiles costed by what the same part of the picture took
