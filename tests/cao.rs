@@ -8,6 +8,7 @@
 mod common;
 
 use common::{crop, device, texels};
+use volao::clip::gpu::MapRequest;
 
 use common::{Rng, data, differing};
 use glam::Vec3;
@@ -1114,34 +1115,39 @@ fn maps_posed_for_an_image_clip_like_the_maps_moved_there() {
             .unwrap_or_else(|e| panic!("{e}"))
             .pixels
     };
+    let (left, right, far) = ([at(-6.0)], [at(6.0)], [at(-20.0)]);
+    let both = [at(6.0), at(-6.0)];
+    let request = |shapes, resolution| MapRequest {
+        shapes,
+        volume_radius: radius,
+        reach_mm: reach,
+        resolution,
+    };
     let report = maps
-        .update(&s.gpu, &[at(-6.0)], radius, reach, MAP)
+        .update(&s.gpu, request(&left, MAP))
         .unwrap_or_else(|e| panic!("{e}"));
     assert!(report.errors.is_empty(), "{:?}", report.errors);
     let before = render(&maps);
     let posed = maps
-        .posed(&s.gpu, &[at(6.0)], radius, reach, MAP)
+        .posed(&s.gpu, request(&right, MAP))
         .expect("the same sphere elsewhere needs no new maps");
     let copy = render(&posed);
     assert_eq!(render(&maps), before, "the maps keep their pose");
-    maps.update(&s.gpu, &[at(6.0)], radius, reach, MAP)
+    maps.update(&s.gpu, request(&right, MAP))
         .unwrap_or_else(|e| panic!("{e}"));
     let moved = render(&maps);
     assert_ne!(moved, before, "the shape's move shows");
     assert_eq!(copy, moved, "the copy clips as the maps moved there");
     let resized = ClipShape::new(Shape::Sphere, Vec3::new(6.0, 4.0, 6.0), 18.0);
     assert!(
-        maps.posed(&s.gpu, std::slice::from_ref(&resized), radius, reach, MAP)
+        maps.posed(&s.gpu, request(std::slice::from_ref(&resized), MAP))
             .is_none()
     );
     // Whether an update would keep the copy valid (only re-pose the maps).
-    assert!(maps.fits(&s.gpu, &[at(-20.0)], radius, reach, MAP));
-    assert!(!maps.fits(&s.gpu, &[resized], radius, reach, MAP));
-    assert!(!maps.fits(&s.gpu, &[at(6.0)], radius, reach, 2 * MAP));
-    assert!(
-        maps.posed(&s.gpu, &[at(6.0), at(-6.0)], radius, reach, MAP)
-            .is_none()
-    );
+    assert!(maps.fits(&s.gpu, request(&far, MAP)));
+    assert!(!maps.fits(&s.gpu, request(std::slice::from_ref(&resized), MAP)));
+    assert!(!maps.fits(&s.gpu, request(&right, 2 * MAP)));
+    assert!(maps.posed(&s.gpu, request(&both, MAP)).is_none());
 }
 
 /// Read back, the voxels no sample reads hold 1 in `V_PAO` and `V_AO` (what `volao ao

@@ -4,6 +4,7 @@
 mod common;
 
 use common::device;
+use volao::clip::gpu::MapRequest;
 
 use common::data;
 use std::path::PathBuf;
@@ -904,7 +905,7 @@ fn a_pipeline_built_for_its_number_of_clip_shapes_draws_the_general_pixels() {
         .unwrap_or_else(|e| panic!("{e}"));
     for n in 1..=shapes.len() {
         let report = maps
-            .update(&gpu, &shapes[..n], radius, 1.0, 128)
+            .update(&gpu, MapRequest::clipping(&shapes[..n], radius, 128))
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(report.errors.is_empty(), "{:?}", report.errors);
         for mode in [RenderMode::Composite, RenderMode::Mip] {

@@ -4,6 +4,7 @@
 mod common;
 
 use common::{device, flat_tf, real_crops, texels, u8_volume};
+use volao::clip::gpu::MapRequest;
 
 use glam::Vec3;
 use volao::gpu::Gpu;
@@ -235,8 +236,11 @@ fn light_passes_through_clipped_space_on_gpu_and_cpu_alike() {
     let plane = ClipShape::parse("plane:0,0,0,0,0,1").expect("plane");
     let mut maps = ClipMaps::new(&gpu).unwrap_or_else(|e| panic!("{e}"));
     let radius = Vec3::from(t.extent()).length() * 0.5;
-    maps.update(&gpu, std::slice::from_ref(&plane), radius, 1.0, 128)
-        .unwrap_or_else(|e| panic!("{e}"));
+    maps.update(
+        &gpu,
+        MapRequest::clipping(std::slice::from_ref(&plane), radius, 128),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     let g = gpu
         .stage::<LightGpu>()
         .unwrap_or_else(|e| panic!("{e}"))

@@ -5,6 +5,7 @@
 mod common;
 
 use common::{crop, device, flat_tf, real_crops, texels, u8_volume};
+use volao::clip::gpu::MapRequest;
 
 use common::data;
 use glam::Vec3;
@@ -704,14 +705,8 @@ fn live_mode_treats_clipped_space_as_empty_and_matches_its_twin() {
     let shape = ClipShape::parse(&format!("plane:0,{},0,0,1,0", -extent.y * 0.1))
         .unwrap_or_else(|e| panic!("{e}"));
     let mut maps = ClipMaps::new(&gpu).unwrap_or_else(|e| panic!("{e}"));
-    maps.update(
-        &gpu,
-        std::slice::from_ref(&shape),
-        extent.length() * 0.5,
-        1.0,
-        256,
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let request = MapRequest::clipping(std::slice::from_ref(&shape), extent.length() * 0.5, 256);
+    maps.update(&gpu, request).unwrap_or_else(|e| panic!("{e}"));
     let g = rc
         .render(&gpu, &vol, &f, Some(&maps))
         .unwrap_or_else(|e| panic!("{e}"));

@@ -898,7 +898,13 @@ fn add_a_clip_shape_drag_it_and_cao_follows() {
     .unwrap_or_else(|e| panic!("{e}"));
     let mut clip = ClipMaps::new(&twin).unwrap_or_else(|e| panic!("{e}"));
     let reach = volao::ao::cao::reach_mm(doc.ao.samples, vol.texels.spacing);
-    clip.update(&twin, &doc.clip_shapes, doc.radius, reach, CLIP_MAPS)
+    let request = volao::clip::gpu::MapRequest {
+        shapes: &doc.clip_shapes,
+        volume_radius: doc.radius,
+        reach_mm: reach,
+        resolution: CLIP_MAPS,
+    };
+    clip.update(&twin, request)
         .unwrap_or_else(|e| panic!("{e}"));
     let expected = RayCaster::new(&twin.device)
         .and_then(|rc| rc.render(&twin, &vol, &frame, Some(&clip)))

@@ -323,8 +323,9 @@ impl Viewer {
                 true => None,
                 false => {
                     let mut m = crate::clip::gpu::ClipMaps::new(&gpu).map_err(|e| e.to_string())?;
-                    m.update(&gpu, &shapes, radius, 1.0, resolution)
-                        .map_err(|e| e.to_string())?;
+                    let request =
+                        crate::clip::gpu::MapRequest::clipping(&shapes, radius, resolution);
+                    m.update(&gpu, request).map_err(|e| e.to_string())?;
                     Some(m)
                 }
             };

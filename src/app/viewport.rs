@@ -14,6 +14,7 @@ use super::tiles::{RECENT_TILES, Tile, TileCosts, next_tile, strip_texture};
 use crate::ao::cao::{CaoFrame, CaoGpu, CaoMode, CaoStats, Pose};
 use crate::clip::ClipShape;
 use crate::clip::gpu::ClipMaps;
+use crate::clip::gpu::MapRequest;
 use crate::gpu::pacer::Pacer;
 use crate::gpu::{Gpu, GpuError};
 use crate::render::Frame;
@@ -370,6 +371,18 @@ pub(super) struct ClipSetup {
     /// Depth-map edge in pixels.
     pub resolution: u32,
     pub cao_mode: CaoMode,
+}
+
+impl ClipSetup {
+    /// The clip maps wanted for `shapes`, dilated by `reach_mm`.
+    pub fn maps<'a>(&self, shapes: &'a [ClipShape], reach_mm: f32) -> MapRequest<'a> {
+        MapRequest {
+            shapes,
+            volume_radius: self.radius,
+            reach_mm,
+            resolution: self.resolution,
+        }
+    }
 }
 
 /// What the viewer wants on screen this frame.

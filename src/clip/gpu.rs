@@ -189,14 +189,41 @@ struct Usable<'a> {
     report: ClipUpdate,
 }
 
-/// The request of [`ClipMaps::update`], [`ClipMaps::posed`] and [`ClipMaps::fits`].
-fn usable<'a>(
-    gpu: &Gpu,
-    shapes: &'a [ClipShape],
-    volume_radius: f32,
-    reach_mm: f32,
-    resolution: u32,
-) -> Usable<'a> {
+/// What the maps are wanted for ([`ClipMaps::update`], [`ClipMaps::posed`],
+/// [`ClipMaps::fits`]): the shapes, with what sizes their maps.
+#[derive(Debug, Clone, Copy)]
+pub struct MapRequest<'a> {
+    pub shapes: &'a [ClipShape],
+    /// The volume's bounding radius (mm): sizes planes.
+    pub volume_radius: f32,
+    /// How far a clipped point can influence the ambient factor (the LAO ray length
+    /// plus the interpolation footprint), in mm: the dilation.
+    pub reach_mm: f32,
+    /// The maps' size in pixels (square), before the adapter's limit.
+    pub resolution: u32,
+}
+
+impl<'a> MapRequest<'a> {
+    /// Maps that only clip the picture (no AO depends on the clipping, so the dilation
+    /// is unused: 1 mm).
+    pub fn clipping(shapes: &'a [ClipShape], volume_radius: f32, resolution: u32) -> Self {
+        MapRequest {
+            shapes,
+            volume_radius,
+            reach_mm: 1.0,
+            resolution,
+        }
+    }
+}
+
+/// The usable part of `request`.
+fn usable<'a>(gpu: &Gpu, request: MapRequest<'a>) -> Usable<'a> {
+    let MapRequest {
+        shapes,
+        volume_radius,
+        reach_mm,
+        resolution,
+    } = request;
     let resolution = map_resolution(gpu, resolution);
     let mut report = ClipUpdate::default();
     if shapes.len() > MAX_SHAPES {
@@ -322,26 +349,22 @@ impl ClipMaps {
         })
     }
 
-    /// Brings the maps and uniforms up to date with `shapes`.
+    /// Brings the maps and uniforms up to date with `request`'s shapes.
     ///
-    /// `reach_mm` is how far a clipped point can influence the ambient factor (the LAO
-    /// ray length plus the interpolation footprint); `volume_radius` (mm) sizes planes.
     /// Shapes that cannot be used (bad pose, broken mesh, beyond [`MAX_SHAPES`]) are left
     /// out and reported; the others clip.
-    pub fn update(
-        &mut self,
-        gpu: &Gpu,
-        shapes: &[ClipShape],
-        volume_radius: f32,
-        reach_mm: f32,
-        resolution: u32,
-    ) -> Result<ClipUpdate, GpuError> {
+    pub fn update(&mut self, gpu: &Gpu, request: MapRequest<'_>) -> Result<ClipUpdate, GpuError> {
         let device = &gpu.device;
+        let MapRequest {
+            volume_radius,
+            reach_mm,
+            ..
+        } = request;
         let Usable {
             resolution,
             shapes: usable,
             mut report,
-        } = usable(gpu, shapes, volume_radius, reach_mm, resolution);
+        } = usable(gpu, request);
         let layers = (usable.len().max(1) as u32) * ARRAY_LAYERS_PER_SHAPE;
         if resolution != self.resolution || layers > self.maps.depth_or_array_layers() {
             self.maps = validated(device, "ClipMaps::allocate", || {
@@ -383,24 +406,17 @@ impl ClipMaps {
         Ok(report)
     }
 
-    /// A copy of these maps posed for `shapes` (its own uniforms, the same textures), so
+    /// A copy of these maps posed for `request`'s shapes (its own uniforms, the same textures), so
     /// that an image can be clipped at one pose while these maps move to another; `None`
     /// when `shapes` need other maps than those built (a shape added, removed or
     /// resized, or one that cannot clip): then only [`Self::update`] will do. Posed for
     /// the shapes [`Self::update`] was given, the copy clips every point alike.
-    pub fn posed(
-        &self,
-        gpu: &Gpu,
-        shapes: &[ClipShape],
-        volume_radius: f32,
-        reach_mm: f32,
-        resolution: u32,
-    ) -> Option<ClipMaps> {
+    pub fn posed(&self, gpu: &Gpu, request: MapRequest<'_>) -> Option<ClipMaps> {
         let Usable {
             resolution,
             shapes: usable,
             report,
-        } = usable(gpu, shapes, volume_radius, reach_mm, resolution);
+        } = usable(gpu, request);
         let same = report.errors.is_empty()
             && usable.len() == self.slots.len()
             && self.built_for(&usable, resolution);
@@ -425,18 +441,11 @@ impl ClipMaps {
         })
     }
 
-    /// Whether [`Self::update`] to `shapes` would only re-pose the maps built (no map
+    /// Whether [`Self::update`] to `request` would only re-pose the maps built (no map
     /// rebuilt: a copy from [`Self::posed`] stays valid across it).
-    pub fn fits(
-        &self,
-        gpu: &Gpu,
-        shapes: &[ClipShape],
-        volume_radius: f32,
-        reach_mm: f32,
-        resolution: u32,
-    ) -> bool {
-        let request = usable(gpu, shapes, volume_radius, reach_mm, resolution);
-        self.built_for(&request.shapes, request.resolution)
+    pub fn fits(&self, gpu: &Gpu, request: MapRequest<'_>) -> bool {
+        let usable = usable(gpu, request);
+        self.built_for(&usable.shapes, usable.resolution)
     }
 
     /// Whether every one of `usable` finds its maps built at `resolution`: the same

@@ -10,7 +10,7 @@ use crate::ao::cao::CaoStats;
 use crate::ao::vao::PositionalAo;
 use crate::ao::{Ambient, AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
 use crate::clip::ClipShape;
-use crate::clip::gpu::ClipMaps;
+use crate::clip::gpu::{ClipMaps, MapRequest};
 use crate::gpu::{Gpu, GpuError};
 use crate::texels::{UploadLimits, VolumeTexels};
 use crate::tf::TransferFunction;
@@ -218,7 +218,7 @@ fn render_gpu(
         let mut m = ClipMaps::new(g)?;
         let radius = glam::Vec3::from(vol.texels.extent()).length() * 0.5;
         // No AO depends on the clipping here: the dilation margin is unused.
-        let update = m.update(g, clip, radius, 1.0, ao.clip_resolution)?;
+        let update = m.update(g, MapRequest::clipping(clip, radius, ao.clip_resolution))?;
         clip_errors = update.errors.iter().map(|e| e.to_string()).collect();
         maps = Some(m);
     }

@@ -30,7 +30,7 @@
 use super::lao::{Rays, STEP_MM, lao_lut};
 use super::sparse::{Bricks, MAX_CUT_BALLS, RAY_TEST_MARGIN, VoxelTest};
 use crate::clip::ClipShape;
-use crate::clip::gpu::{ClipMaps, ClipUpdate};
+use crate::clip::gpu::{ClipMaps, ClipUpdate, MapRequest};
 use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
 use crate::gpu::{
     Gpu, GpuError, read_buffer, readback_buffer, storage_buffer, uniform_group, validated,
@@ -471,7 +471,13 @@ impl CaoGpu {
         let start = Instant::now();
         // V_PAO: the baseline pipeline with nothing clipped, copied aside. Step IV writes
         // every brick whose V_o or V_m is read; unwritten texels stay 0 (V_o's α there).
-        cao.clip.update(gpu, &[], 1.0, 1.0, 16)?;
+        let nothing = MapRequest {
+            shapes: &[],
+            volume_radius: 1.0,
+            reach_mm: 1.0,
+            resolution: 16,
+        };
+        cao.clip.update(gpu, nothing)?;
         let b = &cao.bricks;
         let lists = Lists {
             clip: b.list(|i| b.used(i)),
@@ -541,10 +547,13 @@ impl CaoGpu {
             reach_mm,
             mode,
         } = pose;
-        let radius = Vec3::from(texels.extent()).length() * 0.5;
-        let ClipUpdate { errors, .. } = self
-            .clip
-            .update(gpu, shapes, radius, reach_mm, resolution)?;
+        let request = MapRequest {
+            shapes,
+            volume_radius: Vec3::from(texels.extent()).length() * 0.5,
+            reach_mm,
+            resolution,
+        };
+        let ClipUpdate { errors, .. } = self.clip.update(gpu, request)?;
         let b = &self.bricks;
         let cameras = self.clip.cameras();
         let near = b.near(texels.dims, texels.spacing, &self.clip.uniforms, &cameras);

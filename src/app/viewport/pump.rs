@@ -205,13 +205,10 @@ impl ViewportGpu {
             // An image with its own copy of the maps goes on unless the update rebuilds
             // them (a shape added or resized): the copy shares their textures.
             let rebuilds = || match (&self.cao, &self.volume) {
-                (Some(cao), Some(vol)) => !cao.clip.fits(
-                    gpu,
-                    &key.clip,
-                    want.setup.radius,
-                    cao.reach_mm(&vol.texels),
-                    want.setup.resolution,
-                ),
+                (Some(cao), Some(vol)) => {
+                    let reach = cao.reach_mm(&vol.texels);
+                    !cao.clip.fits(gpu, want.setup.maps(&key.clip, reach))
+                }
                 _ => true,
             };
             if self.work.as_ref().is_some_and(|w| {
@@ -414,9 +411,7 @@ impl ViewportGpu {
         if moved && let (Some(cao), Some(vol)) = (&self.cao, &self.volume) {
             let setup = want.setup;
             let reach = cao.reach_mm(&vol.texels);
-            own_clip = cao
-                .clip
-                .posed(gpu, &key.clip, setup.radius, reach, setup.resolution);
+            own_clip = cao.clip.posed(gpu, setup.maps(&key.clip, reach));
         }
         if moved && own_clip.is_none() {
             // Whatever happens, these shapes are done with (an error is not retried).
@@ -450,7 +445,7 @@ impl ViewportGpu {
             };
             if let Some(maps) = maps {
                 let report = maps
-                    .update(gpu, &key.clip, setup.radius, reach, setup.resolution)
+                    .update(gpu, setup.maps(&key.clip, reach))
                     .map_err(|e| e.to_string())?;
                 errors = report.errors.iter().map(|e| e.to_string()).collect();
             }

@@ -4,6 +4,7 @@ use super::median;
 use anyhow::Result;
 use std::path::PathBuf;
 use std::time::Instant;
+use volao::clip::gpu::MapRequest;
 use volao::volume::{self, LoadOptions};
 
 /// Arguments of `volao bench render`.
@@ -183,7 +184,8 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
                 let radius = glam::Vec3::from(vols[0].1.texels.extent()).length() * 0.5;
                 // No AO depends on the clipping: the dilation margin is unused.
                 let resolution = AoSettings::default().clip_resolution;
-                let update = maps.update(&gpu, &args.clip, radius, 1.0, resolution)?;
+                let update =
+                    maps.update(&gpu, MapRequest::clipping(&args.clip, radius, resolution))?;
                 if let Some(e) = update.errors.first() {
                     anyhow::bail!("{}: --clip: {e}", path.display());
                 }
