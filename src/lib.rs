@@ -8,8 +8,10 @@
 //!    units); [`scene`] files hold a volume, its transfer function, camera, light, AO
 //!    settings, clip shapes and meshes, so any view can be reproduced headlessly.
 //! 3. [`texels`] turns the volume into texels for the GPU (halved until it fits), with
-//!    the block ranges every stage's skipping reads; it sits below [`ao`] and [`render`],
-//!    which both read it. Every GPU stage reads the volume through one module,
+//!    the block ranges every stage's skipping reads, and uploads them
+//!    ([`texels::gpu::GpuVolume`]: the density, occupancy, block ranges and baked table);
+//!    it sits below [`ao`] and [`render`], which both read it (the ray caster's
+//!    `render::gpu::RenderVolume` adds AO, modulation, gradient and extras around it). Every GPU stage reads the volume through one module,
 //!    `shaders/volume.wgsl` (bind group 3: texels, sampler, [`texels::gpu_data::VolumeMap`],
 //!    table; built by [`texels::reader`]), and every CPU twin through its twin
 //!    [`sample::VolumeSampler`]; [`sample`] also holds trilinear sampling, f16 mip

@@ -21,7 +21,7 @@ use volao::ao::sparse::{Bricks, Coverage};
 use volao::clip::camera::EMPTY;
 use volao::clip::{ClipMode, ClipShape, Shape};
 use volao::gpu::Gpu;
-use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::{Camera, Frame, RenderMode, RenderSettings};
 use volao::texels::BlockRanges;
 use volao::tf::{Preset, TransferFunction};
@@ -75,7 +75,7 @@ fn cranium() -> Volume {
 
 struct Scene {
     gpu: Gpu,
-    vol: GpuVolume,
+    vol: RenderVolume,
     rc: RayCaster,
     /// Sparse, as rendering runs it.
     cao: CaoGpu,
@@ -104,7 +104,7 @@ fn scene_with(v: &Volume, preset: Preset, set: RaySet, samples: u32) -> Scene {
         ambient: 0.8,
         ..Default::default()
     };
-    let vol = GpuVolume::from_texels(&gpu, texels(v), &tf, settings.step_voxels)
+    let vol = RenderVolume::from_texels(&gpu, texels(v), &tf, settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     let rays = Rays::uniform(set.directions());
     let make = |bricks: Bricks| {
@@ -194,7 +194,7 @@ impl Scene {
 #[allow(clippy::too_many_arguments)]
 fn run(
     gpu: &Gpu,
-    vol: &mut GpuVolume,
+    vol: &mut RenderVolume,
     rc: &RayCaster,
     frame: &Frame,
     cao: &mut CaoGpu,
@@ -528,7 +528,7 @@ fn a_cut_into_empty_space_recomputes_nothing() {
 }
 
 /// The viewer's images of a shape being moved read `V_PAO` while `V_AO` is updated for
-/// another pose (`GpuVolume::read_stand_in`): such an image is the one of `V_PAO`'s
+/// another pose (`RenderVolume::read_stand_in`): such an image is the one of `V_PAO`'s
 /// values uploaded as the AO volume, not the exact `V_AO`'s, and switching back (or
 /// replacing the AO) reads `V_AO` again.
 #[test]
@@ -547,7 +547,7 @@ fn the_stand_in_reads_v_pao_in_place_of_v_ao() {
         frame,
         ..
     } = &mut s;
-    let render = |vol: &GpuVolume| {
+    let render = |vol: &RenderVolume| {
         rc.render(gpu, vol, frame, Some(&cao.clip))
             .unwrap_or_else(|e| panic!("{e}"))
             .pixels
@@ -979,7 +979,7 @@ fn a_carved_pocket_keeps_its_light_with_cao_gpu_and_cpu() {
     let tf = common::ramp_tf(30.0, 50.0, 0.9);
     let gpu = device();
     let settings = RenderSettings::default();
-    let mut vol = GpuVolume::from_texels(&gpu, texels(&v), &tf, settings.step_voxels)
+    let mut vol = RenderVolume::from_texels(&gpu, texels(&v), &tf, settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     let rays = Rays::uniform(RaySet::Fourteen.directions());
     let bricks = Coverage::Readable.bricks(&vol.texels, vol.ranges(), &tf);

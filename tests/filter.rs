@@ -11,7 +11,7 @@ use volao::ao::filter::{
     AmbientMap, BoxStats, FilterCpu, FilterGpu, Source, StatisticSource, box_stats_cpu,
     compute_cpu, map_cpu,
 };
-use volao::render::gpu::GpuVolume;
+use volao::render::gpu::RenderVolume;
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
 
@@ -218,7 +218,7 @@ fn separable_statistics_equal_brute_force_gpu() {
         let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
         let source = Source::new(&t, &tf, StatisticSource::Density);
         let values = source.values(&t);
-        let vol = GpuVolume::from_texels(&gpu, t, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+        let vol = RenderVolume::from_texels(&gpu, t, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
         for r in RADII {
             let stats = filter
                 .box_stats(&gpu, &vol, &source, r)
@@ -411,7 +411,7 @@ fn gpu_matches_cpu_twin_for_every_map_on_real_data() {
         let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
         let t = texels(&v);
         let vol =
-            GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+            RenderVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
         for kind in [StatisticSource::Density, StatisticSource::Opacity] {
             let source = Source::new(&t, &tf, kind);
             for r in [[5u32; 3], [10, 10, 7]] {

@@ -9,7 +9,7 @@ use common::data;
 use volao::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Coverage;
-use volao::render::gpu::GpuVolume;
+use volao::render::gpu::RenderVolume;
 use volao::texels::BlockRanges;
 use volao::tf::{ColorStop, OpacityPoint, TransferFunction};
 use volao::volume::{self, LoadOptions, Volume, VoxelData};
@@ -205,7 +205,7 @@ fn gpu_matches_cpu_twin_for_every_ray_set() {
         let tf = TransferFunction::preset(volao::tf::Preset::CtBone, &v.stats());
         let t = texels(&v);
         let vol =
-            GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+            RenderVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
         let lut = lao_lut(&tf, &t);
         let sparse = Coverage::Readable.bricks(&t, vol.ranges(), &tf);
         let dense = Coverage::Dense.bricks(&t, vol.ranges(), &tf);
@@ -294,7 +294,7 @@ fn sparse_lao_renders_the_dense_image_and_one_voxel_tighter_loses_readable_voxel
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
     let (tf, t) = cranium_bone_crop();
     let mut vol =
-        GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+        RenderVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     let lut = lao_lut(&tf, &t);
     let rays = Rays::uniform(RaySet::Fourteen.directions());
     let frame = Frame {
@@ -358,7 +358,8 @@ fn ray_cells_without_their_apron_change_the_sums() {
     let gpu = device();
     let lao = gpu.stage::<LaoGpu>().unwrap_or_else(|e| panic!("{e}"));
     let (tf, t) = cranium_bone_crop();
-    let vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let vol =
+        RenderVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     let lut = lao_lut(&tf, &t);
     let rays = Rays::uniform(RaySet::Fourteen.directions());
     let every = Coverage::Every.bricks(&t, vol.ranges(), &tf);

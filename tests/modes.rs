@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use volao::ao::AoSettings;
 use volao::clip::{ClipMode, ClipShape, Shape};
-use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::image::Tolerance;
 use volao::render::offscreen::{self, RenderJob};
 use volao::render::{Camera, Frame, Image, RenderMode, RenderSettings, cpu};
@@ -89,7 +89,7 @@ fn every_mode_on_the_gpu_matches_its_cpu_twin_and_skipping_changes_nothing() {
         for mode in MODES {
             let tf = tf_for(mode, &v);
             let f = frame(96, mode, 30.0, 20.0);
-            let vol = GpuVolume::from_texels(&gpu, texels.clone(), &tf, f.settings.step_voxels)
+            let vol = RenderVolume::from_texels(&gpu, texels.clone(), &tf, f.settings.step_voxels)
                 .unwrap_or_else(|e| panic!("{e}"));
             let g = rc
                 .render(&gpu, &vol, &f, None)

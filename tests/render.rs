@@ -9,7 +9,7 @@ use volao::clip::gpu::MapRequest;
 use common::data;
 use std::path::PathBuf;
 use volao::gpu::Gpu;
-use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::image::{Tolerance, check};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
 use volao::texels::{UploadLimits, VolumeTexels};
@@ -37,7 +37,7 @@ fn both(
     tf: &TransferFunction,
     frame: &Frame,
 ) -> (Image, Image) {
-    let vol = GpuVolume::from_texels(gpu, texels.clone(), tf, frame.settings.step_voxels)
+    let vol = RenderVolume::from_texels(gpu, texels.clone(), tf, frame.settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     let g = rc
         .render(gpu, &vol, frame, None)
@@ -120,8 +120,8 @@ fn golden_images_with_the_ct_bone_preset() {
             width: 160,
             height: 160,
         };
-        let vol =
-            GpuVolume::new(&gpu, &v, &tf, f.settings.step_voxels).unwrap_or_else(|e| panic!("{e}"));
+        let vol = RenderVolume::new(&gpu, &v, &tf, f.settings.step_voxels)
+            .unwrap_or_else(|e| panic!("{e}"));
         let image = rc
             .render(&gpu, &vol, &f, None)
             .unwrap_or_else(|e| panic!("{e}"));
@@ -143,7 +143,7 @@ fn empty_space_skipping_does_not_change_the_image() {
         let texels = small(&v);
         let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
         let mut f = frame(96, Shading::Phong);
-        let vol = GpuVolume::from_texels(&gpu, texels.clone(), &tf, f.settings.step_voxels)
+        let vol = RenderVolume::from_texels(&gpu, texels.clone(), &tf, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
         let occ = vol.occupancy();
         let skipped = occ.iter().filter(|&&o| o == 0).count();
@@ -277,8 +277,8 @@ fn jittered_ray_starts_remove_wood_grain_rings() {
             width: 192,
             height: 192,
         };
-        let vol =
-            GpuVolume::new(&gpu, &v, &tf, f.settings.step_voxels).unwrap_or_else(|e| panic!("{e}"));
+        let vol = RenderVolume::new(&gpu, &v, &tf, f.settings.step_voxels)
+            .unwrap_or_else(|e| panic!("{e}"));
         let img = rc
             .render(&gpu, &vol, &f, None)
             .unwrap_or_else(|e| panic!("{e}"));
@@ -318,7 +318,7 @@ fn an_all_zero_volume_renders_the_background() {
                 },
                 ..frame(64, Shading::Phong)
             };
-            let vol = GpuVolume::new(&gpu, &v, &tf, f.settings.step_voxels)
+            let vol = RenderVolume::new(&gpu, &v, &tf, f.settings.step_voxels)
                 .unwrap_or_else(|e| panic!("{e}"));
             let img = rc
                 .render(&gpu, &vol, &f, None)
@@ -384,7 +384,7 @@ fn a_saved_scene_renders_the_same_image() {
             width: s.width,
             height: s.height,
         };
-        let vol = GpuVolume::new(&gpu, &v, &s.transfer_function, f.settings.step_voxels)
+        let vol = RenderVolume::new(&gpu, &v, &s.transfer_function, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
         rc.render(&gpu, &vol, &f, None)
             .unwrap_or_else(|e| panic!("{e}"))
@@ -421,7 +421,7 @@ fn gpu_matches_cpu_twin_with_lao() {
         },
         ..frame(96, Shading::Phong)
     };
-    let mut vol = GpuVolume::from_texels(&gpu, texels.clone(), &tf, f.settings.step_voxels)
+    let mut vol = RenderVolume::from_texels(&gpu, texels.clone(), &tf, f.settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     let rays = Rays::uniform(RaySet::Fourteen.directions());
     let lut = lao_lut(&tf, &texels);
@@ -489,7 +489,7 @@ fn ao_scales_ambient_and_diffuse_light_or_the_ambient_term_only_gpu_and_cpu() {
     let t = VolumeTexels::new(&v, UploadLimits::NONE);
     let ao = vec![0.3f32; n.iter().product()];
     let mut vol =
-        GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+        RenderVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     vol.set_ambient_occlusion(&gpu, &ao);
     let (mut cv, occ) = cpu::prepare(&t, &vol.lut);
     cv.ao = Some(ao.clone());
@@ -580,7 +580,7 @@ fn ao_read_off_the_surface_keeps_a_flat_face_bright_and_darkens_a_slot_gpu_and_c
     let tf = grey_tf((0.0, 0.0), (200.0, 0.9), 0.7);
     let t = VolumeTexels::new(&v, UploadLimits::NONE);
     let mut vol =
-        GpuVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+        RenderVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     let rays = Rays::uniform(RaySet::Fourteen.directions());
     let lut = lao_lut(&tf, &t);
     let bricks = volao::ao::sparse::Coverage::Readable.bricks(&t, vol.ranges(), &tf);
@@ -723,7 +723,7 @@ fn specialised_pipelines_draw_the_general_pixels() {
     let v = load("raw/engine.raw");
     let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
     let mut vol =
-        GpuVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+        RenderVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     let mut failures = Vec::new();
     // With the gradient volume (the general shader's uniform says so) and without.
     for gradient in [true, false] {
@@ -761,7 +761,7 @@ fn the_gradient_volume_holds_each_voxels_central_differences() {
         [8, 8, 8],
         |x, y, z| if (x, y, z) == (3, 4, 5) { 255 } else { 0 },
     );
-    let vol = GpuVolume::new(&gpu, &one, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let vol = RenderVolume::new(&gpu, &one, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     let g = vol
         .gradient_volume()
         .expect("an 8³ volume's gradient volume fits")
@@ -781,7 +781,8 @@ fn the_gradient_volume_holds_each_voxels_central_differences() {
     assert_eq!(nonzero, 6, "only the six neighbours along the axes");
     // Compute passes' uploads go without it (8 bytes per voxel).
     let texels = common::texels(&one);
-    let compute = GpuVolume::for_compute(&gpu, texels, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let compute =
+        RenderVolume::for_compute(&gpu, texels, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     assert!(compute.gradient_volume().is_none());
 
     let wave = Volume::new(
@@ -802,7 +803,7 @@ fn the_gradient_volume_holds_each_voxels_central_differences() {
     );
     for (name, v) in cases {
         let texels = common::texels(&v);
-        let vol = GpuVolume::from_texels(&gpu, texels.clone(), &tf, 0.5)
+        let vol = RenderVolume::from_texels(&gpu, texels.clone(), &tf, 0.5)
             .unwrap_or_else(|e| panic!("{e}"));
         let gv = vol
             .gradient_volume()
@@ -838,7 +839,7 @@ fn shading_from_the_gradient_volume_matches_six_samples() {
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
     let mut failures = Vec::new();
     for (name, v, tf) in common::real_crops() {
-        let mut vol = GpuVolume::new(&gpu, &v, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+        let mut vol = RenderVolume::new(&gpu, &v, &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
         for ao in [false, true] {
             if ao {
                 // A stand-in AO volume: what matters is where along the gradient it is read.
@@ -889,7 +890,8 @@ fn a_pipeline_built_for_its_number_of_clip_shapes_draws_the_general_pixels() {
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
     let v = load("raw/engine.raw");
     let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
-    let vol = GpuVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let vol =
+        RenderVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     let shapes = [
         ClipShape::new(Shape::Sphere, Vec3::new(0.0, 0.0, 10.0), 20.0),
         ClipShape {
@@ -944,7 +946,8 @@ fn every_variant_draws_the_general_pixels() {
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
     let v = load("raw/engine.raw");
     let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
-    let vol = GpuVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+    let vol =
+        RenderVolume::from_texels(&gpu, small(&v), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
     let mut failures = Vec::new();
     for mode in MODES {
         for bits in 0u32..256 {
@@ -998,9 +1001,9 @@ fn a_frame_at_another_step_reads_the_table_baked_for_it() {
         f
     };
     let baked_for = |step: f32| {
-        GpuVolume::from_texels(&gpu, v.clone(), &tf, step).unwrap_or_else(|e| panic!("{e}"))
+        RenderVolume::from_texels(&gpu, v.clone(), &tf, step).unwrap_or_else(|e| panic!("{e}"))
     };
-    let draw = |vol: &GpuVolume, step: f32| {
+    let draw = |vol: &RenderVolume, step: f32| {
         rc.render(&gpu, vol, &at(step), None)
             .unwrap_or_else(|e| panic!("{e}"))
     };

@@ -14,7 +14,7 @@ use volao::ao::lao::Rays;
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Coverage;
 use volao::clip::{ClipShape, Shape};
-use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::reuse::{Ball, ImageInputs, set_balls};
 use volao::render::{Frame, Image, RenderSettings};
 use volao::tf::{Preset, TransferFunction};
@@ -27,7 +27,7 @@ const SAMPLES: u32 = 8;
 
 struct Scene {
     gpu: volao::gpu::Gpu,
-    vol: GpuVolume,
+    vol: RenderVolume,
     rc: RayCaster,
     cao: CaoGpu,
     frame: Frame,
@@ -45,7 +45,7 @@ fn scene() -> Scene {
         ambient: 0.8,
         ..Default::default()
     };
-    let vol = GpuVolume::from_texels(&gpu, texels(&v), &tf, settings.step_voxels)
+    let vol = RenderVolume::from_texels(&gpu, texels(&v), &tf, settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     let bricks = Coverage::Readable.bricks(&vol.texels, vol.ranges(), &tf);
     let rays = Rays::uniform(RaySet::Six.directions());

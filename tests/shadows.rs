@@ -8,7 +8,7 @@ use volao::clip::gpu::MapRequest;
 
 use glam::Vec3;
 use volao::gpu::Gpu;
-use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::shadow::{
     LIGHT_START_STEPS, LightGpu, LightVolume, filtered_occlusion, light_cpu, light_direction,
     light_lut,
@@ -146,7 +146,7 @@ fn shadowed_rendering_gpu_matches_cpu_twin_and_darkens() {
                 width: 64,
                 height: 64,
             };
-            let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+            let mut vol = RenderVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
                 .unwrap_or_else(|e| panic!("{e}"));
             let light = gpu
                 .stage::<LightGpu>()
@@ -393,7 +393,7 @@ fn a_lit_slab_does_not_shadow_itself_and_an_occluder_darkens_what_it_hides_gpu_a
         let (v, tf) = slabs(front);
         let t = texels(&v);
         let ones = vec![1.0f32; t.dims.iter().product()];
-        let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+        let mut vol = RenderVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
         let hits = face_hits(&t, &vol.lut, &f, front);
         // GPU: the light volume of the slabs, and one of no occlusion at all.
@@ -477,7 +477,7 @@ fn shadows_add_no_high_frequency_energy_to_the_cranium() {
         width: 256,
         height: 256,
     };
-    let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+    let mut vol = RenderVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     let plain = rc
         .render(&gpu, &vol, &f, None)

@@ -9,7 +9,7 @@ use common::data;
 use glam::Vec3;
 use volao::gpu::Gpu;
 use volao::render::cpu::{self, CpuSurfaces};
-use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::image::Tolerance;
 use volao::render::surface::Surface;
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading};
@@ -38,7 +38,7 @@ fn both(
     surfaces: &[Surface],
     f: &Frame,
 ) -> (Image, Image) {
-    let mut vol = GpuVolume::from_texels(gpu, t.clone(), tf, f.settings.step_voxels)
+    let mut vol = RenderVolume::from_texels(gpu, t.clone(), tf, f.settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     vol.extras.surfaces = surfaces.to_vec();
     let g = rc
@@ -168,7 +168,7 @@ fn surfaces_in_real_data_gpu_matches_cpu_twin() {
         }
         common::twin(&label, &g, &c, TWIN, &out).unwrap_or_else(|e| panic!("{e}"));
         // The surfaces are there: the image differs from the volume alone.
-        let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+        let mut vol = RenderVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
         vol.extras.surfaces.clear();
         let plain = rc

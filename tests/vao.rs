@@ -11,7 +11,7 @@ use common::data;
 use glam::Vec3;
 use volao::ao::vao::{Isosurface, PositionalAo, VaoGpu, VaoInputs, VaoSettings, vao_cpu};
 use volao::gpu::Gpu;
-use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::image::{Tolerance, check, compare};
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
 use volao::tf::TransferFunction;
@@ -252,7 +252,7 @@ fn live_mode_gpu_matches_cpu_twin() {
         width: 64,
         height: 64,
     };
-    let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+    let mut vol = RenderVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     vol.set_live_vao(&gpu, &tf, Some(&s))
         .unwrap_or_else(|e| panic!("{e}"));
@@ -327,7 +327,7 @@ fn live_and_precomputed_agree_at_voxel_centres() {
             ..Default::default()
         },
     ] {
-        let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+        let mut vol = RenderVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
         let inputs = VaoInputs::new(&gpu, &t, &tf, &s).unwrap_or_else(|e| panic!("{e}"));
         let a = gpu
@@ -339,7 +339,7 @@ fn live_and_precomputed_agree_at_voxel_centres() {
         let precomputed = rc
             .render(&gpu, &vol, &f, None)
             .unwrap_or_else(|e| panic!("{e}"));
-        let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+        let mut vol = RenderVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
         vol.set_live_vao(&gpu, &tf, Some(&s))
             .unwrap_or_else(|e| panic!("{e}"));
@@ -397,7 +397,7 @@ fn live_mode_follows_a_transfer_function_change_at_once() {
         height: 48,
     };
     let fresh = |tf: &TransferFunction| {
-        let mut vol = GpuVolume::from_texels(&gpu, t.clone(), tf, f.settings.step_voxels)
+        let mut vol = RenderVolume::from_texels(&gpu, t.clone(), tf, f.settings.step_voxels)
             .unwrap_or_else(|e| panic!("{e}"));
         vol.set_live_vao(&gpu, tf, Some(&s))
             .unwrap_or_else(|e| panic!("{e}"));
@@ -696,7 +696,7 @@ fn live_mode_treats_clipped_space_as_empty_and_matches_its_twin() {
         width: 64,
         height: 64,
     };
-    let mut vol = GpuVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
+    let mut vol = RenderVolume::from_texels(&gpu, t.clone(), &tf, f.settings.step_voxels)
         .unwrap_or_else(|e| panic!("{e}"));
     vol.set_live_vao(&gpu, &tf, Some(&s))
         .unwrap_or_else(|e| panic!("{e}"));

@@ -824,7 +824,7 @@ fn a_scene_keeps_its_light_shadows_meshes_and_values_outside_the_sliders_when_sa
 fn add_a_clip_shape_drag_it_and_cao_follows() {
     let _gpu = one_at_a_time();
     use volao::clip::gpu::ClipMaps;
-    use volao::render::gpu::{GpuVolume, RayCaster};
+    use volao::render::gpu::{RayCaster, RenderVolume};
     let dir = tempfile::tempdir().expect("temp dir");
     let gpu = device();
     let twin = volao::gpu::Gpu::new(
@@ -889,7 +889,7 @@ fn add_a_clip_shape_drag_it_and_cao_follows() {
     h.run_steps(2);
     let viewport = viewport_pixels(&mut h);
     let frame = h.state().view_frame().expect("frame");
-    let vol = GpuVolume::new(
+    let vol = RenderVolume::new(
         &twin,
         &doc.volume,
         &doc.view_tf(),

@@ -16,7 +16,7 @@ use super::vao::{PositionalAo, VaoGpu, VaoInputs, vao_cpu};
 use super::{AoMethod, AoSettings};
 use crate::clip::ClipShape;
 use crate::gpu::{Gpu, GpuError, GpuUse};
-use crate::render::gpu::GpuVolume;
+use crate::texels::gpu::GpuVolume;
 use crate::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use crate::tf::TransferFunction;
 use std::sync::Arc;

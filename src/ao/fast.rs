@@ -6,8 +6,8 @@
 use super::filter::{self, AmbientMap, FilterGpu, OpacityModulation, RadiusUnit, Source};
 use super::{AoMethod, AoSettings};
 use crate::gpu::{Gpu, GpuError};
-use crate::render::gpu::GpuVolume;
 use crate::texels::VolumeTexels;
+use crate::texels::gpu::GpuVolume;
 use crate::tf::TransferFunction;
 
 /// The filter map a method asks for, if it is one.

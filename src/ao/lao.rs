@@ -13,9 +13,9 @@ use crate::gpu::{
     Gpu, GpuError, output_buffer, read_buffer, readback_buffer, storage_buffer, uniform_group,
     validated,
 };
-use crate::render::gpu::GpuVolume;
 use crate::sample::{VolumeSampler, voxel_centre};
 use crate::texels::VolumeTexels;
+use crate::texels::gpu::GpuVolume;
 use crate::texels::gpu_data::VolumeMap;
 use crate::texels::reader::{self, Reading, VOLUME_GROUP};
 use crate::tf::Lut;

@@ -6,7 +6,7 @@
 use super::jobs::Progress;
 use crate::ao::{Ambient, AoEngine, AoMethod, AoRequest, AoSettings};
 use crate::gpu::Gpu;
-use crate::render::gpu::GpuVolume;
+use crate::texels::gpu::GpuVolume;
 use crate::texels::{UploadLimits, VolumeTexels};
 use crate::tf::TransferFunction;
 use crate::volume::Volume;

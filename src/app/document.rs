@@ -4,7 +4,7 @@
 use super::jobs::{Job, Progress};
 use crate::ao::AoSettings;
 use crate::gpu::Gpu;
-use crate::render::gpu::GpuVolume;
+use crate::render::gpu::RenderVolume;
 use crate::render::{Camera, RenderSettings, Shading};
 use crate::scene::{Light, MeshSource, SCENE_VERSION, Scene, VolumeSource};
 use crate::texels::{UploadLimits, VolumeTexels};
@@ -208,7 +208,7 @@ impl Document {
 #[derive(Debug)]
 pub struct LoadedDocument {
     pub doc: Document,
-    pub gpu_volume: GpuVolume,
+    pub gpu_volume: RenderVolume,
     pub warnings: Vec<String>,
 }
 
@@ -301,7 +301,7 @@ pub fn load_document(
     progress.check();
     // Out of GPU memory is an error message, not a crash: catch it in a scope.
     let oom = gpu.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-    let uploaded = GpuVolume::from_texels(gpu, texels, &tf, render.step_voxels);
+    let uploaded = RenderVolume::from_texels(gpu, texels, &tf, render.step_voxels);
     if let Some(e) = pollster::block_on(oom.pop()) {
         return Err(format!(
             "the GPU has too little memory for this volume: {e}"

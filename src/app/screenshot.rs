@@ -11,7 +11,7 @@
 use super::jobs::Job;
 use crate::clip::gpu::ClipMaps;
 use crate::gpu::{Gpu, padded_row_bytes, readback_buffer};
-use crate::render::gpu::{GpuVolume, RayCaster, TILE};
+use crate::render::gpu::{RayCaster, RenderVolume, TILE};
 use crate::render::{Frame, Image};
 use crate::scene::Scene;
 use std::path::{Path, PathBuf};
@@ -123,7 +123,7 @@ impl PendingShot {
         &mut self,
         gpu: &Gpu,
         ray_caster: &RayCaster,
-        volume: &GpuVolume,
+        volume: &RenderVolume,
         clip: Option<&ClipMaps>,
     ) -> Result<Option<Shot>, String> {
         let _ = gpu.device.poll(wgpu::PollType::Poll);
@@ -157,7 +157,7 @@ impl PendingShot {
         &mut self,
         gpu: &Gpu,
         ray_caster: &RayCaster,
-        volume: &GpuVolume,
+        volume: &RenderVolume,
         clip: Option<&ClipMaps>,
     ) -> Result<(), String> {
         let (x0, y0) = self.tiles[self.next];

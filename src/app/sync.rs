@@ -13,13 +13,14 @@ use crate::ao::cao::CaoMode;
 use crate::ao::filter::StatisticSource;
 use crate::gpu::Gpu;
 use crate::render::Frame;
-use crate::render::gpu::GpuVolume;
+use crate::render::gpu::RenderVolume;
 use crate::texels::VolumeTexels;
+use crate::texels::gpu::GpuVolume;
 use std::sync::Arc;
 use std::time::Instant;
 
 /// Puts a derived result on the GPU volume: `Ok(false)` when it does not fit (dropped).
-type Upload<'a, K> = &'a dyn Fn(&Gpu, &mut GpuVolume, &K, &[f32]) -> Result<bool, String>;
+type Upload<'a, K> = &'a dyn Fn(&Gpu, &mut RenderVolume, &K, &[f32]) -> Result<bool, String>;
 
 /// How [`Viewer::keep_derived`] handles one derived volume.
 struct DerivedVolume<'a, K> {
@@ -28,7 +29,7 @@ struct DerivedVolume<'a, K> {
     slot: fn(&mut Derived) -> &mut Keyed<K, Vec<f32>>,
     upload: Upload<'a, K>,
     /// Removes the GPU's copy.
-    clear: &'a dyn Fn(&Gpu, &mut GpuVolume),
+    clear: &'a dyn Fn(&Gpu, &mut RenderVolume),
     /// Keep a stale result on screen until the next one arrives.
     keep_stale: bool,
 }
@@ -405,7 +406,7 @@ impl Viewer {
 
     /// Runs `f` on the viewport's volume and redraws; false when there is none or `f`
     /// says the values did not fit.
-    fn upload(&mut self, f: impl FnOnce(&mut GpuVolume) -> bool) -> bool {
+    fn upload(&mut self, f: impl FnOnce(&mut RenderVolume) -> bool) -> bool {
         let v = &mut self.viewport.gpu;
         let done = v.volume.as_mut().is_some_and(f);
         v.touch();

@@ -1,4 +1,4 @@
-//! The 3-D viewport: the same [`RayCaster`] and [`GpuVolume`] as `volao render`, drawn
+//! The 3-D viewport: the same [`RayCaster`] and [`RenderVolume`] as `volao render`, drawn
 //! through an `egui_wgpu` paint callback (`shaders/viewport.wgsl`). Same scene, same
 //! pixels.
 //!
@@ -18,7 +18,7 @@ use crate::clip::gpu::MapRequest;
 use crate::gpu::pacer::Pacer;
 use crate::gpu::{Gpu, GpuError};
 use crate::render::Frame;
-use crate::render::gpu::{GpuVolume, RayCaster, Variant};
+use crate::render::gpu::{RayCaster, RenderVolume, Variant};
 use crate::render::reuse::{Ball, ImageInputs};
 use std::time::Instant;
 
@@ -111,7 +111,7 @@ pub struct ViewportGpu {
     /// The next strip's tag.
     next_strip_tag: u64,
     /// The volume shown; `None` until the first one is uploaded.
-    pub volume: Option<GpuVolume>,
+    pub volume: Option<RenderVolume>,
     /// Clip shapes' maps when clipping without CAO.
     pub clip: Option<ClipMaps>,
     /// Contextual AO (LAO with clip shapes): its clip maps clip the picture too.
@@ -243,7 +243,7 @@ impl ViewportGpu {
     }
 
     /// Replaces the volume shown.
-    pub fn set_volume(&mut self, volume: GpuVolume) {
+    pub fn set_volume(&mut self, volume: RenderVolume) {
         self.volume = Some(volume);
         self.tile_costs.clear();
         self.set_cao(None);
@@ -280,7 +280,9 @@ impl ViewportGpu {
     /// What a screenshot renders with: the ray caster, the volume (reading `V_AO`: a
     /// screenshot waits for a current image, whose `V_AO` is exact, never the stand-in)
     /// and the clip maps; `None` before a volume is uploaded.
-    pub(super) fn for_screenshot(&mut self) -> Option<(&RayCaster, &GpuVolume, Option<&ClipMaps>)> {
+    pub(super) fn for_screenshot(
+        &mut self,
+    ) -> Option<(&RayCaster, &RenderVolume, Option<&ClipMaps>)> {
         self.volume.as_mut()?.read_stand_in(false);
         Some((&*self.ray_caster, self.volume.as_ref()?, self.clip_maps()))
     }

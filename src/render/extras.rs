@@ -8,7 +8,7 @@ use crate::gpu::bind_group;
 use glam::Vec3;
 
 /// What the ray caster reads in its bind group 1 beyond the core volume: live positional
-/// AO and the light volume. Owned by [`crate::render::gpu::GpuVolume`]; `None` = off.
+/// AO and the light volume. Owned by [`crate::render::gpu::RenderVolume`]; `None` = off.
 #[derive(Debug, Default)]
 pub struct RayExtras {
     pub live_vao: Option<crate::ao::vao::VaoInputs>,

@@ -1,8 +1,8 @@
 //! The GPU ray caster: [`RayCaster`] holds what lives as long as the device (pipeline,
-//! layout, sampler); [`GpuVolume`] holds one volume's textures and its transfer function;
+//! layout, sampler); [`RenderVolume`] holds one volume's textures and its transfer function;
 //! a [`Frame`] is all that changes per frame.
 
-pub use super::gpu_volume::GpuVolume;
+pub use super::gpu_volume::RenderVolume;
 use super::reuse::Ball;
 pub use super::variant::Variant;
 use super::{Frame, Image};
@@ -56,9 +56,9 @@ struct Bound {
     params: wgpu::Buffer,
     extras: wgpu::Buffer,
     generation: u64,
-    /// Bound the LUT baked for the frame's own step ([`GpuVolume::prepare_step`]).
+    /// Bound the LUT baked for the frame's own step ([`RenderVolume::prepare_step`]).
     step_lut: bool,
-    /// Bound the AO stand-in ([`GpuVolume::read_stand_in`]).
+    /// Bound the AO stand-in ([`RenderVolume::read_stand_in`]).
     stand_in: bool,
     layer: Option<(wgpu::TextureView, wgpu::TextureView)>,
     group: wgpu::BindGroup,
@@ -137,7 +137,7 @@ impl RayCaster {
     pub fn encode_tile(
         &self,
         (device, queue): (&wgpu::Device, &wgpu::Queue),
-        vol: &GpuVolume,
+        vol: &RenderVolume,
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         (target, origin): (&wgpu::Texture, (u32, u32)),
@@ -231,7 +231,7 @@ impl RayCaster {
     fn encode(
         &self,
         (device, queue): (&wgpu::Device, &wgpu::Queue),
-        (vol, variant): (&GpuVolume, Variant),
+        (vol, variant): (&RenderVolume, Variant),
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         layer: Option<&super::surface::SurfaceLayer>,
@@ -328,7 +328,7 @@ impl RayCaster {
     fn bind_groups(
         &self,
         (device, queue): (&wgpu::Device, &wgpu::Queue),
-        (vol, lut): (&GpuVolume, &wgpu::Buffer),
+        (vol, lut): (&RenderVolume, &wgpu::Buffer),
         target: &wgpu::Texture,
         params: &wgpu::Buffer,
         extras: &wgpu::Buffer,
@@ -363,7 +363,7 @@ impl RayCaster {
             &self.sampler,
         );
         let map = VolumeMap::new(&vol.texels, &vol.lut);
-        let reading = Reading::sampled(&vol.volume_view, &self.sampler, map, lut);
+        let reading = Reading::sampled(vol.volume_view(), &self.sampler, map, lut);
         let group_3 = reading.bind_group((device, queue), "RayCaster", &self.volume_layout);
         [group, group_2, group_3]
     }
@@ -373,7 +373,7 @@ impl RayCaster {
     pub fn render(
         &self,
         gpu: &Gpu,
-        vol: &GpuVolume,
+        vol: &RenderVolume,
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
     ) -> Result<Image, GpuError> {
@@ -386,7 +386,7 @@ impl RayCaster {
     pub fn render_variant(
         &self,
         gpu: &Gpu,
-        vol: &GpuVolume,
+        vol: &RenderVolume,
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         variant: Option<Variant>,
@@ -403,7 +403,7 @@ impl RayCaster {
     pub fn render_reusing(
         &self,
         gpu: &Gpu,
-        vol: &GpuVolume,
+        vol: &RenderVolume,
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         (previous, changed): (&Image, &[Ball]),
@@ -414,7 +414,7 @@ impl RayCaster {
     fn render_tiles(
         &self,
         gpu: &Gpu,
-        (vol, variant): (&GpuVolume, Option<Variant>),
+        (vol, variant): (&RenderVolume, Option<Variant>),
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         previous: Option<(&Image, &[Ball])>,

@@ -1,24 +1,24 @@
-//! One volume on the GPU: [`GpuVolume`] holds its textures (the density, the occupancy
-//! blocks and their ranges, AO, modulation), its transfer function baked into a LUT and
-//! what bind group 2 reads (live positional AO, the light volume, surfaces). The ray
-//! caster (`render::gpu`) binds them; [`GpuVolume::generation`] tells it when its cached
-//! bind groups are stale.
+//! One volume as the ray caster draws it: [`RenderVolume`] is the [`GpuVolume`] every
+//! stage reads (density, occupancy, block ranges, baked table) with what the ray caster
+//! reads beside it: the AO volume (or its stand-in), opacity modulation, the gradient
+//! volume and what bind group 2 reads (live positional AO, the light volume, surfaces).
+//! The ray caster (`render::gpu`) binds them; [`RenderVolume::generation`] tells it when
+//! its cached bind groups are stale.
 
 use super::extras::GpuLight;
 use super::gradient::GradientVolume;
 use super::shadow::LightVolume;
 use crate::gpu::{Gpu, GpuError, validated};
-use crate::sample::bake_lut;
-use crate::texels::{BlockRanges, UploadLimits, VolumeTexels};
-use crate::tf::{Lut, TransferFunction};
+use crate::texels::VolumeTexels;
+use crate::texels::gpu::{GpuVolume, filled, next_generation};
+use crate::tf::TransferFunction;
 use glam::Vec3;
 
-/// One volume on the GPU with its transfer function baked.
+/// One volume on the GPU with what the ray caster reads beside it. Reads through to its
+/// [`GpuVolume`] (`texels`, `lut`, `volume_view()`, …), which AO stages take.
 #[derive(Debug)]
-pub struct GpuVolume {
-    pub texels: VolumeTexels,
-    ranges: BlockRanges,
-    pub(super) volume_view: wgpu::TextureView,
+pub struct RenderVolume {
+    volume: GpuVolume,
     ao_view: wgpu::TextureView,
     /// `ao_view` is an AO volume, not the 1×1×1 texel of 1 (see [`Variant`]).
     pub(super) ao_bound: bool,
@@ -30,21 +30,9 @@ pub struct GpuVolume {
     pub(super) modulation_view: wgpu::TextureView,
     /// `modulation_view` is a modulation volume, not the 1×1×1 texel of 1.
     pub(super) modulation_bound: bool,
-    occupancy: wgpu::Texture,
-    pub(super) occupancy_view: wgpu::TextureView,
-    /// (min, max) of `norm` per occupancy block: the projection and iso modes' skip test.
-    pub(super) block_range_view: wgpu::TextureView,
     /// The density's central differences per voxel ([`super::gradient`]), or `None`: the
     /// ray caster then takes six density samples per gradient (and binds a placeholder).
     gradient: Option<GradientVolume>,
-    pub(super) lut_buffer: wgpu::Buffer,
-    /// The baked LUT currently on the GPU (alpha corrected for `lut_step`).
-    pub lut: Lut,
-    lut_step: f32,
-    /// The same transfer function baked for another step (the viewer's interactive
-    /// images, [`Self::prepare_step`]), and the generation it was baked in.
-    step_lut: Option<(f32, u64, wgpu::Buffer)>,
-    tf: TransferFunction,
     /// Live positional AO, the light volume and surfaces (bind group 2), see
     /// `render::extras`.
     pub extras: super::extras::RayExtras,
@@ -53,32 +41,15 @@ pub struct GpuVolume {
     pub(super) generation: u64,
 }
 
-/// A fresh value for [`GpuVolume::generation`], unique across volumes.
-fn next_generation() -> u64 {
-    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
-    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+impl std::ops::Deref for RenderVolume {
+    type Target = GpuVolume;
+
+    fn deref(&self) -> &GpuVolume {
+        &self.volume
+    }
 }
 
-/// How the volume's textures are used: sampled by the shaders, written by the upload.
-const SAMPLED: wgpu::TextureUsages =
-    wgpu::TextureUsages::TEXTURE_BINDING.union(wgpu::TextureUsages::COPY_DST);
-
-/// A volume texture of `dims` holding `bytes` (tightly packed texels of `format`).
-fn filled(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    label: &str,
-    dims: [u32; 3],
-    format: wgpu::TextureFormat,
-    bytes: &[u8],
-) -> wgpu::Texture {
-    let texture = crate::gpu::texture_3d(device, label, dims, format, SAMPLED);
-    let texel = format.block_copy_size(None).unwrap_or(1);
-    crate::gpu::write_texture_3d(queue, &texture, 0, dims, texel, bytes);
-    texture
-}
-
-impl GpuVolume {
+impl RenderVolume {
     /// Uploads a volume (halving it until it fits the adapter) with a transfer function.
     pub fn new(
         gpu: &Gpu,
@@ -86,7 +57,7 @@ impl GpuVolume {
         tf: &TransferFunction,
         step_voxels: f32,
     ) -> Result<Self, GpuError> {
-        let texels = VolumeTexels::new(volume, UploadLimits::of(gpu));
+        let texels = VolumeTexels::new(volume, crate::texels::UploadLimits::of(gpu));
         Self::from_texels(gpu, texels, tf, step_voxels)
     }
 
@@ -105,79 +76,40 @@ impl GpuVolume {
         Ok(vol)
     }
 
-    /// Uploads `texels` for compute passes (AO, modulation) that read the density and
-    /// the LUT: without the gradient volume, which only the ray caster's shading reads
-    /// (8 bytes per voxel). Ray casting it is still correct, with six samples per
-    /// gradient.
+    /// Uploads `texels` without the gradient volume, which only the ray caster's shading
+    /// reads (8 bytes per voxel): for compute passes (AO, modulation) that may also ray
+    /// cast it, correctly, with six samples per gradient.
     pub fn for_compute(
         gpu: &Gpu,
         texels: VolumeTexels,
         tf: &TransferFunction,
         step_voxels: f32,
     ) -> Result<Self, GpuError> {
+        let volume = GpuVolume::for_compute(gpu, texels, tf, step_voxels)?;
+        Ok(Self::around(gpu, volume))
+    }
+
+    /// `volume` with no AO, modulation, gradient or extras yet.
+    pub fn around(gpu: &Gpu, volume: GpuVolume) -> Self {
         let (device, queue) = (&gpu.device, &gpu.queue);
-        let dims = texels.dims.map(|d| d as u32);
-        let ranges = BlockRanges::new(&texels);
-        let lut = bake_lut(tf, &texels, step_voxels);
-        let occ = ranges.occupancy(&texels, &lut);
-        let grid = ranges.grid.map(|d| d as u32);
-        validated(device, "GpuVolume::upload", || {
-            let volume = filled(
-                device,
-                queue,
-                "GpuVolume::volume",
-                dims,
-                texels.format.wgpu(),
-                &texels.bytes,
-            );
-            let occupancy = filled(
-                device,
-                queue,
-                "GpuVolume::occupancy",
-                grid,
-                wgpu::TextureFormat::R8Uint,
-                &occ,
-            );
-            let range_texels: Vec<[f32; 2]> = ranges.ranges.iter().map(|&(a, b)| [a, b]).collect();
-            let block_range = filled(
-                device,
-                queue,
-                "GpuVolume::block_range",
-                grid,
-                wgpu::TextureFormat::Rg32Float,
-                bytemuck::cast_slice(&range_texels),
-            );
-            let lut_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("GpuVolume::lut"),
-                size: (lut.rgba.len() * 16) as u64,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            queue.write_buffer(&lut_buffer, 0, bytemuck::cast_slice(&lut.rgba));
-            GpuVolume {
-                volume_view: volume.create_view(&Default::default()),
-                // No AO volume yet: a single texel of 1 makes A(x) = 1 everywhere.
-                ao_view: no_ambient_occlusion(device, queue),
-                ao_bound: false,
-                ao_stand_in: None,
-                reads_stand_in: false,
-                modulation_view: no_modulation(device, queue),
-                modulation_bound: false,
-                occupancy_view: occupancy.create_view(&Default::default()),
-                block_range_view: block_range.create_view(&Default::default()),
-                gradient: None,
-                occupancy,
-                lut_buffer,
-                lut,
-                lut_step: step_voxels,
-                step_lut: None,
-                tf: tf.clone(),
-                extras: Default::default(),
-                generation: next_generation(),
-                ranges,
-                texels,
-            }
-        })
+        RenderVolume {
+            volume,
+            // No AO volume yet: a single texel of 1 makes A(x) = 1 everywhere.
+            ao_view: no_ambient_occlusion(device, queue),
+            ao_bound: false,
+            ao_stand_in: None,
+            reads_stand_in: false,
+            modulation_view: no_modulation(device, queue),
+            modulation_bound: false,
+            gradient: None,
+            extras: Default::default(),
+            generation: next_generation(),
+        }
+    }
+
+    /// The [`GpuVolume`] the AO stages read.
+    pub fn volume(&self) -> &GpuVolume {
+        &self.volume
     }
 
     /// Builds (`on`) or drops the gradient volume ([`super::gradient`]); whether one is
@@ -190,8 +122,8 @@ impl GpuVolume {
         self.gradient = None;
         self.generation = next_generation();
         if on {
-            self.gradient =
-                GradientVolume::new(gpu, &self.volume_view, &self.texels, &self.ranges)?;
+            let v = &self.volume;
+            self.gradient = GradientVolume::new(gpu, v.volume_view(), &v.texels, v.ranges())?;
         }
         Ok(self.gradient.is_some())
     }
@@ -201,67 +133,22 @@ impl GpuVolume {
         self.gradient.as_ref()
     }
 
-    /// Bakes the transfer function for frames of `step_voxels` too, unless it is the
-    /// step of [`Self::set_transfer_function`] or was baked already: frames of either
-    /// step then composite with opacity corrected for their own step. The occupancy
-    /// grid stays valid (a step changes no opacity from zero to non-zero or back).
+    /// Bakes the transfer function for frames of `step_voxels` too
+    /// ([`GpuVolume::prepare_step`]).
     pub fn prepare_step(&mut self, gpu: &Gpu, step_voxels: f32) {
-        let baked = |l: &(f32, u64, wgpu::Buffer)| (l.0, l.1) == (step_voxels, self.generation);
-        if step_voxels == self.lut_step || self.step_lut.as_ref().is_some_and(baked) {
-            return;
-        }
-        let lut = bake_lut(&self.tf, &self.texels, step_voxels);
-        let buffer = match self.step_lut.take() {
-            Some((_, _, b)) if b.size() == (lut.rgba.len() * 16) as u64 => b,
-            _ => gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("GpuVolume::step_lut"),
-                size: (lut.rgba.len() * 16) as u64,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
-        };
-        gpu.queue
-            .write_buffer(&buffer, 0, bytemuck::cast_slice(&lut.rgba));
-        self.step_lut = Some((step_voxels, self.generation, buffer));
+        self.volume.prepare_step(gpu, step_voxels);
     }
 
-    /// The LUT buffer for frames of `step_voxels`: the one baked by
-    /// [`Self::prepare_step`] for it, else the transfer function's own.
-    pub(super) fn lut_buffer_for(&self, step_voxels: f32) -> &wgpu::Buffer {
-        match &self.step_lut {
-            Some((step, generation, buffer))
-                if *step == step_voxels
-                    && *generation == self.generation
-                    && step_voxels != self.lut_step =>
-            {
-                buffer
-            }
-            _ => &self.lut_buffer,
-        }
-    }
-
-    /// Re-bakes the transfer function (and the skip grid) if it or the step changed.
+    /// Re-bakes the transfer function (and the skip grid, and live positional AO's
+    /// table) if it or the step changed.
     pub fn set_transfer_function(&mut self, gpu: &Gpu, tf: &TransferFunction, step_voxels: f32) {
-        if *tf == self.tf && step_voxels == self.lut_step {
+        if !self.volume.set_transfer_function(gpu, tf, step_voxels) {
             return;
         }
         self.generation = next_generation();
-        self.lut = bake_lut(tf, &self.texels, step_voxels);
-        self.tf = tf.clone();
-        self.lut_step = step_voxels;
         if let Some(live) = &mut self.extras.live_vao {
-            live.set_transfer_function(gpu, &self.texels, tf);
+            live.set_transfer_function(gpu, &self.volume.texels, tf);
         }
-        gpu.queue
-            .write_buffer(&self.lut_buffer, 0, bytemuck::cast_slice(&self.lut.rgba));
-        let occ = self.ranges.occupancy(&self.texels, &self.lut);
-        let grid = self.ranges.grid.map(|d| d as u32);
-        crate::gpu::write_texture_3d(&gpu.queue, &self.occupancy, 0, grid, 1, &occ);
-    }
-
-    /// The volume texture (for compute passes such as LAO).
-    pub fn volume_view(&self) -> &wgpu::TextureView {
-        &self.volume_view
     }
 
     /// A texture of one texel per voxel holding `bytes` (of `format`), and its view.
@@ -355,16 +242,6 @@ impl GpuVolume {
         self.modulation_bound = true;
         quantised.iter().map(|&q| q as f32 / 65535.0).collect()
     }
-
-    /// Per-block texel ranges (the occupancy grid's and sparse AO's source).
-    pub fn ranges(&self) -> &BlockRanges {
-        &self.ranges
-    }
-
-    /// The occupancy grid for the current LUT (for the CPU twin).
-    pub fn occupancy(&self) -> Vec<u8> {
-        self.ranges.occupancy(&self.texels, &self.lut)
-    }
 }
 
 /// No opacity modulation: a single texel of 1.
@@ -381,7 +258,7 @@ fn no_ambient_occlusion(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::Tex
     filled(device, queue, label, [1, 1, 1], format, one).create_view(&Default::default())
 }
 
-impl GpuVolume {
+impl RenderVolume {
     /// Turns live positional AO on (`Some`) or off for this volume and transfer function.
     /// Returns the CPU twin's equivalent of what is now on the GPU.
     pub fn set_live_vao(
@@ -414,7 +291,7 @@ impl GpuVolume {
         let dims = self.texels.dims;
         if values.len() != dims.iter().product::<usize>() {
             return Err(GpuError::Validation {
-                stage: "GpuVolume::set_light_volume".into(),
+                stage: "RenderVolume::set_light_volume".into(),
                 message: format!(
                     "{} light values for a {}×{}×{} volume",
                     values.len(),
@@ -431,7 +308,7 @@ impl GpuVolume {
             .iter()
             .map(|&v| half::f16::from_f32(v).to_bits())
             .collect();
-        let view = validated(&gpu.device, "GpuVolume::set_light_volume", || {
+        let view = validated(&gpu.device, "RenderVolume::set_light_volume", || {
             crate::gpu::f16_texture(&gpu.device, &gpu.queue, "GpuVolume::light", &[(bits, dims)])
                 .create_view(&Default::default())
         })?;

@@ -3,7 +3,7 @@
 //! caller gives (`None`: the CPU twin).
 
 use super::cpu;
-use super::gpu::{GpuVolume, RayCaster};
+use super::gpu::{RayCaster, RenderVolume};
 use super::shadow::{LightGpu, LightVolume, light_cpu, light_direction, light_lut};
 use super::{Frame, Image, RenderSettings};
 use crate::ao::cao::CaoStats;
@@ -161,7 +161,7 @@ pub fn render(
 /// with).
 pub fn show_ambient(
     g: &Gpu,
-    vol: &mut GpuVolume,
+    vol: &mut RenderVolume,
     tf: &TransferFunction,
     ao: &AoSettings,
     ambient: Ambient,
@@ -193,7 +193,7 @@ fn render_gpu(
         ..
     } = *job;
     let rc = g.stage::<RayCaster>()?;
-    let mut vol = GpuVolume::new(g, volume, tf, frame.settings.step_voxels)?;
+    let mut vol = RenderVolume::new(g, volume, tf, frame.settings.step_voxels)?;
     vol.extras.surfaces = surfaces.to_vec();
     let start = std::time::Instant::now();
     let engine = AoEngine::on(Some(Arc::clone(g)));

@@ -2,7 +2,7 @@
 //! `shaders/raycast.wgsl`); [`super::gpu::RayCaster`] builds one per variant in use.
 
 use super::Frame;
-use super::gpu_volume::GpuVolume;
+use super::gpu_volume::RenderVolume;
 
 /// What a frame's pipeline is specialised for: the `override` constants of
 /// `shaders/raycast.wgsl`. A feature that is off is left out of the shader (on lavapipe
@@ -33,7 +33,7 @@ pub struct Variant {
 impl Variant {
     /// The variant that draws `frame` of `vol` with `clip` and the surface layer (or not).
     pub fn of(
-        vol: &GpuVolume,
+        vol: &RenderVolume,
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         surfaces: bool,

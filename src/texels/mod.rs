@@ -6,6 +6,7 @@
 
 use crate::tf::Lut;
 
+pub mod gpu;
 pub mod gpu_data;
 pub mod reader;
 use crate::volume::{Volume, VoxelData};

@@ -35,8 +35,8 @@ use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields
 use crate::gpu::{
     Gpu, GpuError, read_buffer, readback_buffer, storage_buffer, uniform_group, validated,
 };
-use crate::render::gpu::GpuVolume;
 use crate::texels::VolumeTexels;
+use crate::texels::gpu::GpuVolume;
 use crate::texels::gpu_data::VolumeMap;
 use crate::texels::reader::{self, Reading, VOLUME_GROUP};
 use crate::tf::TransferFunction;

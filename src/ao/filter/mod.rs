@@ -29,9 +29,9 @@ use crate::gpu::{
     Gpu, GpuError, compute_pipeline, copy_texture_out, read_buffer, shaders, storage_buffer,
     submit_compute_with, texture_3d, texture_readback, uniform_group, unpad, validated,
 };
-use crate::render::gpu::GpuVolume;
 use crate::sample::bake_lut;
 use crate::texels::VolumeTexels;
+use crate::texels::gpu::GpuVolume;
 use crate::texels::gpu_data::VolumeMap;
 use crate::texels::reader::{Reading, VOLUME_GROUP};
 use crate::tf::{Lut, TransferFunction};

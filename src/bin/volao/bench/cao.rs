@@ -22,7 +22,7 @@ use volao::ao::lao::Rays;
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Coverage;
 use volao::clip::{ClipShape, Shape};
-use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::reuse::{ImageInputs, reusable};
 use volao::render::{Frame, RenderSettings, Shading};
 use volao::texels::{UploadLimits, VolumeTexels};
@@ -178,7 +178,7 @@ impl Scene {
 struct Bench {
     gpu: volao::gpu::Gpu,
     rc: RayCaster,
-    vol: GpuVolume,
+    vol: RenderVolume,
     tf: TransferFunction,
     frame: Frame,
     resolution: u32,
@@ -228,7 +228,7 @@ impl Bench {
                 max_bytes: volao::render::gpu::MAX_VOLUME_BYTES,
             },
         );
-        let vol = GpuVolume::from_texels(&gpu, texels, &tf, settings.step_voxels)?;
+        let vol = RenderVolume::from_texels(&gpu, texels, &tf, settings.step_voxels)?;
         let rc = RayCaster::new(&gpu.device)?;
         Ok(Bench {
             gpu,

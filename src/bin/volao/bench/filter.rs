@@ -10,7 +10,7 @@ use volao::ao::filter::{self, AmbientMap, FilterCpu, FilterGpu, Source, Statisti
 use volao::ao::lao::{LaoGpu, Rays, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Bricks;
-use volao::render::gpu::GpuVolume;
+use volao::texels::gpu::GpuVolume;
 use volao::texels::{UploadLimits, VolumeTexels};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, LoadOptions, RawOverrides};
@@ -229,7 +229,7 @@ fn quality(
             max_bytes: u64::MAX,
         },
     );
-    let evol = GpuVolume::from_texels(gpu, et.clone(), &etf, 0.5)?;
+    let evol = GpuVolume::for_compute(gpu, et.clone(), &etf, 0.5)?;
     let lao = gpu.stage::<LaoGpu>()?;
     let lut = lao_lut(&etf, &et);
     let m = args.samples.max(1);

@@ -42,7 +42,7 @@ fn pixel_rms(a: &volao::render::Image, b: &volao::render::Image) -> f64 {
 pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     use volao::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
     use volao::ao::rays::RaySet;
-    use volao::render::gpu::{GpuVolume, RayCaster};
+    use volao::render::gpu::{RayCaster, RenderVolume};
     use volao::render::{RenderSettings, Shading};
     use volao::texels::{UploadLimits, VolumeTexels};
 
@@ -51,7 +51,7 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     let rc = RayCaster::new(&gpu.device)?;
     println!("adapter: {}", gpu.describe());
     let (volume, tf) = super::engine_volume(&args.data)?;
-    let mut vol = GpuVolume::new(&gpu, &volume, &tf, RenderSettings::default().step_voxels)?;
+    let mut vol = RenderVolume::new(&gpu, &volume, &tf, RenderSettings::default().step_voxels)?;
     let lut = lao_lut(&tf, &vol.texels);
     let m = args.samples;
     // The AO term alone, as the paper's "LAO rendering": unshaded, k = 1.
@@ -65,7 +65,7 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
         args.size,
     );
     let voxels = vol.texels.dims.iter().product::<usize>() as f64;
-    let run = |vol: &GpuVolume, set: RaySet| -> Result<(Vec<f32>, f64)> {
+    let run = |vol: &RenderVolume, set: RaySet| -> Result<(Vec<f32>, f64)> {
         let start = Instant::now();
         let a = lao.compute(
             &gpu,
@@ -155,7 +155,7 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
         &|_, _| {},
     );
     let t_cpu = start.elapsed().as_secs_f64();
-    let part_vol = GpuVolume::from_texels(&gpu, texels.clone(), &tf, 0.5)?;
+    let part_vol = RenderVolume::from_texels(&gpu, texels.clone(), &tf, 0.5)?;
     let start = Instant::now();
     lao.compute(
         &gpu,

@@ -9,7 +9,7 @@ use volao::ao::lao::{LaoGpu, Rays, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::vao::{VaoGpu, VaoInputs, VaoSettings};
 use volao::render::RenderSettings;
-use volao::render::gpu::{GpuVolume, RayCaster};
+use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::shadow::{LightGpu, light_direction, light_lut};
 use volao::texels::{UploadLimits, VolumeTexels};
 use volao::tf::TransferFunction;
@@ -89,7 +89,7 @@ fn accuracy(bench: Bench) -> Result<()> {
             max_bytes: u64::MAX,
         },
     );
-    let small_vol = GpuVolume::from_texels(gpu, small.clone(), tf, 0.5)?;
+    let small_vol = RenderVolume::from_texels(gpu, small.clone(), tf, 0.5)?;
     let voxels = small.dims.iter().product::<usize>() as f64;
     let start = Instant::now();
     let truth = gpu.stage::<LaoGpu>()?.compute(
@@ -157,7 +157,7 @@ fn frames(bench: Bench) -> Result<()> {
     let (gpu, kernel, volume, tf, args) = bench.parts();
     let rc = RayCaster::new(&gpu.device)?;
     let frame = super::frame(20.0, RenderSettings::default(), args.size);
-    let time_frames = |vol: &GpuVolume| -> Result<f64> {
+    let time_frames = |vol: &RenderVolume| -> Result<f64> {
         rc.render(gpu, vol, &frame, None)?;
         let mut times = Vec::new();
         for _ in 0..args.runs.max(1) {
@@ -168,7 +168,7 @@ fn frames(bench: Bench) -> Result<()> {
         Ok(median(times))
     };
     let s = VaoSettings::default();
-    let mut vol = GpuVolume::new(gpu, volume, tf, frame.settings.step_voxels)?;
+    let mut vol = RenderVolume::new(gpu, volume, tf, frame.settings.step_voxels)?;
     println!();
     println!(
         "Full engine {:?}, {}² frames, Phong, step 0.5 voxel, skipping on; median of {} after a warm-up",
@@ -194,7 +194,7 @@ fn frames(bench: Bench) -> Result<()> {
         t_pre,
         pre * 1e3
     );
-    let mut live_vol = GpuVolume::new(gpu, volume, tf, frame.settings.step_voxels)?;
+    let mut live_vol = RenderVolume::new(gpu, volume, tf, frame.settings.step_voxels)?;
     let start = Instant::now();
     live_vol.set_live_vao(gpu, tf, Some(&s))?;
     let t_live_setup = start.elapsed().as_secs_f64();

@@ -89,7 +89,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
     use std::sync::Arc;
     use volao::ao::{Ambient, AoEngine, AoInput, AoRequest, AoSettings};
     use volao::render::RenderSettings;
-    use volao::render::gpu::{GpuVolume, RayCaster};
+    use volao::render::gpu::{RayCaster, RenderVolume};
     use volao::texels::{UploadLimits, VolumeTexels};
     use volao::tf::{Preset, TransferFunction};
 
@@ -132,8 +132,8 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
         for &gradient in &args.gradient {
             let texels = texels.clone();
             let vol = match gradient {
-                GradientSource::Volume => GpuVolume::from_texels(&gpu, texels, &tf, step)?,
-                GradientSource::Samples => GpuVolume::for_compute(&gpu, texels, &tf, step)?,
+                GradientSource::Volume => RenderVolume::from_texels(&gpu, texels, &tf, step)?,
+                GradientSource::Samples => RenderVolume::for_compute(&gpu, texels, &tf, step)?,
             };
             if vol.gradient_volume().is_some() != (gradient == GradientSource::Volume) {
                 anyhow::bail!("{name}: --gradient volume: the gradient volume does not fit");
@@ -252,7 +252,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
 fn interleaved_frames(
     gpu: &volao::gpu::Gpu,
     rc: &volao::render::gpu::RayCaster,
-    configs: &[(volao::render::Frame, &volao::render::gpu::GpuVolume)],
+    configs: &[(volao::render::Frame, &volao::render::gpu::RenderVolume)],
     (clip, runs): (Option<&volao::clip::gpu::ClipMaps>, usize),
 ) -> Result<Vec<f64>> {
     for (frame, vol) in configs {
@@ -305,7 +305,7 @@ pub fn render_bench(args: &RenderBenchArgs) -> Result<()> {
     if !args.is_fixed() {
         return render_files(args);
     }
-    use volao::render::gpu::{GpuVolume, RayCaster};
+    use volao::render::gpu::{RayCaster, RenderVolume};
     use volao::render::{RenderSettings, Shading};
     use volao::tf::{Preset, TransferFunction};
 
@@ -321,7 +321,7 @@ pub fn render_bench(args: &RenderBenchArgs) -> Result<()> {
             .volume
             .to_ras();
         let tf = TransferFunction::preset(Preset::CtBone, &volume.stats());
-        let vol = GpuVolume::new(&gpu, &volume, &tf, RenderSettings::default().step_voxels)?;
+        let vol = RenderVolume::new(&gpu, &volume, &tf, RenderSettings::default().step_voxels)?;
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
