@@ -11,7 +11,7 @@
 use super::jobs::Job;
 use crate::clip::gpu::ClipMaps;
 use crate::gpu::{Gpu, padded_row_bytes, readback_buffer};
-use crate::render::gpu::{RayCaster, RenderVolume, TILE};
+use crate::render::gpu::{RayCaster, RenderVolume, TILE, TileDraw};
 use crate::render::{Frame, Image};
 use crate::scene::Scene;
 use std::path::{Path, PathBuf};
@@ -180,12 +180,15 @@ impl PendingShot {
         });
         ray_caster
             .encode_tile(
-                (device, &gpu.queue),
-                volume,
-                &self.frame,
-                clip,
-                (&texture, (x0, y0)),
-                &[],
+                gpu,
+                TileDraw {
+                    volume,
+                    frame: &self.frame,
+                    clip,
+                    target: &texture,
+                    origin: (x0, y0),
+                    changed: &[],
+                },
                 &mut encoder,
             )
             .map_err(|e| e.to_string())?;

@@ -5,7 +5,7 @@
 pub use super::gpu_volume::RenderVolume;
 use super::reuse::Ball;
 pub use super::variant::Variant;
-use super::{Frame, Image};
+use super::{Frame, Image, TileAt};
 use crate::gpu::{
     Gpu, GpuError, bind_group, copy_texture_out, read_buffer, shaders, texture_readback,
     uniform_buffer, unpad, validated,
@@ -37,33 +37,23 @@ pub struct RayCaster {
     volume_layout: wgpu::BindGroupLayout,
     placeholders: super::extras::Placeholders,
     surfaces: super::surface::SurfaceRenderer,
-    /// Uniform buffers and bind groups per render target, written each frame and
-    /// rebuilt only when the volume's resources change (egui's `custom3d_wgpu` pattern).
-    bound: std::sync::Mutex<Vec<Bound>>,
-    /// Tile textures of [`Self::render`], by size.
-    tiles: std::sync::Mutex<Vec<wgpu::Texture>>,
 }
 
-/// Render targets whose bindings are kept (the viewport's strips and tiles, a
-/// screenshot tile, a CLI tile).
-const BOUND_TARGETS: usize = 12;
-
-/// What one render target binds: its uniforms, written per frame, and bind groups 0 and
-/// 2, valid while the volume's generation and the surface layer stay the same.
-#[derive(Debug)]
-struct Bound {
-    target: wgpu::Texture,
-    params: wgpu::Buffer,
-    extras: wgpu::Buffer,
-    generation: u64,
-    /// Bound the LUT baked for the frame's own step ([`RenderVolume::prepare_step`]).
-    step_lut: bool,
-    /// Bound the AO stand-in ([`RenderVolume::read_stand_in`]).
-    stand_in: bool,
-    layer: Option<(wgpu::TextureView, wgpu::TextureView)>,
-    group: wgpu::BindGroup,
-    group_2: wgpu::BindGroup,
-    group_3: wgpu::BindGroup,
+/// One tile of one frame to ray cast ([`RayCaster::encode_tile`]).
+#[derive(Debug, Clone, Copy)]
+pub struct TileDraw<'a> {
+    pub volume: &'a RenderVolume,
+    pub frame: &'a Frame,
+    /// Clip shapes' maps: every sample is tested against them.
+    pub clip: Option<&'a crate::clip::gpu::ClipMaps>,
+    /// Rgba8Unorm with `STORAGE_BINDING`, the tile's size.
+    pub target: &'a wgpu::Texture,
+    /// Where the tile sits in the frame.
+    pub origin: (u32, u32),
+    /// Balls holding every change since the image `target` holds ([`super::reuse`]):
+    /// only pixels whose rays meet one are cast, the others keep what `target` holds.
+    /// Empty: every pixel is cast.
+    pub changed: &'a [Ball],
 }
 
 impl RayCaster {
@@ -117,54 +107,33 @@ impl RayCaster {
                 volume_layout,
                 placeholders: super::extras::Placeholders::new(device),
                 surfaces,
-                bound: Default::default(),
-                tiles: Default::default(),
             }
         })
     }
 
-    /// Encodes the ray casting of one tile of `frame` into `encoder`, writing the caller's
-    /// `target` (Rgba8Unorm with `STORAGE_BINDING`; its size is the tile's, `origin` where
-    /// it sits in the frame), with no readback, clipped by `clip`'s shapes. The viewer
-    /// draws `target` through a paint callback and copies screenshot tiles out of it
+    /// Encodes the ray casting of `tile` into `encoder`, with no readback. The viewer
+    /// draws the target through a paint callback and copies screenshot tiles out of it
     /// asynchronously; the pixels are those [`Self::render`] reads back for the same frame.
-    /// With `changed` balls ([`super::reuse`]) only pixels whose rays meet one are cast;
-    /// the others keep what `target` holds (empty: every pixel is cast).
-    #[allow(
-        clippy::too_many_arguments,
-        reason = "one tile of one frame: every argument is a different input"
-    )]
     pub fn encode_tile(
         &self,
-        (device, queue): (&wgpu::Device, &wgpu::Queue),
-        vol: &RenderVolume,
-        frame: &Frame,
-        clip: Option<&crate::clip::gpu::ClipMaps>,
-        (target, origin): (&wgpu::Texture, (u32, u32)),
-        changed: &[Ball],
+        gpu: &Gpu,
+        tile: TileDraw<'_>,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
+        let vol = tile.volume;
         // The surfaces, rasterised for the whole frame (submitted before the caller's
         // encoder, so they are ready when the ray cast reads them).
         let layer = match vol.extras.surfaces.is_empty() {
             true => None,
             false => Some(self.surfaces.rasterise(
-                (device, queue),
+                (&gpu.device, &gpu.queue),
                 &vol.extras.surfaces,
-                frame,
+                tile.frame,
                 &vol.texels,
             )?),
         };
-        let variant = Variant::of(vol, frame, clip, layer.is_some());
-        self.encode(
-            (device, queue),
-            (vol, variant),
-            frame,
-            clip,
-            layer.as_ref(),
-            (target, origin, changed),
-            encoder,
-        )
+        let variant = Variant::of(vol, tile.frame, tile.clip, layer.is_some());
+        self.encode(gpu, tile, variant, layer.as_ref(), encoder)
     }
 
     /// The pipeline of `variant`, built on first use (shader compilation: ~30 ms on
@@ -221,104 +190,48 @@ impl RayCaster {
         self.pipeline(device, variant).map(|_| ())
     }
 
-    /// Writes this frame's uniforms for `target` and encodes its dispatch with `variant`'s
-    /// pipeline; the bind groups are reused while `vol`'s resources and the surface layer
-    /// stay the same.
-    #[allow(
-        clippy::too_many_arguments,
-        reason = "one tile of one frame: every argument is a different input"
-    )]
+    /// Encodes `tile`'s dispatch with `variant`'s pipeline. Its uniforms and bind groups
+    /// are built for it (per-frame data, as rerun's draw data): nothing is cached between
+    /// tiles, so nothing can go stale.
     fn encode(
         &self,
-        (device, queue): (&wgpu::Device, &wgpu::Queue),
-        (vol, variant): (&RenderVolume, Variant),
-        frame: &Frame,
-        clip: Option<&crate::clip::gpu::ClipMaps>,
+        gpu: &Gpu,
+        tile: TileDraw<'_>,
+        variant: Variant,
         layer: Option<&super::surface::SurfaceLayer>,
-        (target, origin, changed): (&wgpu::Texture, (u32, u32), &[Ball]),
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
-        let mut params = frame.params(&vol.texels, &vol.lut, origin.0, origin.1);
-        params.box_half[3] = vol.gradient_volume().map_or(0.0, |g| g.scale);
-        super::reuse::set_balls(&mut params, changed);
+        let (device, queue) = (&gpu.device, &gpu.queue);
+        let vol = tile.volume;
+        let at = TileAt {
+            origin: tile.origin,
+            gradient_scale: vol.gradient_volume().map_or(0.0, |g| g.scale),
+            changed: tile.changed,
+        };
+        let params = tile.frame.uniforms(&vol.texels, &vol.lut, at);
         let pipeline = self.pipeline(device, variant)?;
-        let clip_group = clip.map(|c| c.bind_group(device, &self.clip_layout));
+        let clip_group = tile.clip.map(|c| c.bind_group(device, &self.clip_layout));
         let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
-        let (tw, th) = (target.width(), target.height());
-        let layer_views = layer.map(|l| (l.position.clone(), l.color.clone()));
-        let lut = vol.lut_buffer_for(frame.settings.step_voxels);
-        let step_lut = !std::ptr::eq(lut, &vol.lut_buffer);
-        let stand_in = vol.reads_stand_in();
-        let mut bound = self.bound.lock().unwrap_or_else(|e| e.into_inner());
+        let (tw, th) = (tile.target.width(), tile.target.height());
+        let lut = vol.lut_buffer_for(tile.frame.settings.step_voxels);
         validated(device, "RayCaster::encode_tile", || {
-            let slot = match bound.iter().position(|b| b.target == *target) {
-                Some(i) => i,
-                None => {
-                    if bound.len() >= BOUND_TARGETS {
-                        bound.remove(0);
-                    }
-                    let uniform = |label, bytes: &[u8]| uniform_buffer(device, queue, label, bytes);
-                    let params_buffer = uniform("RayCaster::params", bytemuck::bytes_of(&params));
-                    let extras = uniform(
-                        "RayCaster::extras",
-                        bytemuck::bytes_of(&vol.extras.params()),
-                    );
-                    let [group, group_2, group_3] = self.bind_groups(
-                        (device, queue),
-                        (vol, lut),
-                        target,
-                        &params_buffer,
-                        &extras,
-                        layer,
-                    );
-                    bound.push(Bound {
-                        target: target.clone(),
-                        params: params_buffer,
-                        extras,
-                        generation: vol.generation,
-                        step_lut,
-                        stand_in,
-                        layer: layer_views.clone(),
-                        group,
-                        group_2,
-                        group_3,
-                    });
-                    bound.len() - 1
-                }
-            };
-            let b = &mut bound[slot];
-            if b.generation != vol.generation
-                || b.layer != layer_views
-                || b.step_lut != step_lut
-                || b.stand_in != stand_in
-            {
-                let [group, group_2, group_3] = self.bind_groups(
-                    (device, queue),
-                    (vol, lut),
-                    target,
-                    &b.params,
-                    &b.extras,
-                    layer,
-                );
-                b.group = group;
-                b.group_2 = group_2;
-                b.group_3 = group_3;
-                b.generation = vol.generation;
-                b.step_lut = step_lut;
-                b.stand_in = stand_in;
-                b.layer = layer_views.clone();
-            }
-            queue.write_buffer(&b.params, 0, bytemuck::bytes_of(&params));
-            queue.write_buffer(&b.extras, 0, bytemuck::bytes_of(&vol.extras.params()));
+            let uniform = |label, bytes: &[u8]| uniform_buffer(device, queue, label, bytes);
+            let params = uniform("RayCaster::params", bytemuck::bytes_of(&params));
+            let extras = uniform(
+                "RayCaster::extras",
+                bytemuck::bytes_of(&vol.extras.params()),
+            );
+            let [group, group_2, group_3] =
+                self.bind_groups(gpu, (vol, lut), tile.target, (&params, &extras), layer);
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("RayCaster::encode_tile"),
                 timestamp_writes: None,
             });
             pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &b.group, &[]);
+            pass.set_bind_group(0, &group, &[]);
             pass.set_bind_group(1, clip_group, &[]);
-            pass.set_bind_group(2, &b.group_2, &[]);
-            pass.set_bind_group(VOLUME_GROUP, &b.group_3, &[]);
+            pass.set_bind_group(2, &group_2, &[]);
+            pass.set_bind_group(VOLUME_GROUP, &group_3, &[]);
             pass.dispatch_workgroups(tw.div_ceil(8), th.div_ceil(8), 1);
         })
     }
@@ -327,13 +240,13 @@ impl RayCaster {
     /// (extras) and 3 (the volume and its LUT, `volume.wgsl`).
     fn bind_groups(
         &self,
-        (device, queue): (&wgpu::Device, &wgpu::Queue),
+        gpu: &Gpu,
         (vol, lut): (&RenderVolume, &wgpu::Buffer),
         target: &wgpu::Texture,
-        params: &wgpu::Buffer,
-        extras: &wgpu::Buffer,
+        (params, extras): (&wgpu::Buffer, &wgpu::Buffer),
         layer: Option<&super::surface::SurfaceLayer>,
     ) -> [wgpu::BindGroup; 3] {
+        let device = &gpu.device;
         let target_view = target.create_view(&Default::default());
         let group = bind_group(
             device,
@@ -364,7 +277,7 @@ impl RayCaster {
         );
         let map = VolumeMap::new(&vol.texels, &vol.lut);
         let reading = Reading::sampled(vol.volume_view(), &self.sampler, map, lut);
-        let group_3 = reading.bind_group((device, queue), "RayCaster", &self.volume_layout);
+        let group_3 = reading.bind_group((device, &gpu.queue), "RayCaster", &self.volume_layout);
         [group, group_2, group_3]
     }
 
@@ -447,12 +360,14 @@ impl RayCaster {
                 &vol.texels,
             )?),
         };
+        // Tile textures by size, for this frame.
+        let mut targets = Vec::new();
         let mut y0 = ry0;
         while y0 < ry1 {
             let mut x0 = rx0;
             while x0 < rx1 {
                 let (tw, th) = ((rx1 - x0).min(TILE), (ry1 - y0).min(TILE));
-                let target = self.tile_target(device, tw, th)?;
+                let target = tile_target(&mut targets, device, (tw, th))?;
                 if !changed.is_empty() {
                     // The pixels no ray meeting a change will overwrite.
                     gpu.queue.write_texture(
@@ -473,15 +388,15 @@ impl RayCaster {
                 });
                 let variant =
                     variant.unwrap_or_else(|| Variant::of(vol, frame, clip, layer.is_some()));
-                self.encode(
-                    (device, &gpu.queue),
-                    (vol, variant),
+                let tile = TileDraw {
+                    volume: vol,
                     frame,
                     clip,
-                    layer.as_ref(),
-                    (&target, (x0, y0), changed),
-                    &mut encoder,
-                )?;
+                    target: &target,
+                    origin: (x0, y0),
+                    changed,
+                };
+                self.encode(gpu, tile, variant, layer.as_ref(), &mut encoder)?;
                 copy_texture_out(&mut encoder, &target, &readback, row, [tw, th, 1]);
                 gpu.queue.submit([encoder.finish()]);
                 let bytes = read_buffer(device, &readback, "RayCaster::readback")?;
@@ -498,36 +413,31 @@ impl RayCaster {
         }
         Ok(image)
     }
+}
 
-    /// A tile texture of `tw × th` for [`Self::render`], kept for the next frame of the
-    /// same size (so are its bindings).
-    fn tile_target(
-        &self,
-        device: &wgpu::Device,
-        tw: u32,
-        th: u32,
-    ) -> Result<wgpu::Texture, GpuError> {
-        let mut tiles = self.tiles.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(t) = tiles.iter().find(|t| (t.width(), t.height()) == (tw, th)) {
-            return Ok(t.clone());
-        }
-        let t = validated(device, "RayCaster::tile", || {
-            crate::gpu::image_texture(
-                device,
-                "RayCaster::tile",
-                (tw, th),
-                wgpu::TextureFormat::Rgba8Unorm,
-                wgpu::TextureUsages::STORAGE_BINDING
-                    | wgpu::TextureUsages::COPY_SRC
-                    | wgpu::TextureUsages::COPY_DST,
-            )
-        })?;
-        if tiles.len() >= BOUND_TARGETS - 1 {
-            tiles.remove(0);
-        }
-        tiles.push(t.clone());
-        Ok(t)
+/// A tile texture of `size` for [`RayCaster::render`] from `targets`, made and kept
+/// there if it has none of that size.
+fn tile_target(
+    targets: &mut Vec<wgpu::Texture>,
+    device: &wgpu::Device,
+    size: (u32, u32),
+) -> Result<wgpu::Texture, GpuError> {
+    if let Some(t) = targets.iter().find(|t| (t.width(), t.height()) == size) {
+        return Ok(t.clone());
     }
+    let t = validated(device, "RayCaster::tile", || {
+        crate::gpu::image_texture(
+            device,
+            "RayCaster::tile",
+            size,
+            wgpu::TextureFormat::Rgba8Unorm,
+            wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::COPY_SRC
+                | wgpu::TextureUsages::COPY_DST,
+        )
+    })?;
+    targets.push(t.clone());
+    Ok(t)
 }
 
 impl crate::gpu::Stage for RayCaster {

@@ -2,15 +2,14 @@
 //! stage reads (density, occupancy, block ranges, baked table) with what the ray caster
 //! reads beside it: the AO volume (or its stand-in), opacity modulation, the gradient
 //! volume and what bind group 2 reads (live positional AO, the light volume, surfaces).
-//! The ray caster (`render::gpu`) binds them; [`RenderVolume::generation`] tells it when
-//! its cached bind groups are stale.
+//! The ray caster (`render::gpu`) binds them, in bind groups built for each tile.
 
 use super::extras::GpuLight;
 use super::gradient::GradientVolume;
 use super::shadow::LightVolume;
 use crate::gpu::{Gpu, GpuError, validated};
 use crate::texels::VolumeTexels;
-use crate::texels::gpu::{GpuVolume, filled, next_generation};
+use crate::texels::gpu::{GpuVolume, filled};
 use crate::tf::TransferFunction;
 use glam::Vec3;
 
@@ -36,9 +35,6 @@ pub struct RenderVolume {
     /// Live positional AO, the light volume and surfaces (bind group 2), see
     /// `render::extras`.
     pub extras: super::extras::RayExtras,
-    /// Changes whenever a resource the ray caster binds is replaced, so it knows when
-    /// its cached bind groups are stale.
-    pub(super) generation: u64,
 }
 
 impl std::ops::Deref for RenderVolume {
@@ -103,7 +99,6 @@ impl RenderVolume {
             modulation_bound: false,
             gradient: None,
             extras: Default::default(),
-            generation: next_generation(),
         }
     }
 
@@ -120,7 +115,6 @@ impl RenderVolume {
             return Ok(on);
         }
         self.gradient = None;
-        self.generation = next_generation();
         if on {
             let v = &self.volume;
             self.gradient = GradientVolume::new(gpu, v.volume_view(), &v.texels, v.ranges())?;
@@ -145,7 +139,6 @@ impl RenderVolume {
         if !self.volume.set_transfer_function(gpu, tf, step_voxels) {
             return;
         }
-        self.generation = next_generation();
         if let Some(live) = &mut self.extras.live_vao {
             live.set_transfer_function(gpu, &self.volume.texels, tf);
         }
@@ -168,7 +161,6 @@ impl RenderVolume {
     /// Stored as R32Float (filtered with `FLOAT32_FILTERABLE`), the format CAO's compute
     /// passes write, so a precomputed and a per-frame AO volume shade alike.
     pub fn set_ambient_occlusion(&mut self, gpu: &Gpu, values: &[f32]) {
-        self.generation = next_generation();
         let format = wgpu::TextureFormat::R32Float;
         let bytes = bytemuck::cast_slice(values);
         self.ao_view = self.per_voxel(gpu, "GpuVolume::ambient_occlusion", format, bytes);
@@ -179,7 +171,6 @@ impl RenderVolume {
     /// Uses an AO volume already on the GPU (R32Float, the volume's dims), such as
     /// CAO's `V_AO`.
     pub fn set_ambient_occlusion_view(&mut self, view: &wgpu::TextureView) {
-        self.generation = next_generation();
         self.ao_view = view.clone();
         self.ao_bound = true;
         self.ao_stand_in = None;
@@ -214,7 +205,6 @@ impl RenderVolume {
     /// Back to no ambient occlusion (A = 1 everywhere), as right after upload. The viewer
     /// shows this while a new AO volume is computed for a changed transfer function.
     pub fn clear_ambient_occlusion(&mut self, gpu: &Gpu) {
-        self.generation = next_generation();
         self.ao_view = no_ambient_occlusion(&gpu.device, &gpu.queue);
         self.ao_bound = false;
         self.ao_stand_in = None;
@@ -222,7 +212,6 @@ impl RenderVolume {
 
     /// Drops the opacity modulation (factor 1 everywhere).
     pub fn clear_opacity_modulation(&mut self, gpu: &Gpu) {
-        self.generation = next_generation();
         self.modulation_view = no_modulation(&gpu.device, &gpu.queue);
         self.modulation_bound = false;
     }
@@ -231,7 +220,6 @@ impl RenderVolume {
     /// variance modulation. Stored as R16Unorm like the AO volume; returns the values as
     /// the GPU will sample them (for the CPU twin).
     pub fn set_opacity_modulation(&mut self, gpu: &Gpu, values: &[f32]) -> Vec<f32> {
-        self.generation = next_generation();
         let quantised: Vec<u16> = values
             .iter()
             .map(|&a| (a.clamp(0.0, 1.0) * 65535.0).round() as u16)
@@ -267,7 +255,6 @@ impl RenderVolume {
         tf: &TransferFunction,
         settings: Option<&crate::ao::vao::VaoSettings>,
     ) -> Result<(), GpuError> {
-        self.generation = next_generation();
         self.extras.live_vao = match settings {
             Some(s) => Some(crate::ao::vao::VaoInputs::new(gpu, &self.texels, tf, s)?),
             None => None,
@@ -283,7 +270,6 @@ impl RenderVolume {
         gpu: &Gpu,
         light: Option<(&[f32], Vec3)>,
     ) -> Result<Option<LightVolume>, GpuError> {
-        self.generation = next_generation();
         let Some((values, direction)) = light else {
             self.extras.light = None;
             return Ok(None);

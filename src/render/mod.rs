@@ -327,9 +327,32 @@ pub struct Frame {
     pub height: u32,
 }
 
+/// What a tile's uniforms hold besides its [`Frame`], the texels and the LUT.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct TileAt<'a> {
+    /// Where the tile starts in the frame, in pixels.
+    pub origin: (u32, u32),
+    /// The gradient volume's scale `M` ([`gradient::GradientVolume::scale`]), 0 when
+    /// none is bound (the CPU twin takes six samples either way).
+    pub gradient_scale: f32,
+    /// Balls holding every change since the image the target holds ([`reuse`]): only
+    /// rays meeting one are cast. Empty: every pixel.
+    pub changed: &'a [reuse::Ball],
+}
+
 impl Frame {
-    /// The uniforms for a tile of this frame starting at `(x0, y0)`.
+    /// The uniforms of a whole frame: every pixel cast, no gradient volume.
     pub fn params(&self, texels: &VolumeTexels, lut: &Lut, x0: u32, y0: u32) -> RaycastParams {
+        let at = TileAt {
+            origin: (x0, y0),
+            ..Default::default()
+        };
+        self.uniforms(texels, lut, at)
+    }
+
+    /// The uniforms of the tile `at` of this frame: the one place they are assembled.
+    pub fn uniforms(&self, texels: &VolumeTexels, lut: &Lut, at: TileAt) -> RaycastParams {
+        let (x0, y0) = at.origin;
         let extent = texels.extent();
         let half = glam::Vec3::from(extent) * 0.5;
         let radius = half.length();
@@ -342,7 +365,7 @@ impl Frame {
         let s = &self.settings;
         let grid: [usize; 3] = std::array::from_fn(|i| texels.dims[i].div_ceil(BLOCK));
         let ao_offset = s.ao_offset.clamp(0.0, AO_READ_REACH as f32);
-        RaycastParams {
+        let mut params = RaycastParams {
             inv_view_proj: inv.to_cols_array_2d(),
             box_half: [half.x, half.y, half.z, 0.0],
             background: s.background,
@@ -377,7 +400,10 @@ impl Frame {
             ],
             reuse: [0; 4],
             balls: [[0.0; 4]; MAX_BALLS],
-        }
+        };
+        params.box_half[3] = at.gradient_scale;
+        reuse::set_balls(&mut params, at.changed);
+        params
     }
 }
 

@@ -34,9 +34,9 @@ pub struct GpuVolume {
     tf_generation: u64,
 }
 
-/// A fresh generation number, unique across volumes (what bind groups built from a
-/// volume's resources compare to know they are stale).
-pub fn next_generation() -> u64 {
+/// A fresh generation number, unique across volumes (what a table baked for another
+/// step compares to know it is stale).
+fn next_generation() -> u64 {
     static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
     NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }

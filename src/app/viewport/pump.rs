@@ -21,6 +21,7 @@
 //! its transfer function or AO during a ray cast starts the strips again.
 
 use super::*;
+use crate::render::gpu::TileDraw;
 use crate::render::reuse::screen_rect;
 
 /// Pass label of strips that cast only the pixels near a change (their times say nothing
@@ -656,15 +657,15 @@ impl ViewportGpu {
                             extent,
                         );
                     }
-                    ray_caster.encode_tile(
-                        (&gpu.device, &gpu.queue),
-                        vol,
-                        &w.key.frame,
+                    let tile = TileDraw {
+                        volume: vol,
+                        frame: &w.key.frame,
                         clip,
-                        (strip, (tx, ty)),
-                        &w.changed,
-                        &mut encoder,
-                    )?;
+                        target: strip,
+                        origin: (tx, ty),
+                        changed: &w.changed,
+                    };
+                    ray_caster.encode_tile(gpu, tile, &mut encoder)?;
                     encoder.copy_texture_to_texture(
                         strip.as_image_copy(),
                         wgpu::TexelCopyTextureInfo {
