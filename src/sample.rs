@@ -54,7 +54,18 @@ pub struct VolumeSampler<'a> {
     pub table: &'a [[f32; 4]],
 }
 
-impl VolumeSampler<'_> {
+impl<'a> VolumeSampler<'a> {
+    /// The density of `texels` (`values`, its normalised texels) read through `lut`, as
+    /// the stages that bind the volume itself read it.
+    pub fn density(values: &'a [f32], texels: &VolumeTexels, lut: &'a Lut) -> Self {
+        VolumeSampler {
+            values,
+            dims: texels.dims,
+            map: VolumeMap::new(texels, lut),
+            table: &lut.rgba,
+        }
+    }
+
     /// `value_at`: the texel value at `uvw`, trilinear, clamped at the edges.
     pub fn value_at(&self, uvw: Vec3) -> f32 {
         trilinear(self.values, self.dims, uvw)

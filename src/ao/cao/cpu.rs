@@ -6,7 +6,6 @@ use super::{CaoMode, msaa_offsets};
 use crate::clip::cpu::ClipMapsCpu;
 use crate::sample::{VolumeSampler, trilinear};
 use crate::texels::VolumeTexels;
-use crate::texels::gpu_data::VolumeMap;
 use crate::tf::Lut;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -20,12 +19,7 @@ pub fn clip_volume_cpu(
 ) -> (Vec<f32>, Vec<f32>) {
     let [nx, ny, nz] = texels.dims;
     let norm = texels.norm_values();
-    let volume = VolumeSampler {
-        values: &norm,
-        dims: texels.dims,
-        map: VolumeMap::new(texels, lut),
-        table: &lut.rgba,
-    };
+    let volume = VolumeSampler::density(&norm, texels, lut);
     let spacing = Vec3::from(texels.spacing);
     let half = Vec3::from(texels.extent()) * 0.5;
     let offsets = msaa_offsets(msaa.max(1));
