@@ -465,7 +465,9 @@ impl CaoGpu {
             clip: b.list(|i| b.used(i)),
             lao: b.list(|i| b.readable[i] != 0),
         };
-        cao.run(gpu, &lists, CaoMode::Full, progress)?;
+        cao.write_lists(gpu, &lists);
+        cao.step_iv(gpu, &lists, CaoMode::Full)?;
+        cao.step_v(gpu, &lists, false, progress)?;
         cao.last = (lists, CaoMode::Full);
         validated(device, "Cao::v_pao", || {
             let mut encoder = device.create_command_encoder(&Default::default());
@@ -532,19 +534,6 @@ impl CaoGpu {
             lao_seconds: seconds[1],
             clip_errors: Vec::new(),
         }
-    }
-
-    /// Steps IV and V over `lists` without timing (the precomputation).
-    fn run(
-        &self,
-        gpu: &Gpu,
-        lists: &Lists,
-        mode: CaoMode,
-        progress: &dyn Fn(usize, usize),
-    ) -> Result<(), GpuError> {
-        self.write_lists(gpu, lists);
-        self.step_iv(gpu, lists, mode)?;
-        self.step_v(gpu, lists, false, progress)
     }
 
     fn write_lists(&self, gpu: &Gpu, lists: &Lists) {
