@@ -44,16 +44,6 @@ pub fn trilinear(values: &[f32], dims: [usize; 3], uvw: Vec3) -> f32 {
     lerp(lerp(c00, c10, f.y), lerp(c01, c11, f.y), f.z)
 }
 
-/// A table entry at fractional index `t = norm · map[0] + map[1]`, clamped to the table
-/// and linearly interpolated between neighbours, as the shaders' `lut_alpha` does
-/// (`map[2]` is the last index).
-pub fn lut_lerp(table: &[f32], map: [f32; 3], norm: f32) -> f32 {
-    let t = (norm * map[0] + map[1]).clamp(0.0, map[2]);
-    let i0 = t.floor() as usize;
-    let i1 = (i0 + 1).min(map[2] as usize);
-    table[i0] + (table[i1] - table[i0]) * (t - t.floor())
-}
-
 /// The CPU twin of `shaders/volume.wgsl`: texel values (x fastest) of a volume of `dims`,
 /// read through a [`VolumeMap`] and a table as the shaders' reader reads them.
 #[derive(Debug, Clone, Copy)]
@@ -64,10 +54,26 @@ pub struct VolumeSampler<'a> {
     pub table: &'a [[f32; 4]],
 }
 
-impl VolumeSampler<'_> {
+impl<'a> VolumeSampler<'a> {
+    /// The density of `texels` (`values`, its normalised texels) read through `lut`, as
+    /// the stages that bind the volume itself read it.
+    pub fn density(values: &'a [f32], texels: &VolumeTexels, lut: &'a Lut) -> Self {
+        VolumeSampler {
+            values,
+            dims: texels.dims,
+            map: VolumeMap::new(texels, lut),
+            table: &lut.rgba,
+        }
+    }
+
     /// `value_at`: the texel value at `uvw`, trilinear, clamped at the edges.
     pub fn value_at(&self, uvw: Vec3) -> f32 {
         trilinear(self.values, self.dims, uvw)
+    }
+
+    /// `value_of_voxel`: the texel value of voxel `k`, unfiltered; `k` inside the volume.
+    pub fn value_of_voxel(&self, k: [usize; 3]) -> f32 {
+        self.values[k[0] + self.dims[0] * (k[1] + self.dims[1] * k[2])]
     }
 
     /// `lut_index`: the fractional table index of `value`, clamped to the table.
@@ -104,11 +110,6 @@ impl VolumeSampler<'_> {
     pub fn data_value(&self, value: f32) -> f32 {
         value * self.map.value[0] + self.map.value[1]
     }
-}
-
-/// The alpha column of a baked table (what the compute passes upload).
-pub fn alpha_column(lut: &Lut) -> Vec<f32> {
-    lut.rgba.iter().map(|e| e[3]).collect()
 }
 
 /// Distance between samples along an LAO ray (`ao::lao`, `ao::cao`).

@@ -5,7 +5,11 @@
 //! An import is any `crate::…`, `super::…` or `self::…` path, in a `use` or inline, and
 //! a `use` of a child module; it points at the file that defines the longest prefix of
 //! the path. Re-exports (`pub use`, `pub(crate) use`) are a module's facade, not a
-//! dependency of its code, and are left out; so is `#[cfg(test)]` code.
+//! dependency of its code, and are left out, except where the file's own code uses a
+//! name it re-exports (`pub use orient::Orientation;` and then `Orientation::…` in the
+//! same file imports `orient`); so is `#[cfg(test)]` code. `$crate::…` paths in a
+//! `macro_rules!` body are left out too: they are code of the files that expand the
+//! macro, not of the file that defines it.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -122,9 +126,11 @@ fn inline_paths(code: &str, children: &BTreeSet<String>) -> Vec<String> {
             let i = from + i;
             from = i + start.len();
             // Not the tail of a longer name or path (`crate::render::reuse::` is found
-            // as a whole from `crate::`).
+            // as a whole from `crate::`), and not `$crate::` in a macro body: the
+            // expansion's path, an import of the file the macro expands in.
             if i > 0
-                && (bytes[i - 1].is_ascii_alphanumeric() || matches!(bytes[i - 1], b'_' | b':'))
+                && (bytes[i - 1].is_ascii_alphanumeric()
+                    || matches!(bytes[i - 1], b'_' | b':' | b'$'))
             {
                 continue;
             }
@@ -135,6 +141,32 @@ fn inline_paths(code: &str, children: &BTreeSet<String>) -> Vec<String> {
         }
     }
     out
+}
+
+/// The re-exported paths of `reexports` whose names `code` uses by themselves (not
+/// as a field, a method or the tail of a path): `orient::Orientation` when `code`
+/// holds `Orientation::from_spacing`.
+fn reexports_used(reexports: &[String], code: &str) -> Vec<String> {
+    let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    let used = |name: &str| {
+        code.match_indices(name).any(|(i, _)| {
+            let before = code[..i].chars().next_back();
+            let after = code[i + name.len()..].chars().next();
+            !before.is_some_and(|c| ident(c) || c == ':' || c == '.') && !after.is_some_and(ident)
+        })
+    };
+    reexports
+        .iter()
+        .filter(|p| {
+            let name = match p.split_once(" as ") {
+                Some((_, alias)) => alias,
+                None => p.rsplit("::").next().unwrap_or(p),
+            };
+            let name = name.trim();
+            !matches!(name, "*" | "self" | "_" | "") && used(name)
+        })
+        .cloned()
+        .collect()
 }
 
 struct Crate {
@@ -204,7 +236,7 @@ fn import_graph() -> BTreeMap<PathBuf, BTreeSet<PathBuf>> {
                 l.strip_prefix("mod ")?.strip_suffix(';').map(str::to_owned)
             })
             .collect();
-        let (mut paths, mut rest) = (Vec::new(), String::new());
+        let (mut paths, mut reexports, mut rest) = (Vec::new(), Vec::new(), String::new());
         let mut lines = code.lines();
         while let Some(line) = lines.next() {
             let t = line.trim_start();
@@ -223,16 +255,20 @@ fn import_graph() -> BTreeMap<PathBuf, BTreeSet<PathBuf>> {
                     None => break,
                 }
             }
-            if !reexport {
-                let tree = item
-                    .trim_start_matches("use ")
-                    .split(';')
-                    .next()
-                    .unwrap_or("");
+            let tree = item
+                .split_once("use ")
+                .map_or("", |(_, t)| t)
+                .split(';')
+                .next()
+                .unwrap_or("");
+            if reexport {
+                reexports.extend(expand(tree));
+            } else {
                 paths.extend(expand(tree));
             }
         }
         paths.extend(inline_paths(&rest, &children));
+        paths.extend(reexports_used(&reexports, &rest));
         let deps: BTreeSet<PathBuf> = paths
             .iter()
             .filter_map(|p| {
@@ -354,6 +390,15 @@ fn the_cycle_checker_finds_a_cycle() {
         inline_paths(code, &children),
         ["crate::render::reuse::X", "reuse::MAX_BALLS"]
     );
+    // A re-exported name the file uses itself is an import; one it only hands on, or
+    // whose name appears only as a method, a field or a longer path, is not.
+    let reexports = ["orient::Orientation", "raw::{Endian}", "stats::Stats as S"]
+        .iter()
+        .flat_map(|t| expand(t))
+        .collect::<Vec<_>>();
+    let code = "let o = Orientation::new(); s.Endian; other::S; $crate::volume::X";
+    assert_eq!(reexports_used(&reexports, code), ["orient::Orientation"]);
+    assert!(inline_paths(code, &BTreeSet::new()).is_empty());
 }
 
 #[test]

@@ -168,12 +168,7 @@ pub fn lao_cpu(
 ) -> Vec<f32> {
     let p = params(texels, rays, samples, bricks);
     let norm = texels.norm_values();
-    let volume = VolumeSampler {
-        values: &norm,
-        dims: texels.dims,
-        map: VolumeMap::new(texels, lut),
-        table: &lut.rgba,
-    };
+    let volume = VolumeSampler::density(&norm, texels, lut);
     let packed = rays.packed();
     let dims = texels.dims;
     let list = bricks.list(|i| bricks.readable[i] != 0);

@@ -23,9 +23,10 @@ use crate::gpu::{
     uniform_buffer, validated,
 };
 use crate::sample::{
-    bake_lut, f16_lut_map, f16_map, mip_chain, per_voxel, trilinear, voxel_centre,
+    VolumeSampler, bake_lut, f16_lut_map, f16_map, mip_chain, per_voxel, voxel_centre,
 };
 use crate::texels::VolumeTexels;
+use crate::texels::gpu_data::VolumeMap;
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
 
@@ -126,13 +127,15 @@ pub fn params(texels: &VolumeTexels, lut: &Lut, s: &VaoSettings) -> VaoParams {
 #[derive(Debug, Clone)]
 pub struct PositionalAo {
     pub params: VaoParams,
-    /// Opacity per voxel length, one per LUT entry.
-    pub alpha: Vec<f32>,
     /// Ray directions with their jitter (w).
     pub rays: Vec<[f32; 4]>,
     /// The level the function samples (texel values as f16, x fastest) and its dims.
     level: Vec<f32>,
     level_dims: [usize; 3],
+    /// How the level's values map to the table (`params.lut_map`'s a, b and last entry).
+    map: VolumeMap,
+    /// The opacity table (opacity per voxel length in alpha, one entry per LUT entry).
+    table: Vec<[f32; 4]>,
     /// Clip shapes' maps: clipped space is empty (twin of `vao_clipped`).
     pub clip: Option<crate::clip::cpu::ClipMapsCpu>,
 }
@@ -150,11 +153,22 @@ impl PositionalAo {
             .collect();
         PositionalAo {
             params,
-            alpha: lut.rgba.iter().map(|e| e[3]).collect(),
             rays: rays(s.directions),
             level,
             level_dims,
+            map: VolumeMap::with_lut_map(params.lut_map[0], params.lut_map[1], &lut),
+            table: lut.rgba,
             clip: None,
+        }
+    }
+
+    /// The level read through the opacity table, as [`VolumeSampler`] reads a volume.
+    fn volume(&self) -> VolumeSampler<'_> {
+        VolumeSampler {
+            values: &self.level,
+            dims: self.level_dims,
+            map: self.map,
+            table: &self.table,
         }
     }
 
@@ -171,17 +185,14 @@ impl PositionalAo {
             .0
     }
 
+    /// `vao_value`: the texel value at `uvw` from the level.
     fn value(&self, uvw: Vec3) -> f32 {
-        trilinear(&self.level, self.level_dims, uvw)
+        self.volume().value_at(uvw)
     }
 
+    /// `vao_opacity`: opacity per voxel length v_s (Eq. 6's V).
     fn opacity(&self, norm: f32) -> f32 {
-        let p = &self.params;
-        let t = (norm * p.lut_map[0] + p.lut_map[1]).clamp(0.0, p.lut_map[2]);
-        let i0 = t.floor() as usize;
-        let i1 = (i0 + 1).min(p.lut_map[2] as usize);
-        let f = t - t.floor();
-        self.alpha[i0] + (self.alpha[i1] - self.alpha[i0]) * f
+        self.volume().opacity(norm)
     }
 
     /// γ(x, ω) of one ray (Eq. 7, or §5.2.1 in isosurface mode); `x` in texture

@@ -50,7 +50,7 @@ impl VolumeMap {
         (lut.rgba.len().max(2) - 1) as f32
     }
 
-    /// `(scale, offset, last)` of the table map, as [`crate::sample::lut_lerp`] takes it.
+    /// `(scale, offset, last)` of the table map, as [`crate::sample::VolumeSampler`] reads it.
     pub fn lut_map(&self) -> [f32; 3] {
         [self.lut[0], self.lut[1], self.lut[2]]
     }

@@ -204,3 +204,14 @@ impl VoxelData {
         self.voxel_type() == other.voxel_type() && self.as_bytes() == other.as_bytes()
     }
 }
+
+macro_rules! impl_from_vec {
+    ($($t:ty => $variant:ident),*) => {
+        $(impl From<Vec<$t>> for VoxelData {
+            fn from(v: Vec<$t>) -> Self {
+                VoxelData::$variant(v)
+            }
+        })*
+    };
+}
+impl_from_vec!(u8 => U8, i8 => I8, u16 => U16, i16 => I16, u32 => U32, i32 => I32, f32 => F32, f64 => F64);

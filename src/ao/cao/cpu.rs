@@ -4,7 +4,7 @@ use super::super::lao::{Rays, STEP_MM, ray_sum};
 use super::super::sparse::Bricks;
 use super::{CaoMode, msaa_offsets};
 use crate::clip::cpu::ClipMapsCpu;
-use crate::sample::trilinear;
+use crate::sample::{VolumeSampler, trilinear};
 use crate::texels::VolumeTexels;
 use crate::tf::Lut;
 use glam::Vec3;
@@ -19,26 +19,17 @@ pub fn clip_volume_cpu(
 ) -> (Vec<f32>, Vec<f32>) {
     let [nx, ny, nz] = texels.dims;
     let norm = texels.norm_values();
-    let (a, b) = texels.lut_map(lut);
-    let top = (lut.rgba.len().max(2) - 1) as f32;
+    let volume = VolumeSampler::density(&norm, texels, lut);
     let spacing = Vec3::from(texels.spacing);
     let half = Vec3::from(texels.extent()) * 0.5;
     let offsets = msaa_offsets(msaa.max(1));
-    let opacity = |n: f32| {
-        let t = (n * a + b).clamp(0.0, top);
-        let i0 = t.floor() as usize;
-        let i1 = (i0 + 1).min(top as usize);
-        let f = t - t.floor();
-        lut.rgba[i0][3] + (lut.rgba[i1][3] - lut.rgba[i0][3]) * f
-    };
+    // TF_o: the transfer function's opacity of the voxel itself (`voxel_opacity`).
+    let voxel_opacity = |k: [usize; 3]| volume.opacity(volume.value_of_voxel(k));
     let per_voxel: Vec<(f32, f32)> = (0..nx * ny * nz)
         .into_par_iter()
         .map(|i| {
-            let v = Vec3::new(
-                (i % nx) as f32,
-                ((i / nx) % ny) as f32,
-                (i / (nx * ny)) as f32,
-            );
+            let k = crate::volume::voxel_of(i, texels.dims);
+            let v = Vec3::new(k[0] as f32, k[1] as f32, k[2] as f32);
             let at = |o: Vec3| (v + Vec3::splat(0.5) + o) * spacing - half;
             let (mut visible, mut dilated) = (0u32, 0u32);
             for k in 0..9u32 {
@@ -55,14 +46,14 @@ pub fn clip_volume_cpu(
             }
             let mut o = 0.0;
             if visible == 9 {
-                o = opacity(norm[i]);
+                o = voxel_opacity(k);
             } else if visible > 0 {
                 for off in offsets.iter().take(msaa as usize) {
                     let (vis, aff) = maps.classify(at(*off));
                     visible += u32::from(vis);
                     dilated += u32::from(aff);
                 }
-                o = visible as f32 / (msaa + 9) as f32 * opacity(norm[i]);
+                o = visible as f32 / (msaa + 9) as f32 * voxel_opacity(k);
             }
             let m = if dilated == 0 {
                 1.0

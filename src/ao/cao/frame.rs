@@ -1,4 +1,6 @@
-//! One CAO frame submitted in slices without waiting: the viewer's per-frame update.
+//! One CAO frame: what it is for ([`Pose`]) and its work, waited for in one call
+//! ([`CaoGpu::update`]) or submitted in slices without waiting (the viewer's per-frame
+//! update). The volumes and passes it runs are the long-lived [`CaoGpu`]'s.
 //!
 //! [`CaoGpu::begin`] re-poses the clip maps and writes the brick lists; each
 //! [`CaoGpu::advance`] submits the chunks of step IV, then of step V, that fit in the
@@ -11,9 +13,13 @@
 //! voxel), so the viewer's `V_AO` is bit for bit the one `volao render` computes.
 
 use super::{CaoGpu, CaoMode, CaoStats, Lists};
+use crate::clip::ClipShape;
+use crate::clip::gpu::{ClipUpdate, MapRequest};
 use crate::gpu::dispatch::{BrickDispatch, ChunkParams, Pass};
 use crate::gpu::pacer::{Pacer, Stamp};
 use crate::gpu::{Gpu, GpuError, readback_buffer, validated};
+use crate::texels::VolumeTexels;
+use glam::Vec3;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -23,6 +29,17 @@ const FIRST_RATE: f64 = 1e8;
 
 /// What an asynchronous map of the counters returned.
 type Mapped = Arc<Mutex<Option<Result<(), String>>>>;
+
+/// What one CAO frame is for: the clip shapes, their maps' resolution (pixels) and
+/// reach (mm: normally [`CaoGpu::reach_mm`]; tests shrink it to show exactness depends
+/// on it), and which voxels step V ray casts.
+#[derive(Debug, Clone, Copy)]
+pub struct Pose<'a> {
+    pub shapes: &'a [ClipShape],
+    pub resolution: u32,
+    pub reach_mm: f32,
+    pub mode: CaoMode,
+}
 
 /// One frame of CAO being submitted piece by piece.
 #[derive(Debug)]
@@ -226,6 +243,99 @@ fn submit_paced<P: ChunkParams>(
 }
 
 impl CaoGpu {
+    /// One frame: update the clip maps for `shapes` (moved shapes only change matrices),
+    /// clip (step IV) and compute `V_AO` (step V), waiting for each. `reach_mm` is
+    /// normally [`Self::reach_mm`]; tests shrink it to show exactness depends on it. The
+    /// viewer submits the same work in slices without waiting ([`Self::begin`],
+    /// [`Self::advance`]).
+    pub fn update(
+        &mut self,
+        gpu: &Gpu,
+        texels: &VolumeTexels,
+        pose: Pose<'_>,
+    ) -> Result<CaoStats, GpuError> {
+        let t0 = Instant::now();
+        let mode = pose.mode;
+        let frame = self.begin(gpu, texels, pose)?;
+        crate::gpu::wait(&gpu.device, "Cao::maps", crate::gpu::WAIT)?;
+        let t1 = Instant::now();
+        let mut stats = self.run_timed(gpu, &frame.lists, mode)?;
+        stats.maps_seconds = (t1 - t0).as_secs_f64();
+        stats.clip_errors = frame.clip_errors;
+        Ok(stats)
+    }
+
+    /// Starts one frame: re-poses the clip maps for `shapes` (a new geometry's maps are
+    /// rendered and submitted here), picks the bricks steps IV and V visit and writes
+    /// their lists. Nothing is waited for.
+    pub fn begin(
+        &mut self,
+        gpu: &Gpu,
+        texels: &VolumeTexels,
+        pose: Pose<'_>,
+    ) -> Result<CaoFrame, GpuError> {
+        let Pose {
+            shapes,
+            resolution,
+            reach_mm,
+            mode,
+        } = pose;
+        let request = MapRequest {
+            shapes,
+            volume_radius: Vec3::from(texels.extent()).length() * 0.5,
+            reach_mm,
+            resolution,
+        };
+        let ClipUpdate { errors, .. } = self.clip.update(gpu, request)?;
+        let b = &self.bricks;
+        let cameras = self.clip.cameras();
+        let near = b.near(texels.dims, texels.spacing, &self.clip.uniforms, &cameras);
+        let touched: Vec<bool> = near
+            .iter()
+            .zip(&self.was_near)
+            .map(|(a, b)| *a || *b)
+            .collect();
+        // Step IV marks voxels for step V only in bricks a change can reach; elsewhere
+        // it copies V_PAO (and writes 1 where it clips), so step V skips them.
+        let reached = match mode {
+            CaoMode::Selective => b.reached(
+                texels.dims,
+                texels.spacing,
+                &self.clip.uniforms,
+                &cameras,
+                reach_mm,
+            ),
+            CaoMode::Full => vec![true; b.count()],
+        };
+        let lists = Lists {
+            clip: b.list_flagged(|i| touched[i] && b.used(i), |i| reached[i]),
+            lao: match mode {
+                CaoMode::Selective => {
+                    b.list_flagged(|i| touched[i] && reached[i] && b.readable[i] != 0, |_| true)
+                }
+                CaoMode::Full => b.list_flagged(|i| b.readable[i] != 0, |i| touched[i]),
+            },
+        };
+        self.was_near = near;
+        self.cut_balls = match mode {
+            CaoMode::Selective => {
+                b.cut_balls(&self.clip.uniforms, &cameras, self.ray_test_margin_mm)
+            }
+            CaoMode::Full => None,
+        };
+        let listing = self.lists_voxels(mode);
+        if listing {
+            self.reserve_list(gpu, &lists)?;
+        }
+        self.write_lists(gpu, &lists);
+        self.last = (lists.clone(), mode);
+        Ok(CaoFrame::new(
+            lists,
+            (mode, listing),
+            errors.iter().map(|e| e.to_string()).collect(),
+        ))
+    }
+
     /// Submits what fits of `frame`'s work in the pacer's slice (at least one chunk while
     /// any of the slice is left). Returns true once all of it is submitted.
     pub fn advance(

@@ -29,8 +29,7 @@
 
 use super::lao::{Rays, STEP_MM, lao_lut};
 use super::sparse::{Bricks, MAX_CUT_BALLS, RAY_TEST_MARGIN, VoxelTest};
-use crate::clip::ClipShape;
-use crate::clip::gpu::{ClipMaps, ClipUpdate, MapRequest};
+use crate::clip::gpu::{ClipMaps, MapRequest};
 use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
 use crate::gpu::{
     Gpu, GpuError, read_buffer, readback_buffer, storage_buffer, uniform_group, validated,
@@ -45,7 +44,7 @@ use std::time::Instant;
 
 pub use super::settings::DEFAULT_MSAA;
 pub use cpu::{clip_volume_cpu, lao_on_opacity_cpu};
-pub use frame::CaoFrame;
+pub use frame::{CaoFrame, Pose};
 pub use pipelines::CaoPipelines;
 pub use voxel_list::MAX_LIST_BYTES_PER_VOXEL;
 
@@ -190,17 +189,6 @@ pub struct CaoStats {
     /// Step V ray cast over a list of the voxels to ray cast (`listed`) rather than
     /// over bricks.
     pub listed: bool,
-}
-
-/// What one CAO frame is for: the clip shapes, their maps' resolution (pixels) and
-/// reach (mm: normally [`CaoGpu::reach_mm`]; tests shrink it to show exactness depends
-/// on it), and which voxels step V ray casts.
-#[derive(Debug, Clone, Copy)]
-pub struct Pose<'a> {
-    pub shapes: &'a [ClipShape],
-    pub resolution: u32,
-    pub reach_mm: f32,
-    pub mode: CaoMode,
 }
 
 impl CaoStats {
@@ -483,7 +471,9 @@ impl CaoGpu {
             clip: b.list(|i| b.used(i)),
             lao: b.list(|i| b.readable[i] != 0),
         };
-        cao.run(gpu, &lists, CaoMode::Full, progress)?;
+        cao.write_lists(gpu, &lists);
+        cao.step_iv(gpu, &lists, CaoMode::Full)?;
+        cao.step_v(gpu, &lists, false, progress)?;
         cao.last = (lists, CaoMode::Full);
         validated(device, "Cao::v_pao", || {
             let mut encoder = device.create_command_encoder(&Default::default());
@@ -508,99 +498,6 @@ impl CaoGpu {
     /// The bricks this CAO processes.
     pub fn bricks(&self) -> &Bricks {
         &self.bricks
-    }
-
-    /// One frame: update the clip maps for `shapes` (moved shapes only change matrices),
-    /// clip (step IV) and compute `V_AO` (step V), waiting for each. `reach_mm` is
-    /// normally [`Self::reach_mm`]; tests shrink it to show exactness depends on it. The
-    /// viewer submits the same work in slices without waiting ([`Self::begin`],
-    /// [`Self::advance`]).
-    pub fn update(
-        &mut self,
-        gpu: &Gpu,
-        texels: &VolumeTexels,
-        pose: Pose<'_>,
-    ) -> Result<CaoStats, GpuError> {
-        let t0 = Instant::now();
-        let mode = pose.mode;
-        let frame = self.begin(gpu, texels, pose)?;
-        crate::gpu::wait(&gpu.device, "Cao::maps", crate::gpu::WAIT)?;
-        let t1 = Instant::now();
-        let mut stats = self.run_timed(gpu, &frame.lists, mode)?;
-        stats.maps_seconds = (t1 - t0).as_secs_f64();
-        stats.clip_errors = frame.clip_errors;
-        Ok(stats)
-    }
-
-    /// Starts one frame: re-poses the clip maps for `shapes` (a new geometry's maps are
-    /// rendered and submitted here), picks the bricks steps IV and V visit and writes
-    /// their lists. Nothing is waited for.
-    pub fn begin(
-        &mut self,
-        gpu: &Gpu,
-        texels: &VolumeTexels,
-        pose: Pose<'_>,
-    ) -> Result<CaoFrame, GpuError> {
-        let Pose {
-            shapes,
-            resolution,
-            reach_mm,
-            mode,
-        } = pose;
-        let request = MapRequest {
-            shapes,
-            volume_radius: Vec3::from(texels.extent()).length() * 0.5,
-            reach_mm,
-            resolution,
-        };
-        let ClipUpdate { errors, .. } = self.clip.update(gpu, request)?;
-        let b = &self.bricks;
-        let cameras = self.clip.cameras();
-        let near = b.near(texels.dims, texels.spacing, &self.clip.uniforms, &cameras);
-        let touched: Vec<bool> = near
-            .iter()
-            .zip(&self.was_near)
-            .map(|(a, b)| *a || *b)
-            .collect();
-        // Step IV marks voxels for step V only in bricks a change can reach; elsewhere
-        // it copies V_PAO (and writes 1 where it clips), so step V skips them.
-        let reached = match mode {
-            CaoMode::Selective => b.reached(
-                texels.dims,
-                texels.spacing,
-                &self.clip.uniforms,
-                &cameras,
-                reach_mm,
-            ),
-            CaoMode::Full => vec![true; b.count()],
-        };
-        let lists = Lists {
-            clip: b.list_flagged(|i| touched[i] && b.used(i), |i| reached[i]),
-            lao: match mode {
-                CaoMode::Selective => {
-                    b.list_flagged(|i| touched[i] && reached[i] && b.readable[i] != 0, |_| true)
-                }
-                CaoMode::Full => b.list_flagged(|i| b.readable[i] != 0, |i| touched[i]),
-            },
-        };
-        self.was_near = near;
-        self.cut_balls = match mode {
-            CaoMode::Selective => {
-                b.cut_balls(&self.clip.uniforms, &cameras, self.ray_test_margin_mm)
-            }
-            CaoMode::Full => None,
-        };
-        let listing = self.lists_voxels(mode);
-        if listing {
-            self.reserve_list(gpu, &lists)?;
-        }
-        self.write_lists(gpu, &lists);
-        self.last = (lists.clone(), mode);
-        Ok(CaoFrame::new(
-            lists,
-            (mode, listing),
-            errors.iter().map(|e| e.to_string()).collect(),
-        ))
     }
 
     fn run_timed(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<CaoStats, GpuError> {
@@ -643,19 +540,6 @@ impl CaoGpu {
             lao_seconds: seconds[1],
             clip_errors: Vec::new(),
         }
-    }
-
-    /// Steps IV and V over `lists` without timing (the precomputation).
-    fn run(
-        &self,
-        gpu: &Gpu,
-        lists: &Lists,
-        mode: CaoMode,
-        progress: &dyn Fn(usize, usize),
-    ) -> Result<(), GpuError> {
-        self.write_lists(gpu, lists);
-        self.step_iv(gpu, lists, mode)?;
-        self.step_v(gpu, lists, false, progress)
     }
 
     fn write_lists(&self, gpu: &Gpu, lists: &Lists) {
