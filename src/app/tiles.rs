@@ -147,35 +147,6 @@ pub(super) fn next_tile(
     widest.or(idle.then_some(smallest))
 }
 
-/// The texture a piece of `size` is ray-cast into before it is copied into the image: one
-/// per size in use, kept (a few sizes are in use at a time; past 8 the others go).
-pub(super) fn strip_texture<'a>(
-    strips: &'a mut Vec<wgpu::Texture>,
-    device: &wgpu::Device,
-    (size, format): ((u32, u32), wgpu::TextureFormat),
-) -> &'a wgpu::Texture {
-    match strips.iter().position(|t| (t.width(), t.height()) == size) {
-        Some(i) => &strips[i],
-        None => {
-            if strips.len() >= 8 {
-                strips.clear();
-            }
-            strips.push(crate::gpu::image_texture(
-                device,
-                "Viewport::strip",
-                size,
-                format,
-                // COPY_DST: a strip that re-casts only some pixels starts with the
-                // image's own (render::reuse).
-                wgpu::TextureUsages::STORAGE_BINDING
-                    | wgpu::TextureUsages::COPY_SRC
-                    | wgpu::TextureUsages::COPY_DST,
-            ));
-            &strips[strips.len() - 1]
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

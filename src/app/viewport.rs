@@ -10,7 +10,7 @@
 //! [`ViewportCallback`] carries the rectangle to draw into and the last complete image,
 //! drawn 1:1 at full quality, scaled up while the view moves at interactive quality.
 
-use super::tiles::{RECENT_TILES, Tile, TileCosts, next_tile, strip_texture};
+use super::tiles::{RECENT_TILES, Tile, TileCosts, next_tile};
 use crate::ao::cao::{CaoFrame, CaoGpu, CaoMode, CaoStats, Pose};
 use crate::clip::ClipShape;
 use crate::clip::gpu::ClipMaps;
@@ -103,7 +103,7 @@ pub struct ViewportGpu {
     pub(super) spare: Option<Target>,
     /// The strips the ray cast writes before they are copied into the image, one per
     /// height in use.
-    pub(super) strips: Vec<wgpu::Texture>,
+    pub(super) strips: crate::render::gpu::TileTargets,
     /// What the parts of recent images cost, to cut the next one into tiles that fit.
     tile_costs: TileCosts,
     /// Tiles submitted and not timed yet: tag, image size, step, tile.
@@ -212,7 +212,7 @@ impl ViewportGpu {
             kept: None,
             work: None,
             spare: None,
-            strips: Vec::new(),
+            strips: crate::render::gpu::TileTargets::new("Viewport::strip"),
             tile_costs: TileCosts::default(),
             tiles_in_flight: Vec::new(),
             next_strip_tag: 0,

@@ -3,7 +3,6 @@
 
 use super::{Frame, Image, OPAQUE, RaycastParams, jitter};
 use crate::sample::{VolumeSampler, trilinear};
-use crate::texels::gpu_data::VolumeMap;
 use crate::texels::{BlockRanges, VolumeTexels};
 use crate::tf::Lut;
 use glam::{Mat4, Vec3, Vec4};
@@ -568,12 +567,7 @@ pub fn render_reusing(
         }
         super::reuse::set_balls(&mut p, balls);
     }
-    let volume = VolumeSampler {
-        values: &vol.norm,
-        dims: vol.dims,
-        map: VolumeMap::new(texels, lut),
-        table: &lut.rgba,
-    };
+    let volume = VolumeSampler::density(&vol.norm, texels, lut);
     let (w, h) = (frame.width, frame.height);
     let pixels: Vec<[u8; 4]> = (0..w * h)
         .into_par_iter()

@@ -361,13 +361,15 @@ impl RayCaster {
             )?),
         };
         // Tile textures by size, for this frame.
-        let mut targets = Vec::new();
+        let mut targets = TileTargets::new("RayCaster::tile");
         let mut y0 = ry0;
         while y0 < ry1 {
             let mut x0 = rx0;
             while x0 < rx1 {
                 let (tw, th) = ((rx1 - x0).min(TILE), (ry1 - y0).min(TILE));
-                let target = tile_target(&mut targets, device, (tw, th))?;
+                let target = validated(device, "RayCaster::tile", || {
+                    targets.of_size(device, (tw, th)).clone()
+                })?;
                 if !changed.is_empty() {
                     // The pixels no ray meeting a change will overwrite.
                     gpu.queue.write_texture(
@@ -415,29 +417,49 @@ impl RayCaster {
     }
 }
 
-/// A tile texture of `size` for [`RayCaster::render`] from `targets`, made and kept
-/// there if it has none of that size.
-fn tile_target(
-    targets: &mut Vec<wgpu::Texture>,
-    device: &wgpu::Device,
-    size: (u32, u32),
-) -> Result<wgpu::Texture, GpuError> {
-    if let Some(t) = targets.iter().find(|t| (t.width(), t.height()) == size) {
-        return Ok(t.clone());
+/// Textures the ray caster writes tiles into (Rgba8Unorm, `STORAGE_BINDING`), one per
+/// size in use: [`RayCaster::render`]'s tiles and the viewer's strips. `COPY_DST`: a
+/// tile that re-casts only some pixels starts with the image's own ([`super::reuse`]).
+#[derive(Debug)]
+pub struct TileTargets {
+    label: &'static str,
+    textures: Vec<wgpu::Texture>,
+}
+
+impl TileTargets {
+    /// Sizes kept at a time (a few are in use; past this many the others go).
+    const KEPT: usize = 8;
+
+    pub fn new(label: &'static str) -> Self {
+        TileTargets {
+            label,
+            textures: Vec::new(),
+        }
     }
-    let t = validated(device, "RayCaster::tile", || {
-        crate::gpu::image_texture(
-            device,
-            "RayCaster::tile",
-            size,
-            wgpu::TextureFormat::Rgba8Unorm,
-            wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::COPY_SRC
-                | wgpu::TextureUsages::COPY_DST,
-        )
-    })?;
-    targets.push(t.clone());
-    Ok(t)
+
+    /// The texture of `size`, made if there is none.
+    pub fn of_size(&mut self, device: &wgpu::Device, size: (u32, u32)) -> &wgpu::Texture {
+        let at = self
+            .textures
+            .iter()
+            .position(|t| (t.width(), t.height()) == size);
+        let i = match at {
+            Some(i) => i,
+            None => {
+                if self.textures.len() >= Self::KEPT {
+                    self.textures.clear();
+                }
+                let usage = wgpu::TextureUsages::STORAGE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC
+                    | wgpu::TextureUsages::COPY_DST;
+                let format = wgpu::TextureFormat::Rgba8Unorm;
+                let texture = crate::gpu::image_texture(device, self.label, size, format, usage);
+                self.textures.push(texture);
+                self.textures.len() - 1
+            }
+        };
+        &self.textures[i]
+    }
 }
 
 impl crate::gpu::Stage for RayCaster {

@@ -46,30 +46,34 @@ impl std::ops::Deref for RenderVolume {
 }
 
 impl RenderVolume {
-    /// Uploads a volume (halving it until it fits the adapter) with a transfer function.
+    /// Uploads a volume (halving it until it fits the adapter, [`GpuVolume::new`]) for
+    /// ray casting, with the gradient volume shading reads.
     pub fn new(
         gpu: &Gpu,
         volume: &crate::volume::Volume,
         tf: &TransferFunction,
         step_voxels: f32,
     ) -> Result<Self, GpuError> {
-        let texels = VolumeTexels::new(volume, crate::texels::UploadLimits::of(gpu));
-        Self::from_texels(gpu, texels, tf, step_voxels)
+        let volume = GpuVolume::new(gpu, volume, tf, step_voxels)?;
+        Ok(Self::around(gpu, volume).with_gradient(gpu))
     }
 
-    /// Uploads `texels` for ray casting: with the gradient volume shading reads
-    /// ([`Self::set_gradient_volume`]).
+    /// Uploads `texels` for ray casting, with the gradient volume shading reads.
     pub fn from_texels(
         gpu: &Gpu,
         texels: VolumeTexels,
         tf: &TransferFunction,
         step_voxels: f32,
     ) -> Result<Self, GpuError> {
-        let mut vol = Self::for_compute(gpu, texels, tf, step_voxels)?;
-        // Optional: where the device cannot hold it, shading takes six samples instead,
-        // the same pixels up to f16 rounding ([`Self::gradient_volume`] says which).
-        let _ = vol.set_gradient_volume(gpu, true);
-        Ok(vol)
+        Ok(Self::for_compute(gpu, texels, tf, step_voxels)?.with_gradient(gpu))
+    }
+
+    /// With the gradient volume ([`Self::set_gradient_volume`]), where it fits: where
+    /// the device cannot hold it, shading takes six samples instead, the same pixels up
+    /// to f16 rounding ([`Self::gradient_volume`] says which).
+    fn with_gradient(mut self, gpu: &Gpu) -> Self {
+        let _ = self.set_gradient_volume(gpu, true);
+        self
     }
 
     /// Uploads `texels` without the gradient volume, which only the ray caster's shading

@@ -631,7 +631,7 @@ impl ViewportGpu {
                 });
             };
             let (tx, ty, tw, th) = tile;
-            let strip = strip_texture(strips, &gpu.device, ((tw, th), IMAGE_FORMAT));
+            let strip = strips.of_size(&gpu.device, (tw, th));
             let tag = *next_strip_tag;
             *next_strip_tag += 1;
             let (cw, ch) = (tw.min(width - tx), th.min(height - ty));
