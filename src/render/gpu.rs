@@ -5,7 +5,7 @@
 pub use super::gpu_volume::RenderVolume;
 use super::reuse::Ball;
 pub use super::variant::Variant;
-use super::{Frame, Image, TileAt};
+use super::{Frame, Image, RaycastParams, TileAt};
 use crate::gpu::{
     Gpu, GpuError, bind_group, copy_texture_out, read_buffer, shaders, texture_readback,
     uniform_buffer, unpad, validated,
@@ -37,6 +37,19 @@ pub struct RayCaster {
     volume_layout: wgpu::BindGroupLayout,
     placeholders: super::extras::Placeholders,
     surfaces: super::surface::SurfaceRenderer,
+}
+
+/// One frame to ray cast and read back ([`RayCaster::render`] and its variants).
+#[derive(Debug, Clone, Copy)]
+struct FrameDraw<'a> {
+    volume: &'a RenderVolume,
+    frame: &'a Frame,
+    clip: Option<&'a crate::clip::gpu::ClipMaps>,
+    /// The pipeline to draw with; `None`: the frame's own ([`Variant::of`]).
+    variant: Option<Variant>,
+    /// An image of the same view and the balls outside which this frame's inputs are
+    /// the same ([`RayCaster::render_reusing`]).
+    previous: Option<(&'a Image, &'a [Ball])>,
 }
 
 /// One tile of one frame to ray cast ([`RayCaster::encode_tile`]).
@@ -201,7 +214,7 @@ impl RayCaster {
         layer: Option<&super::surface::SurfaceLayer>,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
-        let (device, queue) = (&gpu.device, &gpu.queue);
+        let device = &gpu.device;
         let vol = tile.volume;
         let at = TileAt {
             origin: tile.origin,
@@ -213,16 +226,8 @@ impl RayCaster {
         let clip_group = tile.clip.map(|c| c.bind_group(device, &self.clip_layout));
         let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
         let (tw, th) = (tile.target.width(), tile.target.height());
-        let lut = vol.lut_buffer_for(tile.frame.settings.step_voxels);
         validated(device, "RayCaster::encode_tile", || {
-            let uniform = |label, bytes: &[u8]| uniform_buffer(device, queue, label, bytes);
-            let params = uniform("RayCaster::params", bytemuck::bytes_of(&params));
-            let extras = uniform(
-                "RayCaster::extras",
-                bytemuck::bytes_of(&vol.extras.params()),
-            );
-            let [group, group_2, group_3] =
-                self.bind_groups(gpu, (vol, lut), tile.target, (&params, &extras), layer);
+            let [group, group_2, group_3] = self.bind_groups(gpu, &tile, &params, layer);
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("RayCaster::encode_tile"),
                 timestamp_writes: None,
@@ -236,18 +241,26 @@ impl RayCaster {
         })
     }
 
-    /// Bind groups 0 (AO, occupancy, target, modulation, block ranges, gradient), 2
-    /// (extras) and 3 (the volume and its LUT, `volume.wgsl`).
+    /// `tile`'s bind groups 0 (its uniforms `params`, AO, occupancy, target, modulation,
+    /// block ranges, gradient), 2 (extras) and 3 (the volume and the table for the
+    /// frame's step, `volume.wgsl`).
     fn bind_groups(
         &self,
         gpu: &Gpu,
-        (vol, lut): (&RenderVolume, &wgpu::Buffer),
-        target: &wgpu::Texture,
-        (params, extras): (&wgpu::Buffer, &wgpu::Buffer),
+        tile: &TileDraw<'_>,
+        params: &RaycastParams,
         layer: Option<&super::surface::SurfaceLayer>,
     ) -> [wgpu::BindGroup; 3] {
-        let device = &gpu.device;
-        let target_view = target.create_view(&Default::default());
+        let (device, queue) = (&gpu.device, &gpu.queue);
+        let vol = tile.volume;
+        let lut = vol.lut_buffer_for(tile.frame.settings.step_voxels);
+        let uniform = |label, bytes: &[u8]| uniform_buffer(device, queue, label, bytes);
+        let params = uniform("RayCaster::params", bytemuck::bytes_of(params));
+        let extras = uniform(
+            "RayCaster::extras",
+            bytemuck::bytes_of(&vol.extras.params()),
+        );
+        let target_view = tile.target.create_view(&Default::default());
         let group = bind_group(
             device,
             "RayCaster::bind_group",
@@ -270,7 +283,7 @@ impl RayCaster {
             device,
             &self.layout_2,
             &vol.extras,
-            extras,
+            &extras,
             layer,
             &self.placeholders,
             &self.sampler,
@@ -304,7 +317,14 @@ impl RayCaster {
         clip: Option<&crate::clip::gpu::ClipMaps>,
         variant: Option<Variant>,
     ) -> Result<Image, GpuError> {
-        self.render_tiles(gpu, (vol, variant), frame, clip, None)
+        let draw = FrameDraw {
+            volume: vol,
+            frame,
+            clip,
+            variant,
+            previous: None,
+        };
+        self.render_tiles(gpu, draw)
     }
 
     /// [`Self::render`] over `previous`, an image of the same view (camera, size,
@@ -321,17 +341,24 @@ impl RayCaster {
         clip: Option<&crate::clip::gpu::ClipMaps>,
         (previous, changed): (&Image, &[Ball]),
     ) -> Result<Image, GpuError> {
-        self.render_tiles(gpu, (vol, None), frame, clip, Some((previous, changed)))
+        let draw = FrameDraw {
+            volume: vol,
+            frame,
+            clip,
+            variant: None,
+            previous: Some((previous, changed)),
+        };
+        self.render_tiles(gpu, draw)
     }
 
-    fn render_tiles(
-        &self,
-        gpu: &Gpu,
-        (vol, variant): (&RenderVolume, Option<Variant>),
-        frame: &Frame,
-        clip: Option<&crate::clip::gpu::ClipMaps>,
-        previous: Option<(&Image, &[Ball])>,
-    ) -> Result<Image, GpuError> {
+    fn render_tiles(&self, gpu: &Gpu, draw: FrameDraw<'_>) -> Result<Image, GpuError> {
+        let FrameDraw {
+            volume: vol,
+            frame,
+            clip,
+            variant,
+            previous,
+        } = draw;
         let device = &gpu.device;
         let (w, h) = (frame.width.max(1), frame.height.max(1));
         let (mut image, rect, changed) = match previous {

@@ -327,6 +327,26 @@ pub struct Frame {
     pub height: u32,
 }
 
+/// A ball in volume-centred mm (the ray caster's space): where something changed since
+/// an image ([`reuse`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ball {
+    pub centre: glam::Vec3,
+    pub radius: f32,
+}
+
+/// Writes `balls` into a frame's uniforms: the ray cast then leaves every pixel whose ray
+/// meets none of them as the target holds it. Empty: every pixel is cast.
+pub fn set_balls(params: &mut RaycastParams, balls: &[Ball]) {
+    debug_assert!(balls.len() <= MAX_BALLS);
+    let n = balls.len().min(MAX_BALLS);
+    params.reuse = [n as u32, 0, 0, 0];
+    params.balls = [[0.0; 4]; MAX_BALLS];
+    for (slot, b) in params.balls.iter_mut().zip(&balls[..n]) {
+        *slot = [b.centre.x, b.centre.y, b.centre.z, b.radius];
+    }
+}
+
 /// What a tile's uniforms hold besides its [`Frame`], the texels and the LUT.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct TileAt<'a> {
@@ -337,7 +357,7 @@ pub struct TileAt<'a> {
     pub gradient_scale: f32,
     /// Balls holding every change since the image the target holds ([`reuse`]): only
     /// rays meeting one are cast. Empty: every pixel.
-    pub changed: &'a [reuse::Ball],
+    pub changed: &'a [Ball],
 }
 
 impl Frame {
@@ -402,7 +422,7 @@ impl Frame {
             balls: [[0.0; 4]; MAX_BALLS],
         };
         params.box_half[3] = at.gradient_scale;
-        reuse::set_balls(&mut params, at.changed);
+        set_balls(&mut params, at.changed);
         params
     }
 }

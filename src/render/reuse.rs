@@ -21,14 +21,7 @@ use crate::sample::AO_READ_REACH;
 use crate::texels::VolumeTexels;
 use glam::{Vec3, Vec4};
 
-pub use super::MAX_BALLS;
-
-/// A ball in volume-centred mm (the ray caster's space).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Ball {
-    pub centre: Vec3,
-    pub radius: f32,
-}
+pub use super::{Ball, MAX_BALLS, set_balls};
 
 impl Ball {
     fn contains(&self, other: &Ball) -> bool {
@@ -177,18 +170,6 @@ pub fn reusable(frame: &Frame, extras: &crate::render::extras::RayExtras) -> boo
         && extras.light.is_none()
         && extras.live_vao.is_none()
         && extras.surfaces.is_empty()
-}
-
-/// Writes `balls` into a frame's uniforms: the ray cast then leaves every pixel whose ray
-/// meets none of them as the target holds it. Empty: every pixel is cast.
-pub fn set_balls(params: &mut RaycastParams, balls: &[Ball]) {
-    debug_assert!(balls.len() <= MAX_BALLS);
-    let n = balls.len().min(MAX_BALLS);
-    params.reuse = [n as u32, 0, 0, 0];
-    params.balls = [[0.0; 4]; MAX_BALLS];
-    for (slot, b) in params.balls.iter_mut().zip(&balls[..n]) {
-        *slot = [b.centre.x, b.centre.y, b.centre.z, b.radius];
-    }
 }
 
 /// Whether the ray `origin + t · dir` (`dir` unit) over `[t_enter, t_exit]` meets one of
