@@ -13,13 +13,14 @@
 // Samples outside the volume box are empty. Isosurface mode (§5.2.1): γ_k = 1 if a
 // sample beyond the guard distance lies within d_tol of d_iso (data values), else 0.
 //!include clip_common.wgsl
+//!include volume.wgsl
 
 struct VaoParams {
     mm_to_uvw: vec4<f32>,  // 1 / extent (mm) per axis; w = stratum length Δ (mm)
-    lut_map: vec4<f32>,    // a, b, entries - 1, Eq. 7 exponent Δ / v_s
+    map: VolumeMap,        // how the f16 level's values map to vao_alpha (volume.wgsl's struct)
     counts: vec4<u32>,     // N_dir, N_samples, mip level, mode (0 Beer's law, 1 isosurface)
     limits: vec4<f32>,     // V_thres, product below which γ ≈ 1, d_iso, d_tol (texel units)
-    guard: vec4<f32>,      // isosurface guard distance (mm), unused × 3
+    guard: vec4<f32>,      // isosurface guard distance (mm), Eq. 7 exponent Δ / v_s, unused × 2
 }
 
 @group(2) @binding(0) var<uniform> vao: VaoParams;
@@ -48,9 +49,9 @@ fn vao_clipped(uvw: vec3<f32>) -> bool {
 
 // Opacity per voxel length v_s (Eq. 6's V), from the transfer function.
 fn vao_opacity(norm: f32) -> f32 {
-    let t = clamp(norm * vao.lut_map.x + vao.lut_map.y, 0.0, vao.lut_map.z);
+    let t = clamp(norm * vao.map.lut.x + vao.map.lut.y, 0.0, vao.map.lut.z);
     let i0 = u32(floor(t));
-    let i1 = min(i0 + 1u, u32(vao.lut_map.z));
+    let i1 = min(i0 + 1u, u32(vao.map.lut.z));
     return mix(vao_alpha[i0], vao_alpha[i1], t - floor(t));
 }
 
@@ -102,7 +103,7 @@ fn vao_obscurance(x: vec3<f32>, ray: vec4<f32>) -> f32 {
     if product <= 0.0 {
         return 1.0;
     }
-    return 1.0 - pow(product, vao.lut_map.w);
+    return 1.0 - pow(product, vao.guard.y);
 }
 
 // A_P(x), Eq. 8: the fraction of light reaching x that the surroundings block.

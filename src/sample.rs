@@ -174,6 +174,12 @@ pub fn f16_lut_map(texels: &VolumeTexels, lut: &Lut) -> (f32, f32) {
     ((a as f64 * scale) as f32, (b as f64 + a as f64 * lo) as f32)
 }
 
+/// How a stage reads the f16 copy of `texels` (and its mip levels) through `lut`.
+pub fn f16_volume_map(texels: &VolumeTexels, lut: &Lut) -> VolumeMap {
+    let (a, b) = f16_lut_map(texels, lut);
+    VolumeMap::with_lut_map(a, b, lut)
+}
+
 /// Rounds to the nearest f16 (what an R16Float texel holds).
 fn to_f16(x: f32) -> u16 {
     half::f16::from_f32(x).to_bits()

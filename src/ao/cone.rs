@@ -20,7 +20,7 @@ use crate::gpu::{
     Gpu, GpuError, copy_texture_out, read_buffer, storage_buffer, submit_compute, texture_readback,
     unpad, validated,
 };
-use crate::sample::trilinear;
+use crate::sample::{VolumeSampler, bake_lut, trilinear};
 use crate::texels::VolumeTexels;
 use crate::tf::TransferFunction;
 use glam::Vec3;
@@ -65,9 +65,13 @@ impl MipPyramid {
     }
 }
 
-/// Opacity per voxel for one voxel of path, from the transfer function.
+/// Opacity per voxel for one voxel of path, from the transfer function: each voxel read
+/// through [`VolumeSampler`] (the pyramid the cones read is built from these).
 pub fn opacity(texels: &VolumeTexels, tf: &TransferFunction) -> Vec<f32> {
-    super::filter::Source::new(texels, tf, super::filter::StatisticSource::Opacity).values(texels)
+    let lut = bake_lut(tf, texels, 1.0);
+    let values = texels.norm_values();
+    let volume = VolumeSampler::density(&values, texels, &lut);
+    values.par_iter().map(|&v| volume.opacity(v)).collect()
 }
 
 /// Where the spheres of a cone sit: `(distance of the centre in mm, mip level)`.

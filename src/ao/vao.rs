@@ -23,7 +23,7 @@ use crate::gpu::{
     uniform_buffer, validated,
 };
 use crate::sample::{
-    VolumeSampler, bake_lut, f16_lut_map, f16_map, mip_chain, per_voxel, voxel_centre,
+    VolumeSampler, bake_lut, f16_map, f16_volume_map, mip_chain, per_voxel, voxel_centre,
 };
 use crate::texels::VolumeTexels;
 use crate::texels::gpu_data::VolumeMap;
@@ -80,22 +80,21 @@ pub fn mip_level(stratum_mm: f32, v_s: f32, dims: [usize; 3]) -> u32 {
 pub struct VaoParams {
     /// 1 / extent (mm) per axis; w = stratum length Δ = r_max / N_samples (mm).
     pub mm_to_uvw: [f32; 4],
-    /// LUT map a, b, entries − 1; w = Eq. 7's exponent Δ / v_s.
-    pub lut_map: [f32; 4],
+    /// How the f16 level's values map to the opacity table.
+    pub map: VolumeMap,
     /// N_dir, N_samples, mip level, mode (0 Beer's law, 1 isosurface).
     pub counts: [u32; 4],
     /// V_thres, product below which γ ≥ 1 − 1/256, d_iso and d_tol in texel units.
     pub limits: [f32; 4],
-    /// Isosurface guard distance `v_s·√3/2` (mm), unused × 3.
+    /// Isosurface guard distance `v_s·√3/2` (mm), Eq. 7's exponent Δ / v_s, unused × 2.
     pub guard: [f32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<VaoParams>() == 80);
+const _: () = assert!(std::mem::size_of::<VaoParams>() == 96);
 
 /// The uniforms for `texels` with opacity table `lut`.
 pub fn params(texels: &VolumeTexels, lut: &Lut, s: &VaoSettings) -> VaoParams {
     let extent = texels.extent();
-    let (a, b) = f16_lut_map(texels, lut);
     let (lo, scale) = f16_map(texels);
     let v_s = min_spacing(texels);
     let samples = s.samples.max(1);
@@ -111,7 +110,7 @@ pub fn params(texels: &VolumeTexels, lut: &Lut, s: &VaoSettings) -> VaoParams {
     };
     VaoParams {
         mm_to_uvw: [1.0 / extent[0], 1.0 / extent[1], 1.0 / extent[2], stratum],
-        lut_map: [a, b, (lut.rgba.len().max(2) - 1) as f32, exponent],
+        map: f16_volume_map(texels, lut),
         counts: [
             s.directions.max(1),
             samples,
@@ -119,7 +118,7 @@ pub fn params(texels: &VolumeTexels, lut: &Lut, s: &VaoSettings) -> VaoParams {
             mode,
         ],
         limits: [s.v_thres, GAMMA_STOP.powf(1.0 / exponent), iso, tol],
-        guard: [v_s * 3.0_f32.sqrt() / 2.0, 0.0, 0.0, 0.0],
+        guard: [v_s * 3.0_f32.sqrt() / 2.0, exponent, 0.0, 0.0],
     }
 }
 
@@ -132,7 +131,7 @@ pub struct PositionalAo {
     /// The level the function samples (texel values as f16, x fastest) and its dims.
     level: Vec<f32>,
     level_dims: [usize; 3],
-    /// How the level's values map to the table (`params.lut_map`'s a, b and last entry).
+    /// How the level's values map to the table (`params.map`).
     map: VolumeMap,
     /// The opacity table (opacity per voxel length in alpha, one entry per LUT entry).
     table: Vec<[f32; 4]>,
@@ -156,7 +155,7 @@ impl PositionalAo {
             rays: rays(s.directions),
             level,
             level_dims,
-            map: VolumeMap::with_lut_map(params.lut_map[0], params.lut_map[1], &lut),
+            map: params.map,
             table: lut.rgba,
             clip: None,
         }
@@ -250,7 +249,7 @@ impl PositionalAo {
         if product <= 0.0 {
             return 1.0;
         }
-        1.0 - product.powf(p.lut_map[3])
+        1.0 - product.powf(p.guard[1])
     }
 
     /// A_P(x) of Eq. 8 at `x` (texture coordinates).
@@ -354,10 +353,7 @@ impl VaoInputs {
     ) {
         let lut = vao_lut(tf, texels);
         let alpha: Vec<f32> = lut.rgba.iter().map(|e| e[3]).collect();
-        let (a, b) = f16_lut_map(texels, &lut);
-        self.params.lut_map[0] = a;
-        self.params.lut_map[1] = b;
-        self.params.lut_map[2] = (lut.rgba.len().max(2) - 1) as f32;
+        self.params.map = f16_volume_map(texels, &lut);
         gpu.queue
             .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&self.params));
         if (alpha.len() * 4) as u64 == self.alpha.size() {

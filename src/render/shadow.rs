@@ -13,9 +13,8 @@
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
 use crate::gpu::{Gpu, GpuError, output_buffer, readback_buffer, uniform_group, validated};
 use crate::sample::bake_lut;
-use crate::sample::{VolumeSampler, per_voxel, trilinear, voxel_centre};
+use crate::sample::{VolumeSampler, f16_volume_map, per_voxel, trilinear, voxel_centre};
 use crate::texels::VolumeTexels;
-use crate::texels::gpu_data::VolumeMap;
 use crate::texels::reader::{self, Reading, VOLUME_GROUP};
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
@@ -96,12 +95,6 @@ fn params(texels: &VolumeTexels, direction: Vec3) -> LightParams {
     }
 }
 
-/// How the light pass reads the f16 copy of the density through `lut`.
-fn f16_map(texels: &VolumeTexels, lut: &Lut) -> VolumeMap {
-    let (a, b) = crate::sample::f16_lut_map(texels, lut);
-    VolumeMap::with_lut_map(a, b, lut)
-}
-
 /// CPU twin of one invocation of `light.wgsl`: T at the centre of `voxel`.
 fn light_voxel(
     p: &LightParams,
@@ -145,7 +138,7 @@ pub fn light_cpu(
     let volume = VolumeSampler {
         values: &norm,
         dims: texels.dims,
-        map: f16_map(texels, lut),
+        map: f16_volume_map(texels, lut),
         table: &lut.rgba,
     };
     per_voxel(texels.dims, progress, |v| light_voxel(&p, &volume, v, clip))
@@ -191,7 +184,7 @@ impl LightGpu {
             let volume = crate::gpu::f16_texture(device, &gpu.queue, "Light::texels", &chain)
                 .create_view(&Default::default());
             let table = reader::table(gpu, "Light::lut", lut);
-            let map = f16_map(texels, lut);
+            let map = f16_volume_map(texels, lut);
             let reading = Reading::sampled(&volume, &self.0.sampler, map, &table);
             let volume_group = reading.group_of(gpu, "Light", &self.0.pipeline);
             let out = output_buffer(device, "Light::transmittance", size);
