@@ -102,7 +102,8 @@ impl Scene {
                 &self.vol,
                 &self.frame,
                 Some(&self.cao.clip),
-                (previous, changed),
+                previous,
+                changed,
             )
             .unwrap_or_else(|e| panic!("{e}"))
     }

@@ -118,7 +118,7 @@ fn lao_voxel(
     let mut total = 0.0;
     for ray in rays {
         let step = Vec3::new(ray[0], ray[1], ray[2]) * scale;
-        let sum = ray_sum(centre, step, samples, (bricks, dims), |uvw| {
+        let sum = ray_sum(centre, step, samples, bricks, dims, |uvw| {
             alpha_at(volume, uvw)
         });
         total += ray[3] * sum / samples as f32;
@@ -134,7 +134,8 @@ pub fn ray_sum(
     centre: Vec3,
     step: Vec3,
     samples: u32,
-    (bricks, dims): (&Bricks, [usize; 3]),
+    bricks: &Bricks,
+    dims: [usize; 3],
     opacity: impl Fn(Vec3) -> f32,
 ) -> f32 {
     let mut transmittance = 1.0f32;

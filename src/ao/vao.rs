@@ -495,6 +495,6 @@ impl VaoGpu {
             bind_groups: &[(0, &group0), (1, &self.no_clip), (2, &group2)],
             uniforms: &uniforms,
         };
-        slabs.run_readback(gpu, &pass, base, (&out, &readback), progress)
+        slabs.run_readback(gpu, &pass, base, &out, &readback, progress)
     }
 }

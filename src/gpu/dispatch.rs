@@ -235,7 +235,8 @@ impl SlabDispatch {
         gpu: &Gpu,
         pass: &Pass<'_>,
         base: P,
-        (out, readback): (&wgpu::Buffer, &wgpu::Buffer),
+        out: &wgpu::Buffer,
+        readback: &wgpu::Buffer,
         progress: &dyn Fn(usize, usize),
     ) -> Result<Vec<f32>, GpuError> {
         let total = self.dims.iter().map(|&d| d as usize).product();

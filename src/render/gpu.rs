@@ -339,7 +339,8 @@ impl RayCaster {
         vol: &RenderVolume,
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
-        (previous, changed): (&Image, &[Ball]),
+        previous: &Image,
+        changed: &[Ball],
     ) -> Result<Image, GpuError> {
         let draw = FrameDraw {
             volume: vol,

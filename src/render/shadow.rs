@@ -199,7 +199,7 @@ impl LightGpu {
             bind_groups: &[(0, &group[0]), (1, &clip_group), (VOLUME_GROUP, &group[1])],
             uniforms: &uniforms,
         };
-        slabs.run_readback(gpu, &pass, base, (&out, &readback), progress)
+        slabs.run_readback(gpu, &pass, base, &out, &readback, progress)
     }
 }
 

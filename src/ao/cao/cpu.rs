@@ -114,7 +114,7 @@ pub fn lao_on_opacity_cpu(
             let mut total = 0.0;
             for (d, w) in rays.directions.iter().zip(&rays.weights) {
                 let step = *d * scale;
-                let sum = ray_sum(centre, step, samples, (bricks, dims), opacity_at);
+                let sum = ray_sum(centre, step, samples, bricks, dims, opacity_at);
                 total += w * sum / samples as f32;
             }
             total / rays.directions.len() as f32

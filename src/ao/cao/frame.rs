@@ -222,7 +222,8 @@ fn mapped_bytes(
 fn submit_paced<P: ChunkParams>(
     gpu: &Gpu,
     pacer: &mut Pacer,
-    (pass, params): (&Pass<'_>, P),
+    pass: &Pass<'_>,
+    params: P,
     chunks: &BrickDispatch,
     next: &mut u32,
 ) -> Result<bool, GpuError> {
@@ -352,7 +353,7 @@ impl CaoGpu {
         if frame.next[0] < iv.len() {
             let next = &mut frame.next[0];
             let submitted = self.with_step_iv(device, self.clip_pipeline(), |pass| {
-                submit_paced(gpu, pacer, (pass, params), &iv, next)
+                submit_paced(gpu, pacer, pass, params, &iv, next)
             })?;
             if !submitted {
                 return Ok(false);
@@ -368,7 +369,7 @@ impl CaoGpu {
             let v = self.v_dispatch(&frame.lists);
             let next = &mut frame.next[1];
             let submitted = self.with_step_v(true, |pass| {
-                submit_paced(gpu, pacer, (pass, self.lao_params), &v, next)
+                submit_paced(gpu, pacer, pass, self.lao_params, &v, next)
             })?;
             if !submitted {
                 return Ok(false);
@@ -408,7 +409,7 @@ impl CaoGpu {
         ];
         let listed = frame.listing.as_ref().is_some_and(|l| !l.over_bricks);
         let c = [c[0], c[1], c[2], c[3]].map(u64::from);
-        let mut stats = self.stats_of(&frame.lists, (c, listed), seconds);
+        let mut stats = self.stats_of(&frame.lists, c, listed, seconds);
         stats.clip_errors = frame.clip_errors.clone();
         Some(Ok(stats))
     }
@@ -436,8 +437,8 @@ impl CaoGpu {
         };
         let group = [(0, parts.2)];
         let pass = super::voxel_list::pass(&parts, &group);
-        let gather = (&pass, self.lao_params);
-        if !submit_paced(gpu, pacer, gather, &chunks, &mut listing.gathered)? {
+        let gathered = &mut listing.gathered;
+        if !submit_paced(gpu, pacer, &pass, self.lao_params, &chunks, gathered)? {
             return Ok(false);
         }
         let count = match listing.count {
@@ -465,6 +466,6 @@ impl CaoGpu {
         };
         let group = [(0, parts.2)];
         let pass = super::voxel_list::pass(&parts, &group);
-        submit_paced(gpu, pacer, (&pass, params), &chunks, &mut listing.traced)
+        submit_paced(gpu, pacer, &pass, params, &chunks, &mut listing.traced)
     }
 }

@@ -515,17 +515,12 @@ impl CaoGpu {
         let c = self.read_counters(gpu)?;
         let t3 = Instant::now();
         let seconds = [(t2 - t1).as_secs_f64(), (t3 - t2).as_secs_f64()];
-        Ok(self.stats_of(lists, (c, listed), seconds))
+        Ok(self.stats_of(lists, c, listed, seconds))
     }
 
     /// A frame's figures from its lists, counters, whether step V ran over the voxel list
     /// (whose length is the voxels ray cast) and stage times (step IV, step V).
-    fn stats_of(
-        &self,
-        lists: &Lists,
-        (c, listed): ([u64; 4], bool),
-        seconds: [f64; 2],
-    ) -> CaoStats {
+    fn stats_of(&self, lists: &Lists, c: [u64; 4], listed: bool, seconds: [f64; 2]) -> CaoStats {
         let dims = self.dims.map(|d| d as usize);
         CaoStats {
             voxels: dims.iter().map(|&d| d as u64).product(),

@@ -282,7 +282,8 @@ impl Bench {
                     &self.vol,
                     &self.frame,
                     Some(&cao.clip),
-                    (&old.image, &changed),
+                    &old.image,
+                    &changed,
                 )?
             }
             _ => self

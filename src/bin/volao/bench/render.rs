@@ -211,7 +211,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
             })
             .collect();
         let timed: Vec<_> = configs.iter().map(|(f, (_, vol))| (*f, vol)).collect();
-        let seconds = interleaved_frames(&gpu, &rc, &timed, (maps.as_ref(), args.runs))?;
+        let seconds = interleaved_frames(&gpu, &rc, &timed, maps.as_ref(), args.runs)?;
         for ((frame, (gradient, _)), seconds) in configs.iter().zip(seconds) {
             let t = Timed {
                 file: name.clone(),
@@ -253,7 +253,8 @@ fn interleaved_frames(
     gpu: &volao::gpu::Gpu,
     rc: &volao::render::gpu::RayCaster,
     configs: &[(volao::render::Frame, &volao::render::gpu::RenderVolume)],
-    (clip, runs): (Option<&volao::clip::gpu::ClipMaps>, usize),
+    clip: Option<&volao::clip::gpu::ClipMaps>,
+    runs: usize,
 ) -> Result<Vec<f64>> {
     for (frame, vol) in configs {
         rc.render(gpu, vol, frame, clip)?;
@@ -335,7 +336,7 @@ pub fn render_bench(args: &RenderBenchArgs) -> Result<()> {
                         ..Default::default()
                     };
                     let frame = super::frame(20.0, settings, size);
-                    let t = interleaved_frames(&gpu, &rc, &[(frame, &vol)], (None, args.runs))?[0];
+                    let t = interleaved_frames(&gpu, &rc, &[(frame, &vol)], None, args.runs)?[0];
                     let steps = box_steps(&frame, &vol.texels, &vol.lut);
                     println!(
                         "| {name} | {size}² | {shading:?} | {} | {:.1} ms | {:.2e} |",
