@@ -13,7 +13,7 @@ use volao::clip::gpu::MapRequest;
 use common::{Rng, data, differing};
 use glam::Vec3;
 use volao::ao::cao::{
-    CaoGpu, CaoMode, CaoVolume, Pose, clip_volume_cpu, lao_on_opacity_cpu, reach_mm,
+    CaoGpu, CaoMode, CaoSetup, CaoVolume, Pose, clip_volume_cpu, lao_on_opacity_cpu, reach_mm,
 };
 use volao::ao::lao::{Rays, lao_lut};
 use volao::ao::rays::RaySet;
@@ -108,7 +108,7 @@ fn scene_with(v: &Volume, preset: Preset, set: RaySet, samples: u32) -> Scene {
         .unwrap_or_else(|e| panic!("{e}"));
     let rays = Rays::uniform(set.directions());
     let make = |bricks: Bricks| {
-        CaoGpu::new(&gpu, &vol, &tf, &rays, samples, 32, bricks, &|_, _| {})
+        CaoGpu::new(&gpu, &vol, setup(&tf, &rays, samples), bricks, &|_, _| {})
             .unwrap_or_else(|e| panic!("{e}"))
     };
     let sparse = Coverage::Readable.bricks(&vol.texels, vol.ranges(), &tf);
@@ -373,6 +373,15 @@ fn exactness(v: &Volume, preset: Preset, set: RaySet, mode: ClipMode, seed: u64,
     assert!(s.listed > 0, "no frame ray cast over the voxel list");
 }
 
+/// CAO's setup with 32 anti-aliasing samples, as these tests run it.
+fn setup<'a>(tf: &'a TransferFunction, rays: &'a Rays, samples: u32) -> CaoSetup<'a> {
+    CaoSetup {
+        tf,
+        rays,
+        samples,
+        msaa: 32,
+    }
+}
 #[test]
 fn cao_equals_lao_every_frame_carving_engine() {
     for set in [RaySet::Six, RaySet::TwentySix] {
@@ -595,10 +604,7 @@ fn readable_bricks_one_voxel_too_tight_break_exactness() {
     let mut wrong = CaoGpu::new(
         &s.gpu,
         &s.vol,
-        &s.tf,
-        &s.rays,
-        SAMPLES,
-        32,
+        setup(&s.tf, &s.rays, SAMPLES),
         bricks,
         &|_, _| {},
     )
@@ -612,10 +618,7 @@ fn readable_bricks_one_voxel_too_tight_break_exactness() {
     let mut wrong_voxels = CaoGpu::new(
         &s.gpu,
         &s.vol,
-        &s.tf,
-        &s.rays,
-        SAMPLES,
-        32,
+        setup(&s.tf, &s.rays, SAMPLES),
         bricks,
         &|_, _| {},
     )
@@ -983,7 +986,7 @@ fn a_carved_pocket_keeps_its_light_with_cao_gpu_and_cpu() {
         .unwrap_or_else(|e| panic!("{e}"));
     let rays = Rays::uniform(RaySet::Fourteen.directions());
     let bricks = Coverage::Readable.bricks(&vol.texels, vol.ranges(), &tf);
-    let mut cao = CaoGpu::new(&gpu, &vol, &tf, &rays, SAMPLES, 32, bricks, &|_, _| {})
+    let mut cao = CaoGpu::new(&gpu, &vol, setup(&tf, &rays, SAMPLES), bricks, &|_, _| {})
         .unwrap_or_else(|e| panic!("{e}"));
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
     // Seen from +y (azimuth 0); the pocket is 20 × 20 mm and 10 deep, its face at y = 26.

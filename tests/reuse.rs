@@ -9,7 +9,7 @@ mod common;
 
 use common::{crop, data, device, texels};
 use glam::Vec3;
-use volao::ao::cao::{CaoGpu, CaoMode, Pose};
+use volao::ao::cao::{CaoGpu, CaoMode, CaoSetup, Pose};
 use volao::ao::lao::Rays;
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Coverage;
@@ -49,8 +49,13 @@ fn scene() -> Scene {
         .unwrap_or_else(|e| panic!("{e}"));
     let bricks = Coverage::Readable.bricks(&vol.texels, vol.ranges(), &tf);
     let rays = Rays::uniform(RaySet::Six.directions());
-    let cao = CaoGpu::new(&gpu, &vol, &tf, &rays, SAMPLES, 32, bricks, &|_, _| {})
-        .unwrap_or_else(|e| panic!("{e}"));
+    let setup = CaoSetup {
+        tf: &tf,
+        rays: &rays,
+        samples: SAMPLES,
+        msaa: 32,
+    };
+    let cao = CaoGpu::new(&gpu, &vol, setup, bricks, &|_, _| {}).unwrap_or_else(|e| panic!("{e}"));
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
     let frame = common::oblique_frame(settings, 96);
     Scene {

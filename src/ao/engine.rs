@@ -6,7 +6,7 @@
 //! ([`crate::gpu::Gpu::stage`]), so an engine is cheap and every computation after the
 //! first reuses them. CLI, offscreen rendering and the viewer all compute AO here.
 
-use super::cao::{CaoGpu, CaoMode, CaoStats};
+use super::cao::{CaoGpu, CaoMode, CaoSetup, CaoStats};
 use super::cone::{ConeGpu, MipPyramid, cone_cpu, opacity};
 use super::fast::{box_radius, cone_reach, map_of, statistics_device, twin_is_faster};
 use super::filter::{FilterGpu, Source};
@@ -298,9 +298,13 @@ impl AoEngine {
         let vol = on_device(g, input, request.tf, &mut uploaded)?;
         let rays = Rays::uniform(s.rays.directions());
         let bricks = request.coverage.bricks(texels, vol.ranges(), request.tf);
-        let mut c = CaoGpu::new(
-            g, vol, request.tf, &rays, s.samples, s.msaa, bricks, progress,
-        )?;
+        let setup = CaoSetup {
+            tf: request.tf,
+            rays: &rays,
+            samples: s.samples,
+            msaa: s.msaa,
+        };
+        let mut c = CaoGpu::new(g, vol, setup, bricks, progress)?;
         let mut stats = None;
         if let Some(clip) = request.clip {
             let reach = c.reach_mm(texels);

@@ -77,10 +77,7 @@ fn intersect_box(origin: Vec3, dir: Vec3, lo: Vec3, hi: Vec3) -> (f32, f32) {
 /// The density and the transfer function as `volume.wgsl` reads them.
 type Reader<'a> = VolumeSampler<'a>;
 
-#[allow(
-    clippy::too_many_arguments,
-    reason = "raycast.wgsl's `shade` and what it reads"
-)]
+/// raycast.wgsl's `shade`.
 fn shade(
     p: &RaycastParams,
     vol: &CpuVolume,

@@ -267,6 +267,18 @@ pub struct CaoGpu {
     pub ray_test_margin_mm: f32,
 }
 
+/// What CAO's `V_PAO` is precomputed for ([`CaoGpu::new`]).
+#[derive(Debug, Clone, Copy)]
+pub struct CaoSetup<'a> {
+    pub tf: &'a TransferFunction,
+    /// The LAO rays, K of them.
+    pub rays: &'a Rays,
+    /// Samples per ray, M.
+    pub samples: u32,
+    /// Extra anti-aliasing samples of step IV, N.
+    pub msaa: u32,
+}
+
 /// What one frame's steps IV and V visit.
 #[derive(Debug, Clone, Default)]
 struct Lists {
@@ -276,18 +288,20 @@ struct Lists {
 
 impl CaoGpu {
     /// Allocates the four CAO volumes (V, V_o, V_PAO, V_AO; V is `vol`'s) and
-    /// precomputes `V_PAO` for `tf` over `bricks` ([`Bricks::dense`]: every voxel).
-    #[allow(clippy::too_many_arguments)]
+    /// precomputes `V_PAO` for `setup` over `bricks` ([`Bricks::dense`]: every voxel).
     pub fn new(
         gpu: &Gpu,
         vol: &GpuVolume,
-        tf: &TransferFunction,
-        rays: &Rays,
-        samples: u32,
-        msaa: u32,
+        setup: CaoSetup<'_>,
         bricks: Bricks,
         progress: &dyn Fn(usize, usize),
     ) -> Result<Self, GpuError> {
+        let CaoSetup {
+            tf,
+            rays,
+            samples,
+            msaa,
+        } = setup;
         let device = &gpu.device;
         if !device
             .features()

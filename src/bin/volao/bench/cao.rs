@@ -241,14 +241,18 @@ impl Bench {
     }
 
     fn cao(&self, set: RaySet, samples: u32, coverage: Coverage) -> Result<CaoGpu> {
+        let setup = volao::ao::cao::CaoSetup {
+            tf: &self.tf,
+            rays: &Rays::uniform(set.directions()),
+            samples,
+            msaa: volao::ao::cao::DEFAULT_MSAA,
+        };
+        let bricks = coverage.bricks(&self.vol.texels, self.vol.ranges(), &self.tf);
         Ok(CaoGpu::new(
             &self.gpu,
             &self.vol,
-            &self.tf,
-            &Rays::uniform(set.directions()),
-            samples,
-            volao::ao::cao::DEFAULT_MSAA,
-            coverage.bricks(&self.vol.texels, self.vol.ranges(), &self.tf),
+            setup,
+            bricks,
             &|_, _| {},
         )?)
     }
