@@ -13,7 +13,8 @@ use volao::clip::gpu::MapRequest;
 use common::{Rng, data, differing};
 use glam::Vec3;
 use volao::ao::cao::{
-    CaoGpu, CaoMode, CaoSetup, CaoVolume, Pose, clip_volume_cpu, lao_on_opacity_cpu, reach_mm,
+    CaoGpu, CaoMode, CaoSetup, CaoVolume, Pose, StepVInputs, clip_volume_cpu, lao_on_opacity_cpu,
+    reach_mm,
 };
 use volao::ao::lao::{Rays, lao_lut};
 use volao::ao::rays::RaySet;
@@ -744,11 +745,14 @@ fn gpu_mask_and_opacity_match_the_cpu_twin() {
                 .dense
                 .read(&s.gpu, CaoVolume::Ambient)
                 .unwrap_or_else(|e| panic!("{e}"));
+            let inputs = StepVInputs {
+                v_o: &g_o,
+                v_m: &g_m,
+                v_pao: &pao,
+            };
             let mut twin = lao_on_opacity_cpu(
                 &s.vol.texels,
-                &g_o,
-                &g_m,
-                &pao,
+                inputs,
                 &s.rays,
                 SAMPLES,
                 CaoMode::Selective,

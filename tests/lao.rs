@@ -6,7 +6,7 @@ mod common;
 use common::{crop, device, texels};
 
 use common::data;
-use volao::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
+use volao::ao::lao::{LaoGpu, LaoSetup, Rays, lao_cpu, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Coverage;
 use volao::render::gpu::RenderVolume;
@@ -226,13 +226,33 @@ fn gpu_matches_cpu_twin_for_every_ray_set() {
         ] {
             let rays = Rays::uniform(set.directions());
             let g = lao
-                .compute(&gpu, &vol, &lut, &rays, 20, &dense, &|_, _| {})
+                .compute(
+                    &gpu,
+                    &vol,
+                    LaoSetup {
+                        lut: &lut,
+                        rays: &rays,
+                        samples: 20,
+                    },
+                    &dense,
+                    &|_, _| {},
+                )
                 .unwrap_or_else(|e| panic!("{e}"));
             let c = lao_cpu(&t, &lut, &rays, 20, &dense, &|_, _| {});
             // Sparse: the readable voxels bit for bit (empty samples skipped, their
             // transmittance still added in order), the others 1; on the GPU and the twin.
             let gs = lao
-                .compute(&gpu, &vol, &lut, &rays, 20, &sparse, &|_, _| {})
+                .compute(
+                    &gpu,
+                    &vol,
+                    LaoSetup {
+                        lut: &lut,
+                        rays: &rays,
+                        samples: 20,
+                    },
+                    &sparse,
+                    &|_, _| {},
+                )
                 .unwrap_or_else(|e| panic!("{e}"));
             let cs = lao_cpu(&t, &lut, &rays, 20, &sparse, &|_, _| {});
             let readable = sparse.readable_mask(&t);
@@ -311,7 +331,17 @@ fn sparse_lao_renders_the_dense_image_and_one_voxel_tighter_loses_readable_voxel
     let dense_bricks = Coverage::Dense.bricks(&t, vol.ranges(), &tf);
     let mut render = |bricks: &volao::ao::sparse::Bricks| {
         let a = lao
-            .compute(&gpu, &vol, &lut, &rays, 12, bricks, &|_, _| {})
+            .compute(
+                &gpu,
+                &vol,
+                LaoSetup {
+                    lut: &lut,
+                    rays: &rays,
+                    samples: 12,
+                },
+                bricks,
+                &|_, _| {},
+            )
             .unwrap_or_else(|e| panic!("{e}"));
         vol.set_ambient_occlusion(&gpu, &a);
         let img = rc
@@ -368,7 +398,12 @@ fn ray_cells_without_their_apron_change_the_sums() {
     tight.rays.occupied = BlockRanges::of_cells(&t, RAY_CELL, 0).occupancy(&t, &lut);
     assert_ne!(tight.rays.occupied, every.rays.occupied);
     let run = |b: &volao::ao::sparse::Bricks| {
-        lao.compute(&gpu, &vol, &lut, &rays, 12, b, &|_, _| {})
+        let setup = LaoSetup {
+            lut: &lut,
+            rays: &rays,
+            samples: 12,
+        };
+        lao.compute(&gpu, &vol, setup, b, &|_, _| {})
             .unwrap_or_else(|e| panic!("{e}"))
     };
     let want = run(&dense);

@@ -10,7 +10,7 @@ use super::cao::{CaoGpu, CaoMode, CaoSetup, CaoStats};
 use super::cone::{ConeGpu, MipPyramid, cone_cpu, opacity};
 use super::fast::{box_radius, cone_reach, map_of, statistics_device, twin_is_faster};
 use super::filter::{FilterGpu, Source};
-use super::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
+use super::lao::{LaoGpu, LaoSetup, Rays, lao_cpu, lao_lut};
 use super::sparse::Coverage;
 use super::vao::{PositionalAo, VaoGpu, VaoInputs, vao_cpu};
 use super::{AoMethod, AoSettings};
@@ -194,8 +194,17 @@ impl AoEngine {
                 let rays = Rays::uniform(s.rays.directions());
                 let lut = lao_lut(tf, texels);
                 let bricks = request.coverage.bricks(texels, vol.ranges(), tf);
-                g.stage::<LaoGpu>()?
-                    .compute(g, vol, &lut, &rays, s.samples, &bricks, progress)
+                g.stage::<LaoGpu>()?.compute(
+                    g,
+                    vol,
+                    LaoSetup {
+                        lut: &lut,
+                        rays: &rays,
+                        samples: s.samples,
+                    },
+                    &bricks,
+                    progress,
+                )
             }
             AoMethod::Vao => {
                 let inputs = VaoInputs::new(g, texels, tf, &s.vao)?;

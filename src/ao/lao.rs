@@ -201,6 +201,15 @@ pub fn lao_cpu(
     out
 }
 
+/// What LAO computes with ([`LaoGpu::compute`]): the opacity table ([`lao_lut`]), the
+/// rays and the samples per ray, M.
+#[derive(Debug, Clone, Copy)]
+pub struct LaoSetup<'a> {
+    pub lut: &'a Lut,
+    pub rays: &'a Rays,
+    pub samples: u32,
+}
+
 /// Long-lived LAO compute state: its pipelines, by what they skip.
 #[derive(Debug)]
 pub struct LaoGpu {
@@ -243,17 +252,15 @@ impl LaoGpu {
     /// `V_PAO` of an uploaded volume over the voxels of `bricks` the ray caster can
     /// read ([`Bricks::voxel_list`]; 1 elsewhere), in submissions of whole groups of 512
     /// of them, each read back. `progress(done, total)` counts groups.
-    #[allow(clippy::too_many_arguments)]
     pub fn compute(
         &self,
         gpu: &Gpu,
         vol: &GpuVolume,
-        lut: &Lut,
-        rays: &Rays,
-        samples: u32,
+        setup: LaoSetup<'_>,
         bricks: &Bricks,
         progress: &dyn Fn(usize, usize),
     ) -> Result<Vec<f32>, GpuError> {
+        let LaoSetup { lut, rays, samples } = setup;
         let device = &gpu.device;
         let texels = &vol.texels;
         let dims = texels.dims;

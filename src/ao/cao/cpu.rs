@@ -68,19 +68,25 @@ pub fn clip_volume_cpu(
     per_voxel.into_iter().unzip()
 }
 
-/// Step V on the CPU: `V_AO` from `V_o`, `V_m` and `V_PAO` (twin of `cao_lao.wgsl`),
-/// for every voxel, with rays stepping over the empty cells of `bricks`.
-#[allow(clippy::too_many_arguments)]
+/// What CAO's step V reads, x fastest: `V_o`, the mask `V_m` and `V_PAO`.
+#[derive(Debug, Clone, Copy)]
+pub struct StepVInputs<'a> {
+    pub v_o: &'a [f32],
+    pub v_m: &'a [f32],
+    pub v_pao: &'a [f32],
+}
+
+/// Step V on the CPU: `V_AO` from `inputs` (twin of `cao_lao.wgsl`), for every voxel,
+/// with rays stepping over the empty cells of `bricks`.
 pub fn lao_on_opacity_cpu(
     texels: &VolumeTexels,
-    v_o: &[f32],
-    v_m: &[f32],
-    v_pao: &[f32],
+    inputs: StepVInputs<'_>,
     rays: &Rays,
     samples: u32,
     mode: CaoMode,
     bricks: &Bricks,
 ) -> Vec<f32> {
+    let StepVInputs { v_o, v_m, v_pao } = inputs;
     let dims = texels.dims;
     let [nx, ny, nz] = dims;
     let extent = Vec3::from(texels.extent());

@@ -43,7 +43,7 @@ use glam::Vec3;
 use std::time::Instant;
 
 pub use super::settings::DEFAULT_MSAA;
-pub use cpu::{clip_volume_cpu, lao_on_opacity_cpu};
+pub use cpu::{StepVInputs, clip_volume_cpu, lao_on_opacity_cpu};
 pub use frame::{CaoFrame, Pose};
 pub use pipelines::CaoPipelines;
 pub use voxel_list::MAX_LIST_BYTES_PER_VOXEL;

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 use volao::ao::cone::{ConeGpu, ConePreset, ConeSet, MipPyramid, cone_cpu, opacity};
 use volao::ao::filter::{self, AmbientMap, FilterCpu, FilterGpu, Source, StatisticSource};
-use volao::ao::lao::{LaoGpu, Rays, lao_lut};
+use volao::ao::lao::{LaoGpu, LaoSetup, Rays, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::Bricks;
 use volao::texels::gpu::GpuVolume;
@@ -245,15 +245,13 @@ fn quality(
     let truth = match cached {
         Some(t) => t,
         None => {
-            let t = lao.compute(
-                gpu,
-                &evol,
-                &lut,
-                &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
-                m,
-                &Bricks::dense(evol.texels.dims),
-                &|_, _| {},
-            )?;
+            let setup = LaoSetup {
+                lut: &lut,
+                rays: &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
+                samples: m,
+            };
+            let every = Bricks::dense(evol.texels.dims);
+            let t = lao.compute(gpu, &evol, setup, &every, &|_, _| {})?;
             if let Some(p) = &args.truth_cache {
                 std::fs::write(p, bytemuck::cast_slice(&t))?;
             }
@@ -319,9 +317,29 @@ fn quality(
     let dense = Bricks::dense(evol.texels.dims);
     for set in [RaySet::Six, RaySet::Fourteen, RaySet::TwentySix] {
         let rays = Rays::uniform(set.directions());
-        let a = lao.compute(gpu, &evol, &lut, &rays, m, &dense, &|_, _| {})?;
+        let a = lao.compute(
+            gpu,
+            &evol,
+            LaoSetup {
+                lut: &lut,
+                rays: &rays,
+                samples: m,
+            },
+            &dense,
+            &|_, _| {},
+        )?;
         let g = median_ms(1, || {
-            lao.compute(gpu, &evol, &lut, &rays, m, &dense, &|_, _| {})?;
+            lao.compute(
+                gpu,
+                &evol,
+                LaoSetup {
+                    lut: &lut,
+                    rays: &rays,
+                    samples: m,
+                },
+                &dense,
+                &|_, _| {},
+            )?;
             Ok(())
         })?;
         let c = median_ms(1, || {

@@ -40,7 +40,7 @@ fn pixel_rms(a: &volao::render::Image, b: &volao::render::Image) -> f64 {
 
 /// `volao bench lao`: the CAO paper's Tables 5–6 on the Engine, and LAO throughput.
 pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
-    use volao::ao::lao::{LaoGpu, Rays, lao_cpu, lao_lut};
+    use volao::ao::lao::{LaoGpu, LaoSetup, Rays, lao_cpu, lao_lut};
     use volao::ao::rays::RaySet;
     use volao::render::gpu::{RayCaster, RenderVolume};
     use volao::render::{RenderSettings, Shading};
@@ -67,12 +67,15 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     let voxels = vol.texels.dims.iter().product::<usize>() as f64;
     let run = |vol: &RenderVolume, set: RaySet| -> Result<(Vec<f32>, f64)> {
         let start = Instant::now();
+        let setup = LaoSetup {
+            lut: &lut,
+            rays: &Rays::uniform(set.directions()),
+            samples: m,
+        };
         let a = lao.compute(
             &gpu,
             vol,
-            &lut,
-            &Rays::uniform(set.directions()),
-            m,
+            setup,
             &Bricks::dense(vol.texels.dims),
             &|_, _| {},
         )?;
@@ -157,12 +160,15 @@ pub fn lao_bench(args: &LaoBenchArgs) -> Result<()> {
     let t_cpu = start.elapsed().as_secs_f64();
     let part_vol = RenderVolume::from_texels(&gpu, texels.clone(), &tf, 0.5)?;
     let start = Instant::now();
+    let setup = LaoSetup {
+        lut: &part_lut,
+        rays: &rays,
+        samples: m,
+    };
     lao.compute(
         &gpu,
         &part_vol,
-        &part_lut,
-        &rays,
-        m,
+        setup,
         &Bricks::dense(part_vol.texels.dims),
         &|_, _| {},
     )?;

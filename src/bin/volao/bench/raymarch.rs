@@ -92,15 +92,15 @@ fn accuracy(bench: Bench) -> Result<()> {
     let small_vol = RenderVolume::from_texels(gpu, small.clone(), tf, 0.5)?;
     let voxels = small.dims.iter().product::<usize>() as f64;
     let start = Instant::now();
-    let truth = gpu.stage::<LaoGpu>()?.compute(
-        gpu,
-        &small_vol,
-        &lao_lut(tf, &small),
-        &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
-        volao::ao::lao::DEFAULT_SAMPLES,
-        &volao::ao::sparse::Bricks::dense(small.dims),
-        &|_, _| {},
-    )?;
+    let setup = volao::ao::lao::LaoSetup {
+        lut: &lao_lut(tf, &small),
+        rays: &Rays::uniform(RaySet::GROUND_TRUTH.directions()),
+        samples: volao::ao::lao::DEFAULT_SAMPLES,
+    };
+    let every = volao::ao::sparse::Bricks::dense(small.dims);
+    let truth = gpu
+        .stage::<LaoGpu>()?
+        .compute(gpu, &small_vol, setup, &every, &|_, _| {})?;
     let t_truth = start.elapsed().as_secs_f64();
     println!();
     println!(
