@@ -317,29 +317,14 @@ fn quality(
     let dense = Bricks::dense(evol.texels.dims);
     for set in [RaySet::Six, RaySet::Fourteen, RaySet::TwentySix] {
         let rays = Rays::uniform(set.directions());
-        let a = lao.compute(
-            gpu,
-            &evol,
-            LaoSetup {
-                lut: &lut,
-                rays: &rays,
-                samples: m,
-            },
-            &dense,
-            &|_, _| {},
-        )?;
+        let setup = LaoSetup {
+            lut: &lut,
+            rays: &rays,
+            samples: m,
+        };
+        let a = lao.compute(gpu, &evol, setup, &dense, &|_, _| {})?;
         let g = median_ms(1, || {
-            lao.compute(
-                gpu,
-                &evol,
-                LaoSetup {
-                    lut: &lut,
-                    rays: &rays,
-                    samples: m,
-                },
-                &dense,
-                &|_, _| {},
-            )?;
+            lao.compute(gpu, &evol, setup, &dense, &|_, _| {})?;
             Ok(())
         })?;
         let c = median_ms(1, || {
