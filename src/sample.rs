@@ -105,11 +105,6 @@ impl<'a> VolumeSampler<'a> {
     pub fn opacity_at(&self, uvw: Vec3) -> f32 {
         self.opacity(self.value_at(uvw))
     }
-
-    /// `data_value`: the stage's value of texel value `value`.
-    pub fn data_value(&self, value: f32) -> f32 {
-        value * self.map.value[0] + self.map.value[1]
-    }
 }
 
 /// Distance between samples along an LAO ray (`ao::lao`, `ao::cao`).

@@ -225,34 +225,19 @@ fn gpu_matches_cpu_twin_for_every_ray_set() {
             RaySet::Fibonacci(32),
         ] {
             let rays = Rays::uniform(set.directions());
+            let setup = LaoSetup {
+                lut: &lut,
+                rays: &rays,
+                samples: 20,
+            };
             let g = lao
-                .compute(
-                    &gpu,
-                    &vol,
-                    LaoSetup {
-                        lut: &lut,
-                        rays: &rays,
-                        samples: 20,
-                    },
-                    &dense,
-                    &|_, _| {},
-                )
+                .compute(&gpu, &vol, setup, &dense, &|_, _| {})
                 .unwrap_or_else(|e| panic!("{e}"));
             let c = lao_cpu(&t, &lut, &rays, 20, &dense, &|_, _| {});
             // Sparse: the readable voxels bit for bit (empty samples skipped, their
             // transmittance still added in order), the others 1; on the GPU and the twin.
             let gs = lao
-                .compute(
-                    &gpu,
-                    &vol,
-                    LaoSetup {
-                        lut: &lut,
-                        rays: &rays,
-                        samples: 20,
-                    },
-                    &sparse,
-                    &|_, _| {},
-                )
+                .compute(&gpu, &vol, setup, &sparse, &|_, _| {})
                 .unwrap_or_else(|e| panic!("{e}"));
             let cs = lao_cpu(&t, &lut, &rays, 20, &sparse, &|_, _| {});
             let readable = sparse.readable_mask(&t);

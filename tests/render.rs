@@ -428,18 +428,13 @@ fn gpu_matches_cpu_twin_with_lao() {
     // Sparse, as rendering computes it: the readable voxels, rays stepping over empty bricks.
     let bricks = volao::ao::sparse::Coverage::Readable.bricks(&texels, vol.ranges(), &tf);
     assert!(bricks.readable.contains(&0) && bricks.occupied.contains(&0));
+    let setup = volao::ao::lao::LaoSetup {
+        lut: &lut,
+        rays: &rays,
+        samples: 10,
+    };
     let a = lao
-        .compute(
-            &gpu,
-            &vol,
-            volao::ao::lao::LaoSetup {
-                lut: &lut,
-                rays: &rays,
-                samples: 10,
-            },
-            &bricks,
-            &|_, _| {},
-        )
+        .compute(&gpu, &vol, setup, &bricks, &|_, _| {})
         .unwrap_or_else(|e| panic!("{e}"));
     vol.set_ambient_occlusion(&gpu, &a);
     let g = rc
@@ -594,18 +589,13 @@ fn ao_read_off_the_surface_keeps_a_flat_face_bright_and_darkens_a_slot_gpu_and_c
     let rays = Rays::uniform(RaySet::Fourteen.directions());
     let lut = lao_lut(&tf, &t);
     let bricks = volao::ao::sparse::Coverage::Readable.bricks(&t, vol.ranges(), &tf);
+    let setup = volao::ao::lao::LaoSetup {
+        lut: &lut,
+        rays: &rays,
+        samples: 12,
+    };
     let a = lao
-        .compute(
-            &gpu,
-            &vol,
-            volao::ao::lao::LaoSetup {
-                lut: &lut,
-                rays: &rays,
-                samples: 12,
-            },
-            &bricks,
-            &|_, _| {},
-        )
+        .compute(&gpu, &vol, setup, &bricks, &|_, _| {})
         .unwrap_or_else(|e| panic!("{e}"));
     vol.set_ambient_occlusion(&gpu, &a);
     let (mut cv, occ) = cpu::prepare(&t, &vol.lut);

@@ -106,11 +106,6 @@ impl RenderVolume {
         }
     }
 
-    /// The [`GpuVolume`] the AO stages read.
-    pub fn volume(&self) -> &GpuVolume {
-        &self.volume
-    }
-
     /// Builds (`on`) or drops the gradient volume ([`super::gradient`]); whether one is
     /// bound afterwards (a volume whose gradient volume does not fit keeps none). The
     /// pixels are the same up to the gradient's f16 rounding.
