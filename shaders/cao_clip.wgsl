@@ -35,9 +35,10 @@ const CLIPPED: f32 = -2.0;
 @group(0) @binding(6) var v_pao: texture_3d<f32>;
 @group(0) @binding(7) var<storage, read> rays: array<vec4<f32>>;  // LAO rays: xyz direction, w weight
 
-// TF_o: the transfer function's opacity (for a 1 mm step) of the voxel itself.
+// TF_o: the transfer function's opacity (for a 1 mm step) of the voxel itself, with a
+// segmentation's weight.
 fn voxel_opacity(v: vec3<u32>) -> f32 {
-    return opacity(value_of_voxel(vec3<i32>(v)));
+    return opacity_of_voxel(vec3<i32>(v));
 }
 
 fn position_mm(v: vec3<u32>, offset: vec3<f32>) -> vec3<f32> {
@@ -74,10 +75,10 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
     }
     // This layer's voxel (0, 0): the lattice's first point.
     let origin = brick_voxel(wid, vec3<u32>(0u)).xyz;
-    if SHARED_CORNERS {
+    if SHARED_CORNERS && !SEGMENTS {
         for (var i = lid.x + 8u * lid.y; i < 162u; i = i + 64u) {
             let l = origin + vec3<u32>(i % 9u, (i / 9u) % 9u, i / 81u);
-            corners[i] = classify_bits(position_mm(l, vec3<f32>(-0.5)));
+            corners[i] = classify_bits(position_mm(l, vec3<f32>(-0.5)), 0xffffffffu);
         }
     }
     workgroupBarrier();
@@ -90,7 +91,17 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
 }
 
 // clip_classify's (visible, affected) as bits 0 and 1; visible alone with CENTRE_REACH.
-fn classify_bits(pos: vec3<f32>) -> u32 {
+// With a segmentation a voxel is visible where the shapes that carve its class leave it
+// (`carve`: clip_visible_for); affected as without one (any shape's dilation: what a
+// shape removes of its neighbours may change its LAO).
+fn classify_bits(pos: vec3<f32>, carve: u32) -> u32 {
+    if SEGMENTS {
+        let visible = clip_visible_for(pos, carve);
+        if CENTRE_REACH {
+            return u32(visible);
+        }
+        return u32(visible) | (u32(clip_classify(pos).y) << 1u);
+    }
     if CENTRE_REACH {
         return u32(clip_visible(pos));
     }
@@ -99,13 +110,14 @@ fn classify_bits(pos: vec3<f32>) -> u32 {
 }
 
 // Corner k (bit a of k: +½ on axis a, else −½) of voxel v, whose corner (−½, −½, −½) is
-// `corners[c]` when they are shared.
-fn corner_bits(v: vec3<u32>, c: u32, k: u32) -> u32 {
-    if SHARED_CORNERS {
+// `corners[c]` when they are shared (never with a segmentation: the voxels sharing a
+// corner may be of classes different shapes carve).
+fn corner_bits(v: vec3<u32>, c: u32, k: u32, carve: u32) -> u32 {
+    if SHARED_CORNERS && !SEGMENTS {
         return corners[c + (k & 1u) + 9u * ((k >> 1u) & 1u) + 81u * ((k >> 2u) & 1u)];
     }
     let offset = vec3<f32>(f32(k & 1u), f32((k >> 1u) & 1u), f32((k >> 2u) & 1u)) - 0.5;
-    return classify_bits(position_mm(v, offset));
+    return classify_bits(position_mm(v, offset), carve);
 }
 
 // Step IV for voxel v, whose corner (−½, −½, −½) is `corners[c]` when they are shared.
@@ -121,11 +133,15 @@ fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
     var dilated = 0u;
     // The centre and the 8 corners of the voxel.
     let centre = position_mm(v, vec3<f32>(0.0));
-    let t = clip_classify(centre);
+    let carve = carved_by_voxel(vec3<i32>(v));
+    var t = clip_classify(centre);
+    if SEGMENTS {
+        t.x = clip_visible_for(centre, carve);
+    }
     visible = visible + u32(t.x);
     dilated = dilated + u32(t.y);
     for (var k = 0u; k < 8u; k = k + 1u) {
-        let bits = corner_bits(v, c, k);
+        let bits = corner_bits(v, c, k, carve);
         visible = visible + (bits & 1u);
         dilated = dilated + (bits >> 1u);
     }
@@ -135,7 +151,7 @@ fn classify_voxel(v: vec3<u32>, c: u32, reached: bool) {
         opacity = voxel_opacity(v);
     } else if visible > 0u {
         for (var k = 0u; k < n; k = k + 1u) {
-            let bits = classify_bits(position_mm(v, msaa[k].xyz));
+            let bits = classify_bits(position_mm(v, msaa[k].xyz), carve);
             visible = visible + (bits & 1u);
             dilated = dilated + (bits >> 1u);
         }

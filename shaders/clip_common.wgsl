@@ -87,3 +87,26 @@ fn clip_classify(pos: vec3<f32>) -> vec2<bool> {
 fn clip_visible(pos: vec3<f32>) -> bool {
     return clip_classify(pos).x;
 }
+
+// Whether `pos` in a voxel that the shapes of `carve` (bit s) cut is visible: outside
+// every carving shape among them and, if some of them probe, inside one of those (a
+// segmentation's segment-aware carving, texels::segments). `carve` = every bit:
+// clip_visible.
+fn clip_visible_for(pos: vec3<f32>, carve: u32) -> bool {
+    var carved = false;
+    var probes = false;
+    var probed = false;
+    for (var s = 0u; s < clip_shapes(); s = s + 1u) {
+        if ((carve >> s) & 1u) == 0u {
+            continue;
+        }
+        let inside = clip_test(s, pos).inside;
+        if clip.shapes[s].info.x == 0u {
+            carved = carved || inside;
+        } else {
+            probes = true;
+            probed = probed || inside;
+        }
+    }
+    return !carved && (!probes || probed);
+}

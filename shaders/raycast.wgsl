@@ -174,6 +174,17 @@ fn gradient(uvw: vec3<f32>) -> vec3<f32> {
     ) / (2.0 * p.voxel_uvw.w);
 }
 
+// The gradient of the segmentation's opacity weight by central differences one voxel
+// either side, per mm (CPU twin: render::cpu::shade).
+fn segment_gradient(uvw: vec3<f32>) -> vec3<f32> {
+    let d = p.voxel_uvw.xyz;
+    return vec3<f32>(
+        segment_look_at(uvw + vec3<f32>(d.x, 0.0, 0.0)).a - segment_look_at(uvw - vec3<f32>(d.x, 0.0, 0.0)).a,
+        segment_look_at(uvw + vec3<f32>(0.0, d.y, 0.0)).a - segment_look_at(uvw - vec3<f32>(0.0, d.y, 0.0)).a,
+        segment_look_at(uvw + vec3<f32>(0.0, 0.0, d.z)).a - segment_look_at(uvw - vec3<f32>(0.0, 0.0, d.z)).a,
+    ) / (2.0 * p.voxel_uvw.w);
+}
+
 // The lit colour of a sample (CPU twin: render::cpu::light), docs/algorithms.md "Shading
 // with ambient occlusion". By default the AO factor A_s = clamp(1 − s(1 − min(A / A_open, 1)), 0, 1)
 // (A_open = ao.w: what the AO method gives an open flat surface, so such a surface keeps
@@ -206,9 +217,20 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>, cut: bool) -> vec3<f32
     // voxel is occluded.
     var ao_at = uvw;
     if phong || ((AO_VOLUME || (LIVE_VAO && extras.flags.x != 0u)) && p.ao.z > 0.0) {
-        let g = gradient(uvw);
+        var g = gradient(uvw);
         // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
-        let strength = length(g) * abs(volume_map.lut.x) * p.voxel_uvw.w * p.edge.x;
+        var strength = length(g) * abs(volume_map.lut.x) * p.voxel_uvw.w * p.edge.x;
+        if SEGMENTS {
+            // A segment's boundary the density does not show (an organ in tissue of the
+            // same HU) is lit by the gradient of the segmentation's weight where that
+            // is the stronger edge (a full step of weight across a voxel is one edge).
+            let gw = segment_gradient(uvw);
+            let sw = length(gw) * p.voxel_uvw.w * 2.0;
+            if sw > strength {
+                g = gw;
+                strength = sw;
+            }
+        }
         var edge = clamp(strength, 0.0, 1.0);
         if MODE == MODE_ISO && strength > 0.0 {
             edge = 1.0;  // an isosurface is a surface however soft its gradient
@@ -261,8 +283,23 @@ fn mode_value(uvw: vec3<f32>) -> f32 {
     return value_at(uvw) * p.mode.y + p.mode.z;
 }
 
+// Whether the clip shapes leave the sample at `pos` (uvw `uvw`): with a segmentation,
+// those that carve its voxel's class.
+fn unclipped(pos: vec3<f32>, uvw: vec3<f32>) -> bool {
+    if SEGMENTS {
+        return clip_visible_for(pos, carved_by_at(uvw));
+    }
+    return clip_visible(pos);
+}
+
+// Whether a projection or an isosurface sees the sample at `pos`: unclipped, and not in
+// a hidden segment (weight below ½).
 fn visible(pos: vec3<f32>) -> bool {
-    return !CLIP || clip.counts.x == 0u || clip_visible(pos);
+    let uvw = pos / (2.0 * p.box_half.xyz) + 0.5;
+    if SEGMENTS && segment_look_at(uvw).a < 0.5 {
+        return false;
+    }
+    return !CLIP || clip.counts.x == 0u || unclipped(pos, uvw);
 }
 
 // MIP, MinIP or average of the mode value over the ray's unclipped samples: opaque
@@ -459,7 +496,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // hit is on a cut face.
                 let lo = origin + dir * hit.y;
                 let cut = !visible(lo) && mode_value(lo / (2.0 * half) + 0.5) >= 0.0;
-                result = vec4<f32>(shade(classify(value_at(uvw)).rgb, uvw, -dir, cut), 1.0);
+                result = vec4<f32>(shade(classify_at(uvw, value_at(uvw)).rgb, uvw, -dir, cut), 1.0);
             }
         } else {
             result = project(origin, dir, t_enter, t_exit, offset, max_steps, mode);
@@ -530,7 +567,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     break;
                 }
                 // Shadow-test clipping (CAO step VI): clipped samples are empty.
-                if CLIP && clip.counts.x > 0u && !clip_visible(origin + dir * t) {
+                if CLIP && clip.counts.x > 0u && !unclipped(origin + dir * t, uvw) {
                     // Only shading that fetches (FIND) looks at cut faces: a carved sample
                     // in a block that may have opacity (with skipping, every sample here).
                     if FIND && ((SKIPPING && p.step.w != 0.0) || textureLoad(occupancy, block_at(uvw), 0).r != 0u) {
@@ -540,7 +577,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     continue;
                 }
                 let norm = value_at(uvw);
-                rgba = classify(norm);
+                rgba = classify_at(uvw, norm);
                 if rgba.a > 0.0 {
                     found = true;
                     break;

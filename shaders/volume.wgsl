@@ -3,7 +3,8 @@
 // the texel texture, its sampler, the value map and the transfer function's table. A
 // stage binds the density (the ray caster, LAO, CAO's clip and readable test, gradient,
 // box statistics, ambient maps) or the f16 copy of it (light) with the map that goes
-// with it, and the table baked for its own step.
+// with it, and the table baked for its own step. A segmentation beside the density
+// (texels::segments) is bindings 4–6, read only where a pipeline sets SEGMENTS.
 
 // Mirrors texels::gpu_data::VolumeMap.
 struct VolumeMap {
@@ -15,6 +16,17 @@ struct VolumeMap {
 @group(3) @binding(1) var volume_sampler: sampler;
 @group(3) @binding(2) var<uniform> volume_map: VolumeMap;
 @group(3) @binding(3) var<storage, read> volume_lut: array<vec4<f32>>;
+
+// Whether a segmentation is read (texels::segments; a pipeline variant). Off, the
+// functions below read the density alone, as without one.
+override SEGMENTS: bool = false;
+// Per voxel: the class colour × its opacity weight, and the weight (filtered).
+@group(3) @binding(4) var segment_look: texture_3d<f32>;
+// Per voxel: its class (a combination of segments), read nearest.
+@group(3) @binding(5) var segment_classes: texture_3d<u32>;
+// Per class: the clip shapes that carve it (bit s), flags (bit 0: its colour replaces
+// the transfer function's), packed RGB, unused (texels::segments::ClassLook::gpu).
+@group(3) @binding(6) var<storage, read> segment_table: array<vec4<u32>>;
 
 // The texel value at texture coordinates `uvw`, trilinear, clamped at the edges.
 fn value_at(uvw: vec3<f32>) -> f32 {
@@ -53,9 +65,74 @@ fn opacity(value: f32) -> f32 {
     return mix(volume_lut[i0].a, volume_lut[i1].a, t - floor(t));
 }
 
+// The segmentation's look at `uvw`: colour × weight and weight, trilinear (1 without one).
+fn segment_look_at(uvw: vec3<f32>) -> vec4<f32> {
+    if SEGMENTS {
+        return textureSampleLevel(segment_look, volume_sampler, uvw, 0.0);
+    }
+    return vec4<f32>(1.0);
+}
+
+// The segmentation's opacity weight of voxel `k` (1 without one).
+fn segment_weight_of_voxel(k: vec3<i32>) -> f32 {
+    if SEGMENTS {
+        return textureLoad(segment_look, k, 0).a;
+    }
+    return 1.0;
+}
+
+// The class of the voxel nearest to `uvw` (0 without a segmentation).
+fn segment_class_at(uvw: vec3<f32>) -> u32 {
+    if SEGMENTS {
+        let d = textureDimensions(segment_classes);
+        let k = min(vec3<u32>(max(uvw, vec3<f32>(0.0)) * vec3<f32>(d)), d - vec3<u32>(1u));
+        return textureLoad(segment_classes, k, 0).r;
+    }
+    return 0u;
+}
+
+// The clip shapes (bit s) that carve the voxel nearest to `uvw`: every one without a
+// segmentation.
+fn carved_by_at(uvw: vec3<f32>) -> u32 {
+    if SEGMENTS {
+        return segment_table[segment_class_at(uvw)].x;
+    }
+    return 0xffffffffu;
+}
+
+// The same for voxel `k`.
+fn carved_by_voxel(k: vec3<i32>) -> u32 {
+    if SEGMENTS {
+        return segment_table[textureLoad(segment_classes, k, 0).r].x;
+    }
+    return 0xffffffffu;
+}
+
+// The colour and opacity at `uvw` of texel value `value` (value_at(uvw)): the transfer
+// function's, with a segmentation's weight on the opacity and its colour tinting
+// (multiplying) or replacing the transfer function's.
+fn classify_at(uvw: vec3<f32>, value: f32) -> vec4<f32> {
+    let tf = classify(value);
+    if !SEGMENTS {
+        return tf;
+    }
+    let look = segment_look_at(uvw);
+    if look.a <= 0.0 {
+        return vec4<f32>(tf.rgb, 0.0);
+    }
+    let c = look.rgb / look.a;
+    let replace = f32(segment_table[segment_class_at(uvw)].y & 1u);
+    return vec4<f32>(mix(tf.rgb * c, c, replace), tf.a * look.a);
+}
+
 // The opacity at texture coordinates `uvw` (inside the box).
 fn opacity_at(uvw: vec3<f32>) -> f32 {
-    return opacity(value_at(uvw));
+    return opacity(value_at(uvw)) * segment_look_at(uvw).a;
+}
+
+// The opacity of voxel `k`, unfiltered.
+fn opacity_of_voxel(k: vec3<i32>) -> f32 {
+    return opacity(value_of_voxel(k)) * segment_weight_of_voxel(k);
 }
 
 // The data's value (the volume's own units) at texel value `value`.

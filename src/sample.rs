@@ -6,6 +6,7 @@
 //! `render::cpu`, …) samples through these, so the GPU and CPU paths read the same values.
 
 use crate::texels::gpu_data::VolumeMap;
+use crate::texels::segments::{REPLACE, SegmentTexels};
 use crate::texels::{TexelFormat, VolumeTexels};
 use crate::tf::{Lut, TransferFunction, correct_opacity};
 use glam::{Vec3, Vec4};
@@ -52,6 +53,69 @@ pub struct VolumeSampler<'a> {
     pub dims: [usize; 3],
     pub map: VolumeMap,
     pub table: &'a [[f32; 4]],
+    /// A segmentation read beside the density (`SEGMENTS` in `volume.wgsl`).
+    pub segments: Option<&'a SegmentSampler>,
+}
+
+/// The CPU twin of a segmentation as `volume.wgsl` reads it (bindings 4–6): the look's
+/// channels as the filtered texture returns them, the classes and the class table.
+#[derive(Debug, Clone)]
+pub struct SegmentSampler {
+    pub dims: [usize; 3],
+    /// Colour × weight (r, g, b) and weight, each in [0, 1].
+    look: [Vec<f32>; 4],
+    classes: Vec<u16>,
+    table: Vec<[u32; 4]>,
+}
+
+impl SegmentSampler {
+    pub fn new(s: &SegmentTexels) -> Self {
+        SegmentSampler {
+            dims: s.dims,
+            look: std::array::from_fn(|c| s.look.iter().map(|l| l[c] as f32 / 255.0).collect()),
+            classes: s.classes.clone(),
+            table: s.gpu_table(),
+        }
+    }
+
+    fn index(&self, k: [usize; 3]) -> usize {
+        k[0] + self.dims[0] * (k[1] + self.dims[1] * k[2])
+    }
+
+    /// `segment_look_at`: colour × weight and weight at `uvw`, trilinear.
+    pub fn look_at(&self, uvw: Vec3) -> Vec4 {
+        Vec4::from_array(std::array::from_fn(|c| {
+            trilinear(&self.look[c], self.dims, uvw)
+        }))
+    }
+
+    /// `segment_weight_of_voxel`.
+    pub fn weight_of_voxel(&self, k: [usize; 3]) -> f32 {
+        self.look[3][self.index(k)]
+    }
+
+    /// `segment_class_at`: the class of the voxel nearest to `uvw`.
+    pub fn class_at(&self, uvw: Vec3) -> usize {
+        let k: [usize; 3] = std::array::from_fn(|a| {
+            ((uvw[a].max(0.0) * self.dims[a] as f32) as usize).min(self.dims[a] - 1)
+        });
+        self.classes[self.index(k)] as usize
+    }
+
+    /// `carved_by_at`: the clip shapes (bit s) that carve the voxel nearest to `uvw`.
+    pub fn carved_by_at(&self, uvw: Vec3) -> u32 {
+        self.table[self.class_at(uvw)][0]
+    }
+
+    /// `carved_by_voxel`.
+    pub fn carved_by_voxel(&self, k: [usize; 3]) -> u32 {
+        self.table[self.classes[self.index(k)] as usize][0]
+    }
+
+    /// Whether the class at `uvw` replaces the transfer function's colour.
+    fn replaces_at(&self, uvw: Vec3) -> bool {
+        self.table[self.class_at(uvw)][1] & REPLACE != 0
+    }
 }
 
 impl<'a> VolumeSampler<'a> {
@@ -63,7 +127,13 @@ impl<'a> VolumeSampler<'a> {
             dims: texels.dims,
             map: VolumeMap::new(texels, lut),
             table: &lut.rgba,
+            segments: None,
         }
+    }
+
+    /// The same reading `segments` beside the density.
+    pub fn with_segments(self, segments: Option<&'a SegmentSampler>) -> Self {
+        VolumeSampler { segments, ..self }
     }
 
     /// `value_at`: the texel value at `uvw`, trilinear, clamped at the edges.
@@ -101,9 +171,49 @@ impl<'a> VolumeSampler<'a> {
         a0 + (a1 - a0) * f
     }
 
-    /// `opacity_at`: the opacity at `uvw` (inside the box).
+    /// `opacity_at`: the opacity at `uvw` (inside the box), with a segmentation's weight.
     pub fn opacity_at(&self, uvw: Vec3) -> f32 {
-        self.opacity(self.value_at(uvw))
+        let a = self.opacity(self.value_at(uvw));
+        match self.segments {
+            Some(s) => a * s.look_at(uvw).w,
+            None => a,
+        }
+    }
+
+    /// `opacity_of_voxel`: the opacity of voxel `k`, unfiltered.
+    pub fn opacity_of_voxel(&self, k: [usize; 3]) -> f32 {
+        let a = self.opacity(self.value_of_voxel(k));
+        match self.segments {
+            Some(s) => a * s.weight_of_voxel(k),
+            None => a,
+        }
+    }
+
+    /// `classify_at`: the colour and opacity at `uvw` of `value` (`value_at(uvw)`), with
+    /// a segmentation's weight and colour (tinting or replacing the transfer function's).
+    pub fn classify_at(&self, uvw: Vec3, value: f32) -> [f32; 4] {
+        let tf = self.classify(value);
+        let Some(s) = self.segments else {
+            return tf;
+        };
+        let look = s.look_at(uvw);
+        let rgb = Vec3::new(tf[0], tf[1], tf[2]);
+        if look.w <= 0.0 {
+            return [tf[0], tf[1], tf[2], 0.0];
+        }
+        let c = look.truncate() / look.w;
+        let out = if s.replaces_at(uvw) { c } else { rgb * c };
+        [out.x, out.y, out.z, tf[3] * look.w]
+    }
+
+    /// `carved_by_at`: the clip shapes (bit s) that carve the sample at `uvw`.
+    pub fn carved_by_at(&self, uvw: Vec3) -> u32 {
+        self.segments.map_or(u32::MAX, |s| s.carved_by_at(uvw))
+    }
+
+    /// `carved_by_voxel`.
+    pub fn carved_by_voxel(&self, k: [usize; 3]) -> u32 {
+        self.segments.map_or(u32::MAX, |s| s.carved_by_voxel(k))
     }
 }
 

@@ -20,7 +20,7 @@ use volao::ao::lao::{Rays, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::{Bricks, Coverage};
 use volao::clip::camera::EMPTY;
-use volao::clip::{ClipMode, ClipShape, Shape};
+use volao::clip::{ClipMode, ClipShape, Cuts, Shape};
 use volao::gpu::Gpu;
 use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::{Camera, Frame, RenderMode, RenderSettings};
@@ -334,6 +334,7 @@ fn random_shape(rng: &mut Rng, shape: &Shape, half: Vec3, mode: ClipMode) -> Cli
         rotation_deg,
         scale,
         mode,
+        cuts: Cuts::All,
     }
 }
 
@@ -1006,6 +1007,7 @@ fn a_carved_pocket_keeps_its_light_with_cao_gpu_and_cpu() {
         rotation_deg: [0.0; 3],
         scale: [10.0, 8.0, 10.0],
         mode: ClipMode::Carve,
+        cuts: Cuts::All,
     };
     let reach = reach_mm(SAMPLES, vol.texels.spacing);
     let stats = cao

@@ -10,7 +10,7 @@ use glam::Vec3;
 use volao::gpu::Gpu;
 use volao::render::gpu::{RayCaster, RenderVolume};
 use volao::render::shadow::{
-    LIGHT_START_STEPS, LightGpu, LightVolume, filtered_occlusion, light_cpu, light_direction,
+    LIGHT_START_STEPS, LightGpu, LightVolume, Lit, filtered_occlusion, light_cpu, light_direction,
     light_lut,
 };
 use volao::render::{Camera, Frame, Image, RenderSettings, Shading, cpu};
@@ -21,7 +21,17 @@ fn gpu_light(gpu: &Gpu, v: &Volume, tf: &TransferFunction, dir: Vec3) -> Vec<f32
     let t = texels(v);
     gpu.stage::<LightGpu>()
         .unwrap_or_else(|e| panic!("{e}"))
-        .compute(gpu, &t, &light_lut(tf, &t), dir, None, &|_, _| {})
+        .compute(
+            gpu,
+            Lit {
+                texels: &t,
+                segments: None,
+                lut: &light_lut(tf, &t),
+            },
+            dir,
+            None,
+            &|_, _| {},
+        )
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
@@ -151,7 +161,17 @@ fn shadowed_rendering_gpu_matches_cpu_twin_and_darkens() {
             let light = gpu
                 .stage::<LightGpu>()
                 .unwrap_or_else(|e| panic!("{e}"))
-                .compute(&gpu, &t, &light_lut(&tf, &t), dir, None, &|_, _| {})
+                .compute(
+                    &gpu,
+                    Lit {
+                        texels: &t,
+                        segments: None,
+                        lut: &light_lut(&tf, &t),
+                    },
+                    dir,
+                    None,
+                    &|_, _| {},
+                )
                 .unwrap_or_else(|e| panic!("{e}"));
             let sampled = vol
                 .set_light_volume(&gpu, Some((&light, dir)))
@@ -244,7 +264,17 @@ fn light_passes_through_clipped_space_on_gpu_and_cpu_alike() {
     let g = gpu
         .stage::<LightGpu>()
         .unwrap_or_else(|e| panic!("{e}"))
-        .compute(&gpu, &t, &light_lut(&tf, &t), dir, Some(&maps), &|_, _| {})
+        .compute(
+            &gpu,
+            Lit {
+                texels: &t,
+                segments: None,
+                lut: &light_lut(&tf, &t),
+            },
+            dir,
+            Some(&maps),
+            &|_, _| {},
+        )
         .unwrap_or_else(|e| panic!("{e}"));
     let cpu_maps = maps.read_back(&gpu).unwrap_or_else(|e| panic!("{e}"));
     let c = light_cpu(&t, &light_lut(&tf, &t), dir, Some(&cpu_maps), &|_, _| {});
@@ -485,7 +515,17 @@ fn shadows_add_no_high_frequency_energy_to_the_cranium() {
     let light = gpu
         .stage::<LightGpu>()
         .unwrap_or_else(|e| panic!("{e}"))
-        .compute(&gpu, &t, &light_lut(&tf, &t), dir, None, &|_, _| {})
+        .compute(
+            &gpu,
+            Lit {
+                texels: &t,
+                segments: None,
+                lut: &light_lut(&tf, &t),
+            },
+            dir,
+            None,
+            &|_, _| {},
+        )
         .unwrap_or_else(|e| panic!("{e}"));
     vol.set_light_volume(&gpu, Some((&light, dir)))
         .unwrap_or_else(|e| panic!("{e}"));

@@ -401,6 +401,7 @@ fn shadows_from_the_rendering_panel_match_volao_render() {
             rotation_deg: [-90.0, 0.0, 0.0],
             scale: [1.0; 3],
             mode: Default::default(),
+            cuts: Default::default(),
         });
         doc.ao.clip_resolution = CLIP_MAPS;
     }
@@ -788,6 +789,7 @@ fn a_scene_keeps_its_light_shadows_meshes_and_values_outside_the_sliders_when_sa
         rotation_deg: [0.0; 3],
         scale: [5.0; 3],
         mode: Default::default(),
+        cuts: Default::default(),
     }];
     let original = dir.path().join("original.json");
     scene.save(&original).expect("scene saved");

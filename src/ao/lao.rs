@@ -10,14 +10,14 @@
 use super::sparse::{Bricks, brick_voxels, empty_run};
 use crate::gpu::dispatch::{BrickChunk, BrickDispatch, Pass, budget, chunk_fields};
 use crate::gpu::{
-    Gpu, GpuError, output_buffer, read_buffer, readback_buffer, storage_buffer, uniform_group,
-    validated,
+    Gpu, GpuError, Segmentable, output_buffer, read_buffer, readback_buffer, storage_buffer,
+    uniform_group, validated,
 };
 use crate::sample::{VolumeSampler, voxel_centre};
 use crate::texels::VolumeTexels;
 use crate::texels::gpu::GpuVolume;
 use crate::texels::gpu_data::VolumeMap;
-use crate::texels::reader::{self, Reading, VOLUME_GROUP};
+use crate::texels::reader::{self, Reading, SegmentBindings, VOLUME_GROUP};
 use crate::tf::Lut;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -214,11 +214,11 @@ pub struct LaoSetup<'a> {
 #[derive(Debug)]
 pub struct LaoGpu {
     /// Rays step over empty cells (every voxel: `volao ao`).
-    sparse: crate::gpu::ComputeStage,
+    sparse: Segmentable,
     /// Readable voxels only, rays fetch every sample ([`super::sparse::READABLE`]).
-    readable: crate::gpu::ComputeStage,
+    readable: Segmentable,
     /// Nothing skipped (`--no-skipping`).
-    dense: crate::gpu::ComputeStage,
+    dense: Segmentable,
 }
 
 /// List entries per dispatched group (dispatched like a brick of 8³ voxels).
@@ -229,21 +229,15 @@ const NONE: u32 = u32::MAX;
 
 impl crate::gpu::Stage for LaoGpu {
     fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
-        use crate::gpu::ComputeStage;
         Ok(LaoGpu {
-            sparse: ComputeStage::new(device, "Lao", "lao.wgsl")?,
-            readable: ComputeStage::specialised(
+            sparse: Segmentable::new(device, "Lao", "lao.wgsl", &[])?,
+            readable: Segmentable::new(
                 device,
                 "Lao::readable",
                 "lao.wgsl",
                 super::sparse::READABLE,
             )?,
-            dense: ComputeStage::specialised(
-                device,
-                "Lao::dense",
-                "lao.wgsl",
-                super::sparse::DENSE,
-            )?,
+            dense: Segmentable::new(device, "Lao::dense", "lao.wgsl", super::sparse::DENSE)?,
         })
     }
 }
@@ -270,7 +264,8 @@ impl LaoGpu {
             &self.readable
         } else {
             &self.sparse
-        };
+        }
+        .get(device, vol.segments.on)?;
         let base = params(texels, rays, samples, bricks);
         let list = bricks.voxel_list(texels);
         let groups = list.len().div_ceil(GROUP);
@@ -285,7 +280,9 @@ impl LaoGpu {
         let (uniforms, out, readback, bound, list_buf) = validated(device, "Lao::buffers", || {
             let table = reader::table(gpu, "Lao::lut", lut);
             let map = VolumeMap::new(texels, lut);
-            let reading = Reading::sampled(vol.volume_view(), &stage.sampler, map, &table);
+            let segments = SegmentBindings::Look(&vol.segments);
+            let reading =
+                Reading::sampled(vol.volume_view(), &stage.sampler, map, &table, segments);
             let volume_group = reading.group_of(gpu, "Lao", &stage.pipeline);
             let ray_buf = storage_buffer(
                 gpu,

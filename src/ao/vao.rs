@@ -168,6 +168,7 @@ impl PositionalAo {
             dims: self.level_dims,
             map: self.map,
             table: &self.table,
+            segments: None,
         }
     }
 

@@ -310,6 +310,8 @@ impl Viewer {
         };
         let (gpu, tf) = (Arc::clone(&self.gpu), doc.tf.clone());
         let (shapes, radius, resolution) = (key.clip.clone(), doc.radius, doc.ao.clip_resolution);
+        // The viewer shows no segmentation yet.
+        let segments: Option<crate::texels::segments::SegmentTexels> = None;
         let dir = match crate::render::shadow::light_direction(key.direction) {
             Ok(d) => d,
             Err(message) => {
@@ -333,7 +335,12 @@ impl Viewer {
             gpu.stage::<crate::render::shadow::LightGpu>()
                 .and_then(|l| {
                     let progress = |d: usize, t: usize| p.set(d as u64, t as u64);
-                    l.compute(&gpu, &texels, &lut, dir, maps.as_ref(), &progress)
+                    let lit = crate::render::shadow::Lit {
+                        texels: &texels,
+                        segments: segments.as_ref(),
+                        lut: &lut,
+                    };
+                    l.compute(&gpu, lit, dir, maps.as_ref(), &progress)
                 })
                 .map_err(|e| e.to_string())
         });

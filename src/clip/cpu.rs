@@ -79,6 +79,25 @@ impl ClipMapsCpu {
         (visible, affected)
     }
 
+    /// `clip_visible_for` of `clip_common.wgsl`: whether `pos` in a voxel the shapes of
+    /// `carve` (bit s) cut is visible.
+    pub fn visible_for(&self, pos: Vec3, carve: u32) -> bool {
+        let (mut carved, mut probes, mut probed) = (false, false, false);
+        for s in 0..self.uniforms.counts[0] as usize {
+            if (carve >> s) & 1 == 0 {
+                continue;
+            }
+            let inside = self.test(s, pos).inside;
+            if self.uniforms.shapes[s].info[0] == 0 {
+                carved |= inside;
+            } else {
+                probes = true;
+                probed |= inside;
+            }
+        }
+        !carved && (!probes || probed)
+    }
+
     /// One map layer of shape `slot` (0..8: Z_front1 … D_back2).
     pub fn layer(&self, slot: usize, layer: u32) -> &[f32] {
         let r = self.resolution as usize;

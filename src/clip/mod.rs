@@ -75,6 +75,45 @@ pub struct ClipShape {
     pub scale: [f32; 3],
     #[serde(default)]
     pub mode: ClipMode,
+    /// Which segments of a segmentation it cuts (all when there is none).
+    #[serde(default, skip_serializing_if = "Cuts::is_all")]
+    pub cuts: Cuts,
+}
+
+/// Which segments a clip shape cuts: names (`*` matches any run of characters) or label
+/// values, `unlabelled` for the voxels in no segment. A voxel in several overlapping
+/// segments is cut only if the shape cuts all of them.
+#[derive(Debug, Clone, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Cuts {
+    #[default]
+    All,
+    Only(Vec<String>),
+    Except(Vec<String>),
+}
+
+impl Cuts {
+    pub fn is_all(&self) -> bool {
+        *self == Cuts::All
+    }
+
+    /// `all`, `only=A,B,…` or `except=A,B,…` (the part of `--clip` after `;`).
+    pub fn parse(s: &str) -> Result<Cuts, String> {
+        let list = |l: &str| {
+            l.split(',')
+                .map(|n| n.trim().to_owned())
+                .filter(|n| !n.is_empty())
+                .collect()
+        };
+        match s.trim().split_once('=') {
+            None if s.trim() == "all" => Ok(Cuts::All),
+            Some(("only", l)) => Ok(Cuts::Only(list(l))),
+            Some(("except", l)) => Ok(Cuts::Except(list(l))),
+            _ => Err(format!(
+                "segments {s:?}: expected all, only=NAME,… or except=NAME,…"
+            )),
+        }
+    }
 }
 
 /// Why a clip shape cannot be used.
@@ -97,6 +136,7 @@ impl ClipShape {
             rotation_deg: [0.0; 3],
             scale: [size; 3],
             mode: ClipMode::Carve,
+            cuts: Cuts::All,
         }
     }
 
@@ -210,7 +250,17 @@ impl ClipShape {
     /// - `cylinder:CX,CY,CZ,R,H[,RX,RY,RZ]` — radius, height along local z
     /// - `torus:CX,CY,CZ,R,r[,RX,RY,RZ]` — major and tube radius
     /// - `mesh:PATH[,CX,CY,CZ[,S]]` — OBJ or STL, uniform scale S
+    ///
+    /// followed by `;only=NAME,…` or `;except=NAME,…` for the segments it cuts ([`Cuts`]).
     pub fn parse(spec: &str) -> Result<ClipShape, String> {
+        // `SHAPE;only=…` or `SHAPE;except=…`: the segments it cuts.
+        if let Some((shape, cuts)) = spec.split_once(';') {
+            let cuts = Cuts::parse(cuts).map_err(|e| format!("clip shape {spec:?}: {e}"))?;
+            return Ok(ClipShape {
+                cuts,
+                ..Self::parse(shape)?
+            });
+        }
         let (kind, rest) = spec.split_once(':').ok_or_else(|| {
             format!("clip shape {spec:?}: expected KIND:NUMBERS, e.g. sphere:0,0,0,20")
         })?;

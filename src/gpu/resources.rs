@@ -160,7 +160,7 @@ impl ComputeStage {
         device: &wgpu::Device,
         name: &str,
         shader: &str,
-        constants: super::shaders::Constants,
+        constants: &[(&str, f64)],
     ) -> Result<Self, GpuError> {
         let module = super::shaders::module(device, shader)?;
         let label = format!("{name}::pipeline");
@@ -642,4 +642,49 @@ pub fn depth_tested_pipeline(
         multiview_mask: None,
         cache: None,
     })
+}
+
+/// A stage's pipeline of one variant and, built the first time a volume with a
+/// segmentation needs it, the same variant reading the segmentation (`SEGMENTS` in
+/// `volume.wgsl`): volumes without one run the pipeline they always ran.
+#[derive(Debug)]
+pub struct Segmentable {
+    plain: ComputeStage,
+    segments: std::sync::OnceLock<ComputeStage>,
+    name: String,
+    shader: &'static str,
+    constants: super::shaders::Constants,
+}
+
+impl Segmentable {
+    /// `shader`'s pipeline with `constants` (see [`ComputeStage::specialised`]).
+    pub fn new(
+        device: &wgpu::Device,
+        name: &str,
+        shader: &'static str,
+        constants: super::shaders::Constants,
+    ) -> Result<Self, GpuError> {
+        Ok(Segmentable {
+            plain: ComputeStage::specialised(device, name, shader, constants)?,
+            segments: std::sync::OnceLock::new(),
+            name: name.to_owned(),
+            shader,
+            constants,
+        })
+    }
+
+    /// The pipeline for a volume with a segmentation (`segments`) or without.
+    pub fn get(&self, device: &wgpu::Device, segments: bool) -> Result<&ComputeStage, GpuError> {
+        if !segments {
+            return Ok(&self.plain);
+        }
+        if let Some(stage) = self.segments.get() {
+            return Ok(stage);
+        }
+        let mut constants = self.constants.to_vec();
+        constants.push(("SEGMENTS", 1.0));
+        let name = format!("{}::segments", self.name);
+        let stage = ComputeStage::specialised(device, &name, self.shader, &constants)?;
+        Ok(self.segments.get_or_init(|| stage))
+    }
 }

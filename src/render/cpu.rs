@@ -2,7 +2,7 @@
 //! rayon. Tests compare it with the GPU; it is also the fallback without an adapter.
 
 use super::{Frame, Image, OPAQUE, RaycastParams, jitter};
-use crate::sample::{VolumeSampler, trilinear};
+use crate::sample::{SegmentSampler, VolumeSampler, trilinear};
 use crate::texels::{BlockRanges, VolumeTexels};
 use crate::tf::Lut;
 use glam::{Mat4, Vec3, Vec4};
@@ -30,6 +30,8 @@ pub struct CpuVolume {
     /// (min, max) of `norm` per occupancy block, for the projection and iso modes'
     /// skipping; `None` skips nothing there.
     pub block_ranges: Option<BlockRanges>,
+    /// A segmentation read beside the density (`SEGMENTS`).
+    pub segments: Option<SegmentSampler>,
 }
 
 /// Surfaces for the CPU twin: the meshes, and the frame and texels that place the camera.
@@ -40,9 +42,21 @@ pub struct CpuSurfaces {
     pub texels: VolumeTexels,
 }
 
-/// The colour of `value` (`classify(value).rgb` in raycast.wgsl).
-fn classify(volume: &Reader, value: f32) -> Vec3 {
-    Vec4::from(volume.classify(value)).truncate()
+/// The colour at `uvw` of `value` (`classify_at(uvw, value).rgb` in raycast.wgsl).
+fn classify(volume: &Reader, uvw: Vec3, value: f32) -> Vec3 {
+    Vec4::from(volume.classify_at(uvw, value)).truncate()
+}
+
+/// raycast.wgsl's `unclipped`: whether the clip shapes (those that carve the sample's
+/// class, with a segmentation) leave the sample at `pos` (`uvw`).
+fn unclipped(vol: &CpuVolume, volume: &Reader, pos: Vec3, uvw: Vec3) -> bool {
+    vol.clip.as_ref().is_none_or(|c| {
+        c.uniforms.counts[0] == 0
+            || match volume.segments {
+                Some(_) => c.visible_for(pos, volume.carved_by_at(uvw)),
+                None => c.classify(pos).0,
+            }
+    })
 }
 
 fn over(acc: Vec4, rgb: Vec3, a: f32) -> Vec4 {
@@ -61,6 +75,7 @@ impl CpuVolume {
             modulation: None,
             clip: None,
             block_ranges: None,
+            segments: None,
         }
     }
 }
@@ -99,13 +114,23 @@ fn shade(
     let mut ao_at = uvw;
     if phong || ((vol.ao.is_some() || vol.live_vao.is_some()) && p.ao[2] > 0.0) {
         let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
-        let s = |o: Vec3| volume.value_at(uvw + o);
-        let g = Vec3::new(
-            s(Vec3::new(d.x, 0.0, 0.0)) - s(Vec3::new(-d.x, 0.0, 0.0)),
-            s(Vec3::new(0.0, d.y, 0.0)) - s(Vec3::new(0.0, -d.y, 0.0)),
-            s(Vec3::new(0.0, 0.0, d.z)) - s(Vec3::new(0.0, 0.0, -d.z)),
-        ) / (2.0 * p.voxel_uvw[3]);
-        let strength = g.length() * volume.map.lut[0].abs() * p.voxel_uvw[3] * p.edge[0];
+        let differences = |s: &dyn Fn(Vec3) -> f32| {
+            Vec3::new(
+                s(Vec3::new(d.x, 0.0, 0.0)) - s(Vec3::new(-d.x, 0.0, 0.0)),
+                s(Vec3::new(0.0, d.y, 0.0)) - s(Vec3::new(0.0, -d.y, 0.0)),
+                s(Vec3::new(0.0, 0.0, d.z)) - s(Vec3::new(0.0, 0.0, -d.z)),
+            ) / (2.0 * p.voxel_uvw[3])
+        };
+        let mut g = differences(&|o| volume.value_at(uvw + o));
+        let mut strength = g.length() * volume.map.lut[0].abs() * p.voxel_uvw[3] * p.edge[0];
+        if let Some(segments) = volume.segments {
+            // raycast.wgsl's segment_gradient: the weight's edge where it is the stronger.
+            let gw = differences(&|o| segments.look_at(uvw + o).w);
+            let sw = gw.length() * p.voxel_uvw[3] * 2.0;
+            if sw > strength {
+                (g, strength) = (gw, sw);
+            }
+        }
         let mut edge = strength.clamp(0.0, 1.0);
         if p.mode[0] as u32 == MODE_ISO && strength > 0.0 {
             edge = 1.0; // an isosurface is a surface however soft its gradient
@@ -252,11 +277,15 @@ impl Ray<'_> {
         Some(((a.min(b), a.max(b)), next))
     }
 
+    /// raycast.wgsl's `visible`: unclipped and not in a hidden segment.
     fn visible(&self, pos: Vec3) -> bool {
-        self.vol
-            .clip
-            .as_ref()
-            .is_none_or(|c| c.uniforms.counts[0] == 0 || c.classify(pos).0)
+        let uvw = pos / (2.0 * self.half()) + Vec3::splat(0.5);
+        if let Some(s) = self.volume.segments
+            && s.look_at(uvw).w < 0.5
+        {
+            return false;
+        }
+        unclipped(self.vol, self.volume, pos, uvw)
     }
 
     fn mode_value(&self, pos: Vec3) -> f32 {
@@ -428,7 +457,7 @@ pub fn pixel(
                     // the hit is on a cut face.
                     let lo = origin + dir * t_lo;
                     let cut = !ray.visible(lo) && ray.mode_value(lo) >= 0.0;
-                    let rgb = shade(p, vol, volume, classify(volume, norm), uvw, -dir, cut);
+                    let rgb = shade(p, vol, volume, classify(volume, uvw, norm), uvw, -dir, cut);
                     (t_hit, rgb.extend(1.0))
                 }
                 None => (3.0e38, Vec4::ZERO),
@@ -480,10 +509,7 @@ pub fn pixel(
                 }
             }
             // Shadow-test clipping (CAO step VI): clipped samples are empty.
-            if let Some(c) = &vol.clip
-                && c.uniforms.counts[0] > 0
-                && !c.classify(pos).0
-            {
+            if !unclipped(vol, volume, pos, uvw) {
                 // In a block that may have opacity (with skipping, every sample here).
                 if p.step[3] != 0.0 || occupancy[block_at(p, dims, uvw).1] != 0 {
                     cut_t = t;
@@ -492,7 +518,7 @@ pub fn pixel(
                 continue;
             }
             let norm = volume.value_at(uvw);
-            let mut rgba = Vec4::from(volume.classify(norm));
+            let mut rgba = Vec4::from(volume.classify_at(uvw, norm));
             if rgba.w > 0.0 {
                 if let Some(m) = &vol.modulation {
                     rgba.w *= trilinear(m, vol.dims, uvw);
@@ -564,7 +590,8 @@ pub fn render_reusing(
         }
         super::reuse::set_balls(&mut p, balls);
     }
-    let volume = VolumeSampler::density(&vol.norm, texels, lut);
+    let volume =
+        VolumeSampler::density(&vol.norm, texels, lut).with_segments(vol.segments.as_ref());
     let (w, h) = (frame.width, frame.height);
     let pixels: Vec<[u8; 4]> = (0..w * h)
         .into_par_iter()

@@ -11,7 +11,7 @@ use crate::gpu::{
     uniform_buffer, unpad, validated,
 };
 use crate::texels::gpu_data::VolumeMap;
-use crate::texels::reader::{self, Reading, VOLUME_GROUP};
+use crate::texels::reader::{self, Reading, SegmentBindings, VOLUME_GROUP};
 
 /// Largest tile rendered in one submission: keeps each dispatch short (no driver
 /// watchdog on real GPUs) and lets any image size fit the 2-D texture limit.
@@ -289,7 +289,8 @@ impl RayCaster {
             &self.sampler,
         );
         let map = VolumeMap::new(&vol.texels, &vol.lut);
-        let reading = Reading::sampled(vol.volume_view(), &self.sampler, map, lut);
+        let segments = SegmentBindings::All(&vol.segments);
+        let reading = Reading::sampled(vol.volume_view(), &self.sampler, map, lut, segments);
         let group_3 = reading.bind_group((device, &gpu.queue), "RayCaster", &self.volume_layout);
         [group, group_2, group_3]
     }

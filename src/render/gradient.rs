@@ -10,7 +10,7 @@
 //! [`GRADIENT_BUDGET`] (or the adapter's 3-D texture size) keeps the six fetches.
 
 use crate::gpu::{Gpu, GpuError, validated};
-use crate::texels::reader::{Reading, VOLUME_GROUP};
+use crate::texels::reader::{Reading, SegmentBindings, VOLUME_GROUP};
 use crate::texels::{BlockRanges, TexelFormat, VolumeTexels};
 
 /// The most GPU memory a gradient volume may take (8 bytes per texel).
@@ -116,6 +116,7 @@ impl GradientVolume {
                 texels: volume,
                 sampler: None,
                 lut: None,
+                segments: SegmentBindings::None,
             };
             let volume_group = reading.group_of(gpu, "Gradient", &stage.0.pipeline);
             crate::gpu::submit_compute_with(

@@ -4,7 +4,7 @@
 
 use super::cpu;
 use super::gpu::{RayCaster, RenderVolume};
-use super::shadow::{LightGpu, LightVolume, light_cpu, light_direction, light_lut};
+use super::shadow::{LightGpu, LightVolume, Lit, light_cpu, light_direction, light_lut};
 use super::{Frame, Image, RenderSettings};
 use crate::ao::cao::CaoStats;
 use crate::ao::vao::PositionalAo;
@@ -229,8 +229,11 @@ fn render_gpu(
         let dir = light_dir(frame)?;
         let t = g.stage::<LightGpu>()?.compute(
             g,
-            &vol.texels,
-            &light_lut(tf, &vol.texels),
+            Lit {
+                texels: &vol.texels,
+                segments: vol.segment_texels.as_ref(),
+                lut: &light_lut(tf, &vol.texels),
+            },
             dir,
             clip_maps,
             progress,

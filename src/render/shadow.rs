@@ -15,7 +15,8 @@ use crate::gpu::{Gpu, GpuError, output_buffer, readback_buffer, uniform_group, v
 use crate::sample::bake_lut;
 use crate::sample::{VolumeSampler, f16_volume_map, per_voxel, trilinear, voxel_centre};
 use crate::texels::VolumeTexels;
-use crate::texels::reader::{self, Reading, VOLUME_GROUP};
+use crate::texels::reader::{self, Reading, SegmentBindings, VOLUME_GROUP};
+use crate::texels::segments::{GpuSegments, SegmentTexels};
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
 
@@ -140,31 +141,52 @@ pub fn light_cpu(
         dims: texels.dims,
         map: f16_volume_map(texels, lut),
         table: &lut.rgba,
+        // The twin lights without a segmentation (the GPU's light reads one).
+        segments: None,
     };
     per_voxel(texels.dims, progress, |v| light_voxel(&p, &volume, v, clip))
 }
 
-crate::gpu::compute_stage!(
-    /// Long-lived light-volume compute state.
-    LightGpu,
-    "Light",
-    "light.wgsl"
-);
+/// What the light volume is computed of: the texels (uploaded as f16), a segmentation
+/// beside them, and the opacity table ([`light_lut`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Lit<'a> {
+    pub texels: &'a VolumeTexels,
+    pub segments: Option<&'a SegmentTexels>,
+    pub lut: &'a Lut,
+}
+
+/// Long-lived light-volume compute state: its pipeline, and the one reading a
+/// segmentation.
+#[derive(Debug)]
+pub struct LightGpu(crate::gpu::Segmentable);
+
+impl crate::gpu::Stage for LightGpu {
+    fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
+        crate::gpu::Segmentable::new(device, "Light", "light.wgsl", &[]).map(LightGpu)
+    }
+}
 
 impl LightGpu {
     /// The light volume of `texels` (uploaded as f16 for this pass), in z-slabs, read
-    /// back. `direction`: unit, towards the light; `clip`'s carved space lets light through.
+    /// back. `direction`: unit, towards the light; `clip`'s carved space lets light
+    /// through, and so do a segmentation's hidden segments.
     pub fn compute(
         &self,
         gpu: &Gpu,
-        texels: &VolumeTexels,
-        lut: &Lut,
+        lit: Lit<'_>,
         direction: Vec3,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         progress: &dyn Fn(usize, usize),
     ) -> Result<Vec<f32>, GpuError> {
+        let Lit {
+            texels,
+            segments,
+            lut,
+        } = lit;
         let device = &gpu.device;
-        let clip_layout = self.0.pipeline.get_bind_group_layout(1);
+        let stage = self.0.get(device, segments.is_some())?;
+        let clip_layout = stage.pipeline.get_bind_group_layout(1);
         let clip_group = match clip {
             Some(c) => c.bind_group(device, &clip_layout),
             None => crate::clip::gpu::empty_bind_group(device, &clip_layout),
@@ -185,17 +207,22 @@ impl LightGpu {
                 .create_view(&Default::default());
             let table = reader::table(gpu, "Light::lut", lut);
             let map = f16_volume_map(texels, lut);
-            let reading = Reading::sampled(&volume, &self.0.sampler, map, &table);
-            let volume_group = reading.group_of(gpu, "Light", &self.0.pipeline);
+            let segments = match segments {
+                Some(s) => GpuSegments::new(gpu, s),
+                None => GpuSegments::none(gpu),
+            };
+            let look = SegmentBindings::Look(&segments);
+            let reading = Reading::sampled(&volume, &stage.sampler, map, &table, look);
+            let volume_group = reading.group_of(gpu, "Light", &stage.pipeline);
             let out = output_buffer(device, "Light::transmittance", size);
             let readback = readback_buffer(device, "Light::readback", size);
             let bound = [out.as_entire_binding()];
-            let (uniforms, group) = uniform_group(gpu, "Light", &self.0.pipeline, &base, &bound);
+            let (uniforms, group) = uniform_group(gpu, "Light", &stage.pipeline, &base, &bound);
             (uniforms, out, readback, [group, volume_group])
         })?;
         let pass = Pass {
             label: "Light::slab",
-            pipeline: &self.0.pipeline,
+            pipeline: &stage.pipeline,
             bind_groups: &[(0, &group[0]), (1, &clip_group), (VOLUME_GROUP, &group[1])],
             uniforms: &uniforms,
         };

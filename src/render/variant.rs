@@ -28,6 +28,8 @@ pub struct Variant {
     /// A gradient volume is bound (one fetch per gradient instead of six); `None`: the
     /// uniform `box_half.w` decides (the general shader).
     pub gradient: Option<bool>,
+    /// A segmentation is read (`SEGMENTS` of `volume.wgsl`).
+    pub segments: bool,
 }
 
 impl Variant {
@@ -64,6 +66,7 @@ impl Variant {
             // Only shading and the AO's read point take gradients: without either, the
             // same pipeline whether a gradient volume is bound or not.
             gradient: Some(vol.gradient_volume().is_some() && (phong || ao_volume || live_vao)),
+            segments: vol.segments.on,
         }
     }
 
@@ -81,11 +84,12 @@ impl Variant {
             modulation: true,
             skipping: true,
             gradient: None,
+            segments: true,
         }
     }
 
     /// The values of the shader's `override` constants.
-    pub(super) fn constants(&self) -> [(&'static str, f64); 12] {
+    pub(super) fn constants(&self) -> [(&'static str, f64); 13] {
         let b = |on: bool| f64::from(u8::from(on));
         // Shading that fetches: worth finding a sample with opacity before shading.
         let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
@@ -102,6 +106,7 @@ impl Variant {
             ("MODULATION", b(self.modulation)),
             ("SKIPPING", b(self.skipping)),
             ("GRADIENT", self.gradient.map_or(2.0, b)),
+            ("SEGMENTS", b(self.segments)),
         ]
     }
 }

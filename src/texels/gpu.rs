@@ -5,6 +5,7 @@
 //! gradient, live positional AO, light, surfaces) are `render::gpu::RenderVolume`'s; the
 //! AO stages read this alone.
 
+use super::segments::{GpuSegments, SegmentTexels};
 use super::{BlockRanges, UploadLimits, VolumeTexels};
 use crate::gpu::{Gpu, GpuError, validated};
 use crate::sample::bake_lut;
@@ -32,6 +33,11 @@ pub struct GpuVolume {
     tf: TransferFunction,
     /// Changes whenever the transfer function is baked anew.
     tf_generation: u64,
+    /// The segmentation every stage reads beside the density ([`GpuSegments::none`]
+    /// without one).
+    pub segments: GpuSegments,
+    /// Its classes and looks on the texel grid (the CPU twins read them).
+    pub segment_texels: Option<SegmentTexels>,
 }
 
 /// A fresh generation number, unique across volumes (what a table baked for another
@@ -131,6 +137,8 @@ impl GpuVolume {
                 step_lut: None,
                 tf: tf.clone(),
                 tf_generation: next_generation(),
+                segments: GpuSegments::none(gpu),
+                segment_texels: None,
                 ranges,
                 texels,
             }
@@ -196,6 +204,35 @@ impl GpuVolume {
         let occ = self.ranges.occupancy(&self.texels, &self.lut);
         let grid = self.ranges.grid.map(|d| d as u32);
         crate::gpu::write_texture_3d(&gpu.queue, &self.occupancy, 0, grid, 1, &occ);
+        true
+    }
+
+    /// Sets the segmentation every stage reads beside the density (`None`: none). One on
+    /// the volume's grid before halving is subsampled to the texels'. Only the looks and
+    /// the table are written when the classes stay; whether anything changed.
+    pub fn set_segments(&mut self, gpu: &Gpu, segments: Option<SegmentTexels>) -> bool {
+        let Some(s) = segments else {
+            let had = self.segment_texels.take().is_some();
+            if had {
+                self.segments = GpuSegments::none(gpu);
+            }
+            return had;
+        };
+        let s = if s.dims == self.texels.dims {
+            s
+        } else {
+            s.subsampled(self.texels.dims, 1 << self.texels.downsampled)
+        };
+        match &self.segment_texels {
+            Some(old) if old.classes == s.classes => {
+                if old.table == s.table {
+                    return false;
+                }
+                self.segments.update(gpu, &s);
+            }
+            _ => self.segments = GpuSegments::new(gpu, &s),
+        }
+        self.segment_texels = Some(s);
         true
     }
 

@@ -9,6 +9,7 @@ use crate::tf::Lut;
 pub mod gpu;
 pub mod gpu_data;
 pub mod reader;
+pub mod segments;
 use crate::volume::{Volume, VoxelData};
 
 /// Texture format chosen to keep the data's precision.

@@ -1,9 +1,11 @@
 //! What a GPU stage binds to read the volume: bind group [`VOLUME_GROUP`] of every shader
 //! that includes `shaders/volume.wgsl` (its `value_at`, `opacity_at`, `classify`, …) —
-//! the texel texture, its sampler, the [`VolumeMap`] and the transfer function's table.
-//! A page table for bricked volumes, or a label map, is one more binding here.
+//! the texel texture, its sampler, the [`VolumeMap`] and the transfer function's table,
+//! and a segmentation beside them ([`super::segments::GpuSegments`], bindings 4–6). A
+//! page table for bricked volumes is one more binding here.
 
 use super::gpu_data::VolumeMap;
+use super::segments::GpuSegments;
 use crate::gpu::{Gpu, entry, storage_buffer, uniform_buffer};
 use crate::tf::Lut;
 
@@ -22,6 +24,9 @@ pub fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
             entry::sampler(1, c),
             entry::uniform(2, c),
             entry::storage(3, c, true),
+            entry::texture(4, c, D3, Some(true)),
+            entry::texture(5, c, D3, None),
+            entry::storage(6, c, true),
         ],
     })
 }
@@ -46,6 +51,19 @@ pub struct Reading<'a> {
     pub texels: &'a wgpu::TextureView,
     pub sampler: Option<&'a wgpu::Sampler>,
     pub lut: Option<(VolumeMap, &'a wgpu::Buffer)>,
+    /// The segmentation's bindings its shader uses.
+    pub segments: SegmentBindings<'a>,
+}
+
+/// Which of a segmentation's bindings a stage's shader uses (`volume.wgsl`): none (it
+/// reads no opacity), the look (4: `opacity_at`, `opacity_of_voxel`) or all three (4–6:
+/// `classify_at`, `carved_by_*`). Every pipeline binds them, with or without
+/// `SEGMENTS`: without a segmentation they are [`GpuSegments::none`]'s.
+#[derive(Debug, Clone, Copy)]
+pub enum SegmentBindings<'a> {
+    None,
+    Look(&'a GpuSegments),
+    All(&'a GpuSegments),
 }
 
 impl<'a> Reading<'a> {
@@ -55,11 +73,13 @@ impl<'a> Reading<'a> {
         sampler: &'a wgpu::Sampler,
         map: VolumeMap,
         table: &'a wgpu::Buffer,
+        segments: SegmentBindings<'a>,
     ) -> Self {
         Reading {
             texels,
             sampler: Some(sampler),
             lut: Some((map, table)),
+            segments,
         }
     }
 
@@ -82,6 +102,17 @@ impl<'a> Reading<'a> {
         if let (Some(map), Some((_, table))) = (&map, self.lut) {
             entries.push((2, map.as_entire_binding()));
             entries.push((3, table.as_entire_binding()));
+        }
+        match self.segments {
+            SegmentBindings::None => {}
+            SegmentBindings::Look(s) => {
+                entries.push((4, wgpu::BindingResource::TextureView(&s.look_view)));
+            }
+            SegmentBindings::All(s) => {
+                entries.push((4, wgpu::BindingResource::TextureView(&s.look_view)));
+                entries.push((5, wgpu::BindingResource::TextureView(&s.classes_view)));
+                entries.push((6, s.table.as_entire_binding()));
+            }
         }
         let entries: Vec<_> = entries
             .into_iter()

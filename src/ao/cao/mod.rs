@@ -37,7 +37,7 @@ use crate::gpu::{
 use crate::texels::VolumeTexels;
 use crate::texels::gpu::GpuVolume;
 use crate::texels::gpu_data::VolumeMap;
-use crate::texels::reader::{self, Reading, VOLUME_GROUP};
+use crate::texels::reader::{self, Reading, SegmentBindings, VOLUME_GROUP};
 use crate::tf::TransferFunction;
 use glam::Vec3;
 use std::time::Instant;
@@ -245,6 +245,8 @@ pub struct CaoGpu {
     lao_volume: [wgpu::BindGroup; 2],
     clip_params: ClipParams,
     lao_params: LaoParams,
+    /// Whether step IV reads the volume's segmentation (segment-aware carving).
+    segments: bool,
     dims: [u32; 3],
     rays: usize,
     samples: u32,
@@ -328,6 +330,10 @@ impl CaoGpu {
             .map(|(d, w)| [d.x, d.y, d.z, *w])
             .collect();
         let occupied = bricks.rays.words();
+        let segments = vol.segments.on;
+        if segments {
+            pipelines.prepare_segments(device)?;
+        }
         let clip = ClipMaps::new(gpu)?;
         let extent = texels.extent();
         let clip_params = ClipParams {
@@ -392,7 +398,7 @@ impl CaoGpu {
             let (clip_uniforms, clip_group) = uniform_group(
                 gpu,
                 "Cao::clip",
-                pipelines.clip_for(&bricks).any(),
+                pipelines.clip_for(&bricks, segments).any(),
                 &clip_params,
                 &[
                     msaa_buffer.as_entire_binding(),
@@ -427,17 +433,25 @@ impl CaoGpu {
                 texels: volume_view,
                 sampler: None,
                 lut: None,
+                segments: SegmentBindings::None,
             };
             let lao_volume = [false, true]
                 .map(|frame| voxels.group_of(gpu, "Cao::lao", pipelines.lao_for(&bricks, frame)));
             let map = VolumeMap::new(texels, &lut);
-            let reading = Reading::sampled(volume_view, &pipelines.sampler, map, &table);
+            let reading = Reading::sampled(
+                volume_view,
+                &pipelines.sampler,
+                map,
+                &table,
+                SegmentBindings::All(&vol.segments),
+            );
             let clip_volume =
                 reading.bind_group((device, &gpu.queue), "Cao::clip", &pipelines.volume_layout);
             // Auto layouts are per pipeline: one bind group (and uniforms) for each.
             let lao_groups = [lao_group(false), lao_group(true)];
             CaoGpu {
                 pipelines,
+                segments,
                 clip,
                 v_o,
                 v_pao,
@@ -604,7 +618,7 @@ impl CaoGpu {
 
     /// Step IV's bind group of the clip maps (group 1).
     fn iv_clip_group(&self, device: &wgpu::Device) -> wgpu::BindGroup {
-        let layout = self.pipelines.clip_for(&self.bricks).any();
+        let layout = self.pipelines.clip_for(&self.bricks, self.segments).any();
         self.clip
             .bind_group(device, &layout.get_bind_group_layout(1))
     }
@@ -663,7 +677,9 @@ impl CaoGpu {
     /// Step IV's pipeline for these bricks and the shapes the clip maps are posed for.
     fn clip_pipeline(&self) -> &wgpu::ComputePipeline {
         let shapes = self.clip.uniforms.counts[0];
-        self.pipelines.clip_for(&self.bricks).for_shapes(shapes)
+        self.pipelines
+            .clip_for(&self.bricks, self.segments)
+            .for_shapes(shapes)
     }
 
     /// Step IV with `pipeline` (CAO's for its bricks, or the dense one for the paper's

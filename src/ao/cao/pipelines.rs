@@ -12,6 +12,11 @@ pub struct CaoPipelines {
     /// Step IV, and its dense variant (`--no-skipping`: every voxel tests its corners).
     clip: ClipPipelines,
     clip_dense: ClipPipelines,
+    /// The same reading a segmentation (`SEGMENTS`: segment-aware carving), built when
+    /// a volume with one first needs them ([`Self::prepare_segments`]).
+    segment_clip: [std::sync::OnceLock<ClipPipelines>; 2],
+    clip_module: wgpu::ShaderModule,
+    clip_layout: wgpu::PipelineLayout,
     /// Step V with skipping, and its dense variant (`--no-skipping`).
     lao: wgpu::ComputePipeline,
     lao_dense: wgpu::ComputePipeline,
@@ -116,11 +121,14 @@ impl crate::gpu::Stage for CaoPipelines {
             validated(device, "CaoPipelines::create", || CaoPipelines {
                 clip: clip("Cao::clip", &[]),
                 clip_dense: clip("Cao::clip_dense", sparse::DENSE_CLIP),
+                segment_clip: Default::default(),
                 lao: lao("Cao::lao", &[]),
                 lao_dense: lao("Cao::lao_dense", sparse::DENSE),
                 lao_readable: lao("Cao::lao_readable", sparse::READABLE),
                 lao_frame: lao("Cao::lao_frame", sparse::FRAME),
                 listed,
+                clip_module: clip_module.clone(),
+                clip_layout: clip_layout.clone(),
                 volume_layout,
                 sampler: crate::gpu::linear_sampler(device, "Cao::linear_clamp"),
                 format,
@@ -138,16 +146,54 @@ impl crate::gpu::Stage for CaoPipelines {
 }
 
 impl CaoPipelines {
-    /// The dense step IV: the paper's mask, whatever the bricks.
-    pub(super) fn clip_dense(&self) -> &ClipPipelines {
-        &self.clip_dense
+    /// Builds step IV's pipelines that read a segmentation, unless built already.
+    pub(super) fn prepare_segments(&self, device: &wgpu::Device) -> Result<(), GpuError> {
+        let variants: [(&str, Constants); 2] = [
+            ("Cao::clip_segments", &[("SEGMENTS", 1.0)]),
+            (
+                "Cao::clip_dense_segments",
+                &[
+                    ("SHARED_CORNERS", 0.0),
+                    ("CENTRE_REACH", 0.0),
+                    ("SEGMENTS", 1.0),
+                ],
+            ),
+        ];
+        for (slot, (label, constants)) in self.segment_clip.iter().zip(variants) {
+            if slot.get().is_none() {
+                let built = validated(device, "CaoPipelines::prepare_segments", || {
+                    ClipPipelines::new(
+                        device,
+                        label,
+                        &self.clip_module,
+                        &self.clip_layout,
+                        constants,
+                    )
+                })?;
+                let _ = slot.set(built);
+            }
+        }
+        Ok(())
     }
 
-    /// Step IV's pipelines for `bricks`.
-    pub(super) fn clip_for(&self, bricks: &Bricks) -> &ClipPipelines {
-        match bricks.skipping {
-            true => &self.clip,
-            false => &self.clip_dense,
+    /// The dense step IV: the paper's mask, whatever the bricks; with `segments`, the
+    /// one reading a segmentation ([`Self::prepare_segments`] first).
+    pub(super) fn clip_dense(&self, segments: bool) -> &ClipPipelines {
+        self.clip_variant(false, segments)
+    }
+
+    /// Step IV's pipelines for `bricks` (and a segmentation: `segments`).
+    pub(super) fn clip_for(&self, bricks: &Bricks, segments: bool) -> &ClipPipelines {
+        self.clip_variant(bricks.skipping, segments)
+    }
+
+    fn clip_variant(&self, skipping: bool, segments: bool) -> &ClipPipelines {
+        let i = usize::from(!skipping);
+        match (segments, self.segment_clip[i].get()) {
+            (true, Some(built)) => built,
+            (true, None) => panic!("CaoPipelines::prepare_segments was not called"),
+            (false, _) if skipping => &self.clip,
+            (false, _) => &self.clip_dense,
         }
     }
 

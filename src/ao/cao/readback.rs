@@ -57,7 +57,7 @@ impl CaoGpu {
         params.clipped_one = 0;
         params.ray_test = 0;
         // The dense pipeline: any of a voxel's clip samples in a dilation marks it.
-        let dense = self.pipelines.clip_dense();
+        let dense = self.pipelines.clip_dense(self.segments);
         self.step_iv_with(
             gpu,
             chunks,

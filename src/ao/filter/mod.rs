@@ -33,7 +33,7 @@ use crate::sample::bake_lut;
 use crate::texels::VolumeTexels;
 use crate::texels::gpu::GpuVolume;
 use crate::texels::gpu_data::VolumeMap;
-use crate::texels::reader::{Reading, VOLUME_GROUP};
+use crate::texels::reader::{Reading, SegmentBindings, VOLUME_GROUP};
 use crate::tf::{Lut, TransferFunction};
 use rayon::prelude::*;
 
@@ -154,6 +154,7 @@ impl Source {
             texels: vol.volume_view(),
             sampler: None,
             lut: Some((self.map(), table)),
+            segments: SegmentBindings::None,
         }
     }
 

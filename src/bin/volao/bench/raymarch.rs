@@ -10,7 +10,7 @@ use volao::ao::rays::RaySet;
 use volao::ao::vao::{VaoGpu, VaoInputs, VaoSettings};
 use volao::render::RenderSettings;
 use volao::render::gpu::{RayCaster, RenderVolume};
-use volao::render::shadow::{LightGpu, light_direction, light_lut};
+use volao::render::shadow::{LightGpu, Lit, light_direction, light_lut};
 use volao::texels::{UploadLimits, VolumeTexels};
 use volao::tf::TransferFunction;
 
@@ -210,8 +210,11 @@ fn frames(bench: Bench) -> Result<()> {
     let start = Instant::now();
     let light = gpu.stage::<LightGpu>()?.compute(
         gpu,
-        &vol.texels,
-        &light_lut(tf, &vol.texels),
+        Lit {
+            texels: &vol.texels,
+            segments: vol.segment_texels.as_ref(),
+            lut: &light_lut(tf, &vol.texels),
+        },
         dir,
         None,
         &|_, _| {},
