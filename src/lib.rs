@@ -56,6 +56,8 @@
 
 pub mod volume;
 
+pub mod labels;
+
 pub mod scene;
 pub mod tf;
 

@@ -86,6 +86,13 @@ pub enum VolumeError {
     Invalid { path: PathBuf, message: String },
     #[error("{}: {message}", display_path(.path))]
     Unsupported { path: PathBuf, message: String },
+    /// A problem on one line of a text file (a label table).
+    #[error("{}:{line}: {message}", display_path(.path))]
+    AtLine {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
     #[error(
         "{}: header claims {dims} {ty} = {bytes} of voxels, more than this machine can hold ({limit} available)", display_path(.path)
     )]

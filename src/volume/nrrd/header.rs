@@ -44,6 +44,8 @@ pub struct Header {
     /// `-1`: the voxels are the last bytes of the file (raw only).
     pub byte_skip: i64,
     pub content: Option<String>,
+    /// `key:=value` pairs in header order (3D Slicer's `SegmentN_Name`, …), unescaped.
+    pub key_values: Vec<(String, String)>,
     /// Bytes of the header including the blank line that ends it (attached data).
     pub header_len: u64,
 }
@@ -195,6 +197,7 @@ pub fn parse_header(text: &str, path: &Path) -> Result<Header, VolumeError> {
     let mut line_skip = 0u64;
     let mut byte_skip = 0i64;
     let mut content = None;
+    let mut key_values = Vec::new();
     let mut list_mode = false;
     for (i, raw_line) in lines.enumerate() {
         let lineno = i + 2;
@@ -209,13 +212,17 @@ pub fn parse_header(text: &str, path: &Path) -> Result<Header, VolumeError> {
         if line.starts_with('#') || line.is_empty() {
             continue;
         }
-        if line.contains(":=") && !line.contains(": ") {
-            continue; // key/value pair
+        // A key/value pair when `:=` comes before any `: ` (values may hold ": ").
+        if let Some(kv) = line.find(":=")
+            && line.find(": ").is_none_or(|f| kv < f)
+        {
+            key_values.push((
+                unescape_key_value(&line[..kv]),
+                unescape_key_value(&line[kv + 2..]),
+            ));
+            continue;
         }
         let Some((field, value)) = line.split_once(": ") else {
-            if line.contains(":=") {
-                continue;
-            }
             return Err(invalid(
                 path,
                 format!(
@@ -439,8 +446,32 @@ pub fn parse_header(text: &str, path: &Path) -> Result<Header, VolumeError> {
         line_skip,
         byte_skip,
         content,
+        key_values,
         header_len: 0,
     })
+}
+
+/// A key or value of a `key:=value` pair with NRRD's escapes (`\n` newline, `\\`
+/// backslash) undone.
+fn unescape_key_value(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    let mut chars = s.chars();
+    while let Some(c) = chars.next() {
+        if c != '\\' {
+            out.push(c);
+            continue;
+        }
+        match chars.next() {
+            Some('n') => out.push('\n'),
+            Some('\\') => out.push('\\'),
+            Some(other) => {
+                out.push('\\');
+                out.push(other);
+            }
+            None => out.push('\\'),
+        }
+    }
+    out
 }
 
 /// `slice%03d.raw` with 7 → `slice007.raw` (the only printf form teem's data-file

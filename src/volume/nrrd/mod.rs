@@ -415,6 +415,93 @@ pub fn load(
     Ok((volume(&h, &lay, data, path, reading.warnings), last_path))
 }
 
+/// Every value of a NRRD file in file order (fastest axis first), whatever its axes:
+/// for callers that split non-spatial axes themselves (3D Slicer's layered
+/// segmentations keep a `list` axis fastest).
+pub fn read_all_values(h: &Header, path: &Path, max_bytes: u64) -> Result<VoxelData, VolumeError> {
+    let n = h
+        .sizes
+        .iter()
+        .try_fold(1usize, |acc, &s| acc.checked_mul(s))
+        .filter(|&n| n.checked_mul(h.ty.size()).is_some_and(|b| b < 1 << 62))
+        .ok_or_else(|| invalid(path, format!("sizes {:?} overflow", h.sizes)))?;
+    let total = (n * h.ty.size()) as u64;
+    if total > max_bytes {
+        return Err(VolumeError::TooLarge {
+            path: path.to_owned(),
+            dims: format!("{:?}", h.sizes),
+            ty: h.ty.name().into(),
+            bytes: fmt_bytes(total),
+            limit: fmt_bytes(max_bytes),
+        });
+    }
+    let parts = data_paths(h, path);
+    if !total.is_multiple_of(parts.len() as u64) {
+        return Err(invalid(
+            path,
+            format!(
+                "{total} bytes of values cannot be split evenly over {} data files",
+                parts.len()
+            ),
+        ));
+    }
+    let per_part = total / parts.len() as u64;
+    let offset = if h.data_files.is_empty() {
+        h.header_len
+    } else {
+        0
+    };
+    let mut data = VoxelData::try_zeroed(h.ty, n)
+        .ok_or_else(|| invalid(path, format!("cannot allocate {}", fmt_bytes(total))))?;
+    let what = format!("{:?} {} values", h.sizes, h.ty);
+    match h.encoding {
+        Encoding::Raw | Encoding::Gzip => {
+            let out = data.as_bytes_mut();
+            for (k, p) in parts.iter().enumerate() {
+                let (mut r, bound) = open_part(h, p, offset, per_part)?;
+                if bound < per_part {
+                    return Err(VolumeError::Truncated {
+                        path: p.clone(),
+                        what: what.clone(),
+                        expected: per_part,
+                        actual: bound,
+                    });
+                }
+                let lo = k as u64 * per_part;
+                read_all(
+                    &mut r,
+                    &mut out[lo as usize..(lo + per_part) as usize],
+                    p,
+                    &what,
+                    0,
+                )?;
+                if h.encoding == Encoding::Gzip {
+                    finish_gzip(&mut r, p)?;
+                }
+            }
+            data.fix_endianness(h.little_endian);
+        }
+        Encoding::Ascii | Encoding::Hex => {
+            let mut text = Vec::new();
+            for p in &parts {
+                let (r, bound) = open_part(h, p, offset, per_part)?;
+                if bound > max_bytes.saturating_mul(24) {
+                    return Err(invalid(
+                        p,
+                        "text data larger than any volume that fits in memory",
+                    ));
+                }
+                r.take(bound)
+                    .read_to_end(&mut text)
+                    .map_err(|e| VolumeError::io(p, e))?;
+                text.push(b'\n');
+            }
+            decode_text(h, &text, 0, &mut data, path, total)?;
+        }
+    }
+    Ok(data)
+}
+
 /// The volume of decoded `data`, with the header's geometry and content.
 fn volume(
     h: &Header,
@@ -716,6 +803,20 @@ mod tests {
         let text = "NRRD0004\ntype: uint8\nencoding: raw\ndimension: 3\nsizes: 3 4 4\nkinds: RGB-color domain domain\n\n";
         let err = load_bytes(text.as_bytes(), 1 << 20, p()).expect_err("RGB");
         assert!(err.to_string().contains("RGB-color"), "{err}");
+    }
+
+    #[test]
+    fn key_value_pairs_are_kept_even_with_colons_in_values() {
+        let text = "NRRD0004\ntype: uint8\nencoding: raw\ndimension: 1\nsizes: 1\nSegment0_Name:=ribs\nParams:=Range: 0.0|a\\nb\ncontent: a:=b\n";
+        let h = parse_header(text, p()).expect("parses");
+        assert_eq!(
+            h.key_values,
+            vec![
+                ("Segment0_Name".to_owned(), "ribs".to_owned()),
+                ("Params".to_owned(), "Range: 0.0|a\nb".to_owned()),
+            ]
+        );
+        assert_eq!(h.content.as_deref(), Some("a:=b"));
     }
 
     #[test]
