@@ -138,6 +138,21 @@ pub struct Scene {
     /// to the scene file.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub meshes: Vec<MeshSource>,
+    /// A segmentation of the volume, with how its segments show (the clip shapes say
+    /// which segments they cut); paths relative to the scene file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub segmentation: Option<SegmentationSource>,
+}
+
+/// A label map beside the volume: its file, a colour table, and its segments' styles.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SegmentationSource {
+    pub path: PathBuf,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table: Option<PathBuf>,
+    #[serde(default)]
+    pub styles: crate::labels::style::Styles,
 }
 
 /// A mesh file drawn inside the volume, with its colour.
@@ -202,8 +217,13 @@ impl Scene {
         if let Some(vol) = &self.volume.path {
             scene.volume.path = Some(relative_to(vol, path.parent().unwrap_or(Path::new("."))));
         }
+        let base = path.parent().unwrap_or(Path::new("."));
         for m in &mut scene.meshes {
-            m.path = relative_to(&m.path, path.parent().unwrap_or(Path::new(".")));
+            m.path = relative_to(&m.path, base);
+        }
+        if let Some(s) = &mut scene.segmentation {
+            s.path = relative_to(&s.path, base);
+            s.table = s.table.as_ref().map(|t| relative_to(t, base));
         }
         for c in &mut scene.clip_shapes {
             if let crate::clip::Shape::Mesh { path: mesh } = &mut c.shape {
@@ -232,6 +252,11 @@ impl Scene {
         self.volume.path = self.volume_path(scene_path);
         self.clip_shapes = self.clip_shapes_resolved(scene_path);
         self.meshes = self.meshes_resolved(scene_path);
+        let base = scene_path.parent().unwrap_or(Path::new("."));
+        if let Some(s) = &mut self.segmentation {
+            s.path = base.join(&s.path);
+            s.table = s.table.as_ref().map(|t| base.join(t));
+        }
     }
 
     /// The clip shapes with mesh paths resolved against the scene file's folder.
@@ -362,6 +387,7 @@ mod tests {
                 },
             ],
             meshes: Vec::new(),
+            segmentation: None,
         }
     }
 

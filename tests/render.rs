@@ -371,6 +371,7 @@ fn a_saved_scene_renders_the_same_image() {
         ambient_occlusion: Default::default(),
         clip_shapes: Vec::new(),
         meshes: Vec::new(),
+        segmentation: None,
     };
     let render = |s: &Scene, scene_path: &std::path::Path| {
         let p = s.volume_path(scene_path).expect("scene names a volume");

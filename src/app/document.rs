@@ -200,6 +200,7 @@ impl Document {
             ambient_occlusion: self.ao,
             clip_shapes: self.clip_shapes.clone(),
             meshes: self.meshes.clone(),
+            segmentation: None,
         }
     }
 }

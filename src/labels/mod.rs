@@ -14,6 +14,7 @@ pub mod palette;
 pub mod place;
 pub mod seg_nrrd;
 pub mod stats;
+pub mod style;
 pub mod table;
 
 use crate::volume::{LoadOptions, Volume, VolumeError, VoxelData, display_path};

@@ -126,6 +126,16 @@ impl RenderVolume {
         self.gradient.as_ref()
     }
 
+    /// Sets the segmentation every stage reads ([`GpuVolume::set_segments`]); whether
+    /// anything changed.
+    pub fn set_segments(
+        &mut self,
+        gpu: &Gpu,
+        segments: Option<crate::texels::segments::SegmentTexels>,
+    ) -> bool {
+        self.volume.set_segments(gpu, segments)
+    }
+
     /// Bakes the transfer function for frames of `step_voxels` too
     /// ([`GpuVolume::prepare_step`]).
     pub fn prepare_step(&mut self, gpu: &Gpu, step_voxels: f32) {

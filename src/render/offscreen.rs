@@ -12,6 +12,7 @@ use crate::ao::{Ambient, AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
 use crate::clip::ClipShape;
 use crate::clip::gpu::{ClipMaps, MapRequest};
 use crate::gpu::{Gpu, GpuError};
+use crate::texels::segments::SegmentTexels;
 use crate::texels::{UploadLimits, VolumeTexels};
 use crate::tf::TransferFunction;
 use crate::volume::Volume;
@@ -49,6 +50,8 @@ pub struct RenderJob<'a> {
     pub clip: &'a [ClipShape],
     /// Triangle meshes drawn inside the volume (see `render::surface`).
     pub surfaces: &'a [super::surface::Surface],
+    /// A segmentation on the volume's grid, with its looks and the shapes' cuts.
+    pub segments: Option<&'a SegmentTexels>,
 }
 
 impl<'a> RenderJob<'a> {
@@ -66,6 +69,7 @@ impl<'a> RenderJob<'a> {
             ao,
             clip: &[],
             surfaces: &[],
+            segments: None,
         }
     }
 }
@@ -194,6 +198,7 @@ fn render_gpu(
     } = *job;
     let rc = g.stage::<RayCaster>()?;
     let mut vol = RenderVolume::new(g, volume, tf, frame.settings.step_voxels)?;
+    vol.set_segments(g, job.segments.cloned());
     vol.extras.surfaces = surfaces.to_vec();
     let start = std::time::Instant::now();
     let engine = AoEngine::on(Some(Arc::clone(g)));
@@ -263,6 +268,16 @@ fn render_cpu(
     let texels = VolumeTexels::new(volume, UploadLimits::NONE);
     let lut = crate::sample::bake_lut(tf, &texels, frame.settings.step_voxels);
     let (mut cv, occ) = cpu::prepare(&texels, &lut);
+    let mut notes = Vec::new();
+    if let Some(s) = job.segments {
+        cv.segments = Some(crate::sample::SegmentSampler::new(s));
+        if ao.method != AoMethod::None || frame.settings.shadows {
+            notes.push(
+                "the CPU twin computes AO and shadows without the segmentation (the GPU's read it)"
+                    .to_owned(),
+            );
+        }
+    }
     if !surfaces.is_empty() {
         cv.surfaces = Some(cpu::CpuSurfaces {
             surfaces: surfaces.to_vec(),
@@ -305,7 +320,7 @@ fn render_cpu(
         light_seconds,
         cao: None,
         clip_errors: Vec::new(),
-        notes: computed.notes,
+        notes: notes.into_iter().chain(computed.notes).collect(),
     })
 }
 

@@ -91,6 +91,7 @@ fn default_scene(stats: &Stats) -> Scene {
         ambient_occlusion: AoSettings::default(),
         clip_shapes: Vec::new(),
         meshes: Vec::new(),
+        segmentation: None,
     }
 }
 
