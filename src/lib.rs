@@ -4,6 +4,8 @@
 //!
 //! 1. [`volume`] loads a file (NIfTI, Analyze, NRRD, DICOM series, PVM/DDS, raw) into a [`volume::Volume`]: voxels in
 //!    their stored type and units, spacing in mm, orientation in RAS.
+//!    [`labels`] places a segmentation label map on a volume's grid through the two
+//!    affines, with its segments' names and colours and statistics of the volume under each.
 //! 2. [`tf`] maps values to colour and opacity (the transfer function, in the data's
 //!    units); [`scene`] files hold a volume, its transfer function, camera, light, AO
 //!    settings, clip shapes and meshes, so any view can be reproduced headlessly.

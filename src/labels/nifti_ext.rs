@@ -8,7 +8,8 @@
 //! `esize` (i32, including its 8-byte head), `ecode` (i32) and `esize − 8` bytes of data,
 //! up to `vox_offset`.
 
-use super::{FileNames, SegmentKey, TableEntry};
+use super::raw::{FileNames, SegmentKey};
+use super::table::TableEntry;
 use crate::volume::nifti;
 use std::io::Read;
 use std::path::Path;

@@ -2,7 +2,7 @@
 //! image's affine to world (RAS mm) and through the inverse of the label map's affine to
 //! a label voxel, rounded to the nearest; outside the label grid is background (0).
 
-use super::{Grid, RawLabels};
+use super::raw::{Grid, RawLabels};
 use crate::volume::{VolumeError, display_path};
 use glam::DVec3;
 use std::path::Path;
@@ -126,7 +126,7 @@ pub fn world_box(g: Grid) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::labels::FileNames;
+    use crate::labels::raw::FileNames;
     use crate::volume::Orientation;
 
     fn raw(dims: [usize; 3], orientation: Orientation) -> RawLabels {

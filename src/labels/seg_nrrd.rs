@@ -7,7 +7,8 @@
 //! are interleaved voxel by voxel. The volume loader refuses such a list axis; here the
 //! whole payload is read and split.
 
-use super::{FileNames, Grid, RawLabels, SegmentKey, TableEntry, to_labels};
+use super::raw::{FileNames, Grid, RawLabels, SegmentKey, to_labels};
+use super::table::TableEntry;
 use crate::volume::nrrd::{self, Header, Layout};
 use crate::volume::{LoadOptions, VolumeError, memory_budget};
 use std::collections::BTreeMap;

@@ -18,6 +18,21 @@ pub struct InfoArgs {
     pub bins: usize,
     #[command(flatten)]
     pub load: LoadArgs,
+    #[command(flatten)]
+    pub labels: LabelArgs,
+}
+
+/// A segmentation to show or measure beside the image.
+#[derive(Args, Debug, Default, Clone)]
+pub struct LabelArgs {
+    /// Label map (segmentation) of the image: any volume format volao reads with
+    /// integer labels, or a 3D Slicer .seg.nrrd; placed on the image by the affines.
+    #[arg(long, value_name = "SEG")]
+    pub labels: Option<PathBuf>,
+    /// Names and colours of the labels (FreeSurferColorLUT/Slicer .ctbl/.txt, NiiVue
+    /// .json, MRIcron .lut); wins over those in the label file.
+    #[arg(long, value_name = "FILE", requires = "labels")]
+    pub label_table: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]

@@ -5,14 +5,26 @@ use crate::args::InfoArgs;
 use crate::progress::load_with_bar;
 use anyhow::{Context, Result};
 use std::path::Path;
+use volao::labels::SegmentStats;
 use volao::volume::{self, Loaded, Volume, VoxelType, fmt_bytes, fmt_dims};
 
 /// `volao info`.
 pub fn run(args: &InfoArgs) -> Result<()> {
+    if args.file.is_none() && args.labels.labels.is_some() {
+        anyhow::bail!("--labels needs an image file: the demo volume has no label map");
+    }
     let report = match &args.file {
         Some(path) => {
             let loaded = load_with_bar(path, &args.load.options())?;
-            describe_loaded(path, &loaded, args.bins)
+            let mut report = describe_loaded(path, &loaded, args.bins);
+            if let Some(seg) = &args.labels.labels {
+                let name = volume::display_path(path);
+                let table = args.labels.label_table.as_deref();
+                let labels = volao::labels::load_named(seg, table, &loaded.volume, &name)?;
+                report.segments = Some(volao::labels::statistics(&loaded.volume, &labels.labels));
+                report.label_warnings = labels.warnings;
+            }
+            report
         }
         None => describe_demo(&volume::demo::head_phantom(128), args.bins),
     };
@@ -36,6 +48,12 @@ struct Report {
     descriptions: Vec<(String, String)>,
     warnings: Vec<String>,
     histogram: volume::Histogram,
+    /// With `--labels`: statistics of the image under each present segment.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    segments: Option<Vec<SegmentStats>>,
+    /// With `--labels`: what the user should know about the label map.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    label_warnings: Vec<String>,
 }
 
 fn describe(file: String, format: String, v: &Volume, warnings: &[String], bins: usize) -> Report {
@@ -55,6 +73,8 @@ fn describe(file: String, format: String, v: &Volume, warnings: &[String], bins:
         affine: v.orientation.rows(),
         descriptions: v.descriptions.clone(),
         warnings: warnings.to_vec(),
+        segments: None,
+        label_warnings: Vec::new(),
     }
 }
 
@@ -148,5 +168,47 @@ fn print_info(r: &Report, json: bool) -> Result<()> {
     }
     println!("histogram ({} bins, log scale):", r.histogram.counts.len());
     print!("{}", r.histogram.to_text(48));
+    if let Some(segments) = &r.segments {
+        print_segments(segments, &r.label_warnings);
+    }
     Ok(())
+}
+
+/// The `--labels` table: one row per present segment.
+fn print_segments(segments: &[SegmentStats], warnings: &[String]) {
+    for w in warnings {
+        println!("labels:       warning: {w}");
+    }
+    println!("segments ({} present):", segments.len());
+    let layered = segments.iter().any(|s| s.layer > 0);
+    let width = segments
+        .iter()
+        .map(|s| s.name.chars().count())
+        .max()
+        .unwrap_or(4)
+        .clamp(4, 40);
+    let layer_head = if layered { "layer " } else { "" };
+    println!(
+        "  {layer_head}{:>5}  {:<width$}  {:>10}  {:>10}  {:>10}  {:>10}  {:>10}  {:>10}",
+        "id", "name", "voxels", "mL", "mean", "median", "min", "max"
+    );
+    for s in segments {
+        let layer = if layered {
+            format!("{:>5} ", s.layer)
+        } else {
+            String::new()
+        };
+        let name: String = s.name.chars().take(width).collect();
+        println!(
+            "  {layer}{:>5}  {:<width$}  {:>10}  {:>10.3}  {:>10.2}  {:>10}  {:>10}  {:>10}",
+            s.id,
+            volume::escape_controls(&name),
+            s.voxels,
+            s.volume_ml,
+            s.mean,
+            fmt_value(s.median),
+            fmt_value(s.min),
+            fmt_value(s.max)
+        );
+    }
 }
