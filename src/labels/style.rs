@@ -93,7 +93,8 @@ impl Styles {
         let (pattern, changes) = spec
             .rsplit_once(':')
             .ok_or_else(|| format!("--segment {spec:?}: expected PATTERN:CHANGE[,CHANGE…]"))?;
-        let change = parse_changes(changes).map_err(|e| format!("--segment {spec:?}: {e}"))?;
+        let changes = parse_changes(changes).map_err(|e| format!("--segment {spec:?}: {e}"))?;
+        let change = |s: &mut SegmentStyle| changes.iter().for_each(|c| c.apply(s));
         if pattern.eq_ignore_ascii_case("unlabelled") {
             change(&mut self.unlabelled);
             return Ok(());
@@ -114,41 +115,68 @@ impl Styles {
     }
 }
 
+/// One change `--segment` makes to a style.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Change {
+    Hide,
+    Show,
+    Tint,
+    Replace,
+    Outline,
+    Fill,
+    Opacity(f32),
+    Color([u8; 3]),
+}
+
+impl Change {
+    pub fn apply(self, s: &mut SegmentStyle) {
+        match self {
+            Change::Hide => s.visible = false,
+            Change::Show => s.visible = true,
+            Change::Tint => s.replace = false,
+            Change::Replace => s.replace = true,
+            Change::Outline => s.outline = true,
+            Change::Fill => s.outline = false,
+            Change::Opacity(o) => s.opacity = o,
+            Change::Color(c) => s.color = Some(c),
+        }
+    }
+}
+
 /// One `--segment` change list: `hide`, `show`, `opacity=F`, `color=#rrggbb`, `tint`,
 /// `replace`, `outline`, `fill`, comma-separated.
-pub fn parse_changes(changes: &str) -> Result<impl Fn(&mut SegmentStyle), String> {
-    let mut steps: Vec<Box<dyn Fn(&mut SegmentStyle)>> = Vec::new();
-    for c in changes.split(',').map(str::trim).filter(|c| !c.is_empty()) {
-        let (key, value) = c.split_once('=').unwrap_or((c, ""));
-        let step: Box<dyn Fn(&mut SegmentStyle)> = match key {
-            "hide" => Box::new(|s| s.visible = false),
-            "show" => Box::new(|s| s.visible = true),
-            "tint" => Box::new(|s| s.replace = false),
-            "replace" => Box::new(|s| s.replace = true),
-            "outline" => Box::new(|s| s.outline = true),
-            "fill" => Box::new(|s| s.outline = false),
-            "opacity" => {
-                let o: f32 = value
-                    .parse()
-                    .ok()
-                    .filter(|o: &f32| (0.0..=1.0).contains(o))
-                    .ok_or_else(|| format!("opacity {value:?} is not a number in 0…1"))?;
-                Box::new(move |s| s.opacity = o)
-            }
-            "color" | "colour" => {
-                let rgb = parse_hex(value)
-                    .ok_or_else(|| format!("colour {value:?} is not #rrggbb"))?;
-                Box::new(move |s| s.color = Some(rgb))
-            }
-            _ => {
-                return Err(format!(
-                    "unknown change {c:?} (hide, show, opacity=F, color=#rrggbb, tint, replace, outline, fill)"
-                ));
-            }
-        };
-        steps.push(step);
-    }
-    Ok(move |s: &mut SegmentStyle| steps.iter().for_each(|f| f(s)))
+pub fn parse_changes(changes: &str) -> Result<Vec<Change>, String> {
+    changes
+        .split(',')
+        .map(str::trim)
+        .filter(|c| !c.is_empty())
+        .map(|c| {
+            let (key, value) = c.split_once('=').unwrap_or((c, ""));
+            Ok(match key {
+                "hide" => Change::Hide,
+                "show" => Change::Show,
+                "tint" => Change::Tint,
+                "replace" => Change::Replace,
+                "outline" => Change::Outline,
+                "fill" => Change::Fill,
+                "opacity" => Change::Opacity(
+                    value
+                        .parse()
+                        .ok()
+                        .filter(|o: &f32| (0.0..=1.0).contains(o))
+                        .ok_or_else(|| format!("opacity {value:?} is not a number in 0…1"))?,
+                ),
+                "color" | "colour" => Change::Color(
+                    parse_hex(value).ok_or_else(|| format!("colour {value:?} is not #rrggbb"))?,
+                ),
+                _ => {
+                    return Err(format!(
+                        "unknown change {c:?} (hide, show, opacity=F, color=#rrggbb, tint, replace, outline, fill)"
+                    ));
+                }
+            })
+        })
+        .collect()
 }
 
 fn parse_hex(s: &str) -> Option<[u8; 3]> {
@@ -179,6 +207,9 @@ impl Classes {
         // Class 0 is always "in no segment", so unlabelled voxels keep a fixed class.
         ids.insert(vec![0; labels.layers.len()], 0);
         members.push(Vec::new());
+        if let [layer] = &labels.layers[..] {
+            return Self::of_layer(labels, layer);
+        }
         let mut combo = vec![0u16; labels.layers.len()];
         for i in 0..n {
             for (c, layer) in combo.iter_mut().zip(&labels.layers) {
@@ -205,6 +236,25 @@ impl Classes {
             };
             of_voxel.push(id);
         }
+        Ok(Classes { of_voxel, members })
+    }
+}
+
+impl Classes {
+    /// One layer: a class per value present (class 0: value 0), by a table of values.
+    fn of_layer(labels: &LabelMap, layer: &[u16]) -> Result<Classes, String> {
+        let mut class_of = vec![u16::MAX; 1 << 16];
+        class_of[0] = 0;
+        let mut members = vec![Vec::new()];
+        for &v in layer {
+            if class_of[v as usize] == u16::MAX {
+                class_of[v as usize] = u16::try_from(members.len()).map_err(|_| {
+                    format!("{}: more than 65 535 label values", labels.display_path())
+                })?;
+                members.push(vec![SegmentKey { layer: 0, value: v }]);
+            }
+        }
+        let of_voxel = layer.iter().map(|&v| class_of[v as usize]).collect();
         Ok(Classes { of_voxel, members })
     }
 }
@@ -301,6 +351,27 @@ pub fn looks(
             }
         })
         .collect()
+}
+
+/// Checks that every segment a clip shape names is in `labels`: one line per problem.
+pub fn check_cuts(labels: &LabelMap, shapes: &[ClipShape]) -> Result<(), String> {
+    for (i, shape) in shapes.iter().enumerate() {
+        let names = match &shape.cuts {
+            Cuts::All => continue,
+            Cuts::Only(n) | Cuts::Except(n) => n,
+        };
+        for name in names {
+            let background = name.eq_ignore_ascii_case("unlabelled") || name.trim() == "0";
+            if !background && labels.find(name).is_empty() {
+                return Err(format!(
+                    "clip shape {}: no segment of {} is named or numbered {name:?}",
+                    i + 1,
+                    labels.display_path()
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// A segmentation ready for the GPU: its classes with `styles`' looks and `shapes`' cuts.

@@ -123,6 +123,14 @@ pub struct ConvertArgs {
 pub struct RenderArgs {
     /// Volume file or scene (.json). Omit for the demo volume.
     pub input: Option<PathBuf>,
+    #[command(flatten)]
+    pub labels: LabelArgs,
+    /// How segments show: PATTERN:CHANGE[,CHANGE…] with PATTERN a segment name (`*`
+    /// matches any run of characters), a label value or `unlabelled`, and CHANGE one of
+    /// hide, show, opacity=F, color=#rrggbb, tint, replace, outline, fill. Repeatable,
+    /// applied in order.
+    #[arg(long, value_name = "SPEC")]
+    pub segment: Vec<String>,
     /// Output PNG.
     #[arg(short, long)]
     pub output: PathBuf,

@@ -8,10 +8,12 @@ use crate::args::{RenderArgs, parse_background, set, set_within};
 use crate::progress::{load_with_bar, slice_bar};
 use anyhow::{Result, bail};
 use volao::ao::{AoMethod, AoSettings};
+use volao::labels::{self, style};
 use volao::render::offscreen::{RenderJob, Rendered};
 use volao::render::surface::Surface;
 use volao::render::{Frame, RenderSettings};
-use volao::scene::{Light, MeshSource, SCENE_VERSION, Scene, VolumeSource};
+use volao::scene::{Light, MeshSource, SCENE_VERSION, Scene, SegmentationSource, VolumeSource};
+use volao::texels::segments::SegmentTexels;
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, Stats, Volume};
 
@@ -31,6 +33,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let mut scene = file.unwrap_or_else(|| default_scene(&stats));
     scene.volume = source;
     args.apply_to(&mut scene, &stats)?;
+    let segments = args.segmentation(&mut scene, &volume)?;
     let meshes = scene
         .meshes
         .iter()
@@ -38,7 +41,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .collect::<Result<Vec<_>, _>>()?;
 
     let start = std::time::Instant::now();
-    let out = render_scene(&scene, &volume, &meshes, !args.cpu)?;
+    let out = render_scene(&scene, &volume, &meshes, segments.as_ref(), !args.cpu)?;
     for e in &out.clip_errors {
         eprintln!("warning: {e} (rendered without it)");
     }
@@ -109,6 +112,48 @@ impl RenderArgs {
         // What is saved is this volao's format.
         scene.version = SCENE_VERSION;
         Ok(Some(scene))
+    }
+
+    /// The scene's segmentation (`--labels` replaces it; `--segment` changes its
+    /// styles), loaded onto `volume`'s grid with its looks and the clip shapes' cuts.
+    fn segmentation(&self, scene: &mut Scene, volume: &Volume) -> Result<Option<SegmentTexels>> {
+        if let Some(path) = &self.labels.labels {
+            let styles = scene
+                .segmentation
+                .take()
+                .map(|s| s.styles)
+                .unwrap_or_default();
+            scene.segmentation = Some(SegmentationSource {
+                path: path.clone(),
+                table: self.labels.label_table.clone(),
+                styles,
+            });
+        }
+        let Some(source) = &mut scene.segmentation else {
+            if !self.segment.is_empty() {
+                bail!("--segment needs a segmentation: give --labels SEG");
+            }
+            return Ok(None);
+        };
+        let loaded = labels::load(&source.path, source.table.as_deref(), volume)?;
+        for w in &loaded.warnings {
+            eprintln!("warning: {w}");
+        }
+        let map = loaded.labels;
+        for spec in &self.segment {
+            source
+                .styles
+                .apply(&map, spec)
+                .map_err(anyhow::Error::msg)?;
+        }
+        style::check_cuts(&map, &scene.clip_shapes).map_err(anyhow::Error::msg)?;
+        let classes = style::Classes::of(&map).map_err(anyhow::Error::msg)?;
+        Ok(Some(style::segment_texels(
+            &map,
+            &classes,
+            &source.styles,
+            &scene.clip_shapes,
+        )))
     }
 
     /// Which volume, and how to read it: the scene's (a raw layout given by flags
@@ -255,6 +300,7 @@ fn render_scene(
     scene: &Scene,
     volume: &Volume,
     surfaces: &[Surface],
+    segments: Option<&SegmentTexels>,
     gpu: bool,
 ) -> Result<Rendered> {
     let frame = Frame {
@@ -284,6 +330,7 @@ fn render_scene(
         ao,
         clip: &scene.clip_shapes,
         surfaces,
+        segments,
     };
     let out = volao::render::offscreen::render(device.as_ref(), &job, &|done, total| {
         bar.set_length(total as u64);
