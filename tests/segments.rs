@@ -493,3 +493,111 @@ fn a_probe_cuts_only_its_segments() {
         .expect("a vertebra in the crop");
     assert_eq!(t.table[vertebra as usize].carved_by, 1);
 }
+
+/// Hiding a segment updates `V_PAO` only within the rays' reach of its bricks, to the
+/// bits a recomputation gives; a carved frame after it gives the recomputation's pixels.
+#[test]
+fn hiding_a_segment_updates_v_pao_near_it_to_the_bits_of_a_recomputation() {
+    use volao::ao::cao::CaoVolume;
+    let gpu = device();
+    for p in [totalsegmentator(), slicer()] {
+        let tf = TransferFunction::preset(Preset::CtSoftTissue, &p.image.stats());
+        let keep = skeleton_and_vessels(&p);
+        let shapes = [sphere(Vec3::new(0.0, 20.0, 0.0), 30.0, Cuts::Except(keep))];
+        let shown = Styles::default();
+        let mut hidden = shown.clone();
+        // The smallest segment with voxels here: few bricks change.
+        let small = p
+            .labels
+            .segments
+            .iter()
+            .filter(|s| s.voxels > 0)
+            .min_by_key(|s| s.voxels)
+            .expect("a segment")
+            .key;
+        hidden.set(
+            small,
+            SegmentStyle {
+                visible: false,
+                ..Default::default()
+            },
+        );
+        let before = texels_of(&p, &shown, &shapes);
+        let after = texels_of(&p, &hidden, &shapes);
+        let changed = before.bricks_changed_by(&after.table, volao::ao::sparse::BRICK);
+        let rays = Rays::uniform(RaySet::Fourteen.directions());
+        let setup = CaoSetup {
+            tf: &tf,
+            rays: &rays,
+            samples: SAMPLES,
+            msaa: 32,
+        };
+        let upload = |s: &SegmentTexels| {
+            let mut vol = RenderVolume::from_texels(&gpu, common::texels(&p.image), &tf, 1.0)
+                .unwrap_or_else(|e| panic!("{e}"));
+            vol.set_segments(&gpu, Some(s.clone()));
+            vol
+        };
+        let new_cao = |vol: &RenderVolume| {
+            let bricks = Coverage::Readable.bricks(&vol.texels, vol.ranges(), &tf);
+            CaoGpu::new(&gpu, vol, setup, bricks, &|_, _| {}).unwrap_or_else(|e| panic!("{e}"))
+        };
+        let reach = reach_mm(SAMPLES, p.image.spacing);
+        let pose = Pose {
+            shapes: &shapes,
+            resolution: MAP,
+            reach_mm: reach,
+            mode: CaoMode::Selective,
+        };
+        // Recomputed from scratch with the segment hidden.
+        let fresh_vol = upload(&after);
+        let mut fresh = new_cao(&fresh_vol);
+        let fresh_pao = fresh
+            .read(&gpu, CaoVolume::Precomputed)
+            .unwrap_or_else(|e| panic!("{e}"));
+        // Shown, carved for a frame, then the segment hidden and V_PAO updated.
+        let mut vol = upload(&before);
+        let mut cao = new_cao(&vol);
+        cao.update(&gpu, &vol.texels, pose)
+            .unwrap_or_else(|e| panic!("{e}"));
+        vol.set_segments(&gpu, Some(after.clone()));
+        let update = cao
+            .update_pao(&gpu, &vol.texels, &changed, &|_, _| {})
+            .unwrap_or_else(|e| panic!("{e}"));
+        let pao = cao
+            .read(&gpu, CaoVolume::Precomputed)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let differ = (0..pao.len())
+            .filter(|&i| pao[i].to_bits() != fresh_pao[i].to_bits())
+            .count();
+        assert_eq!(
+            differ, 0,
+            "{}: V_PAO after the update vs recomputed",
+            p.name
+        );
+        assert!(
+            update.lao_bricks > 0 && update.lao_bricks < update.bricks,
+            "{}: the update should ray cast some bricks, not all: {update:?}",
+            p.name
+        );
+        // The next carved frame: the recomputation's pixels.
+        let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
+        let f = frame(RenderSettings::default(), 48);
+        let image = |cao: &mut CaoGpu, vol: &mut RenderVolume| {
+            cao.update(&gpu, &vol.texels, pose)
+                .unwrap_or_else(|e| panic!("{e}"));
+            vol.set_ambient_occlusion_view(cao.ao_view());
+            rc.render(&gpu, vol, &f, Some(&cao.clip))
+                .unwrap_or_else(|e| panic!("{e}"))
+                .pixels
+        };
+        let mut fresh_vol = fresh_vol;
+        let (a, b) = (image(&mut cao, &mut vol), image(&mut fresh, &mut fresh_vol));
+        assert_eq!(
+            differing(&a, &b),
+            0,
+            "{}: the carved frame after the update",
+            p.name
+        );
+    }
+}

@@ -101,6 +101,28 @@ impl SegmentTexels {
         true
     }
 
+    /// Per brick of `edge`³ voxels (x fastest over the volume's dims ÷ `edge`, rounded
+    /// up): whether a voxel in it is of a class whose opacity weight `table` changes (what
+    /// `V_o` and `V_PAO` read; colours and cuts change neither).
+    pub fn bricks_changed_by(&self, table: &[ClassLook], edge: usize) -> Vec<bool> {
+        let weight = |c: &ClassLook| (c.opacity.clamp(0.0, 1.0).to_bits(), c.outline);
+        let changed: Vec<bool> = self
+            .table
+            .iter()
+            .zip(table)
+            .map(|(a, b)| weight(a) != weight(b))
+            .collect();
+        let grid = self.dims.map(|d| d.div_ceil(edge));
+        let mut bricks = vec![false; grid.iter().product()];
+        for (i, &c) in self.classes.iter().enumerate() {
+            if changed.get(c as usize).copied().unwrap_or(true) {
+                let v = voxel_of(i, self.dims).map(|x| x / edge);
+                bricks[v[0] + grid[0] * (v[1] + grid[1] * v[2])] = true;
+            }
+        }
+        bricks
+    }
+
     /// The class table as the shaders read it.
     pub fn gpu_table(&self) -> Vec<[u32; 4]> {
         self.table.iter().map(ClassLook::gpu).collect()

@@ -45,12 +45,14 @@ use std::time::Instant;
 pub use super::settings::DEFAULT_MSAA;
 pub use cpu::{StepVInputs, clip_volume_cpu, lao_on_opacity_cpu};
 pub use frame::{CaoFrame, Pose};
+pub use pao::{PaoUpdate, dilate};
 pub use pipelines::CaoPipelines;
 pub use voxel_list::MAX_LIST_BYTES_PER_VOXEL;
 
 mod cpu;
 mod frame;
 mod listed;
+mod pao;
 mod pipelines;
 mod readback;
 mod voxel_list;
