@@ -39,6 +39,9 @@ override FIND: bool = true;       // shading fetches: find a sample with opacity
 // 1: a gradient volume is bound (one fetch per gradient), 0: six density samples,
 // 2: box_half.w decides (the general shader).
 override GRADIENT: u32 = 2u;
+// A segmentation's weight has edges (some class hidden, fainter or outlined): shading
+// looks at its gradient (texels::segments::SegmentTexels::edges; without, it is 0).
+override SEGMENT_EDGES: bool = true;
 
 // The AO is read the full offset out wherever the gradient is at least 1/AO_EDGE_GAIN
 // of a full edge: through the whole soft ramp of a CT surface, whose deeper samples
@@ -174,17 +177,6 @@ fn gradient(uvw: vec3<f32>) -> vec3<f32> {
     ) / (2.0 * p.voxel_uvw.w);
 }
 
-// The gradient of the segmentation's opacity weight by central differences one voxel
-// either side, per mm (CPU twin: render::cpu::shade).
-fn segment_gradient(uvw: vec3<f32>) -> vec3<f32> {
-    let d = p.voxel_uvw.xyz;
-    return vec3<f32>(
-        segment_look_at(uvw + vec3<f32>(d.x, 0.0, 0.0)).a - segment_look_at(uvw - vec3<f32>(d.x, 0.0, 0.0)).a,
-        segment_look_at(uvw + vec3<f32>(0.0, d.y, 0.0)).a - segment_look_at(uvw - vec3<f32>(0.0, d.y, 0.0)).a,
-        segment_look_at(uvw + vec3<f32>(0.0, 0.0, d.z)).a - segment_look_at(uvw - vec3<f32>(0.0, 0.0, d.z)).a,
-    ) / (2.0 * p.voxel_uvw.w);
-}
-
 // The lit colour of a sample (CPU twin: render::cpu::light), docs/algorithms.md "Shading
 // with ambient occlusion". By default the AO factor A_s = clamp(1 − s(1 − min(A / A_open, 1)), 0, 1)
 // (A_open = ao.w: what the AO method gives an open flat surface, so such a surface keeps
@@ -220,11 +212,11 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>, cut: bool) -> vec3<f32
         var g = gradient(uvw);
         // How much of an edge this is (1 = a clear surface); flat regions are lit fully.
         var strength = length(g) * abs(volume_map.lut.x) * p.voxel_uvw.w * p.edge.x;
-        if SEGMENTS {
+        if SEGMENTS && SEGMENT_EDGES {
             // A segment's boundary the density does not show (an organ in tissue of the
             // same HU) is lit by the gradient of the segmentation's weight where that
             // is the stronger edge (a full step of weight across a voxel is one edge).
-            let gw = segment_gradient(uvw);
+            let gw = segment_gradient_at(uvw) / (2.0 * p.voxel_uvw.w);
             let sw = length(gw) * p.voxel_uvw.w * 2.0;
             if sw > strength {
                 g = gw;

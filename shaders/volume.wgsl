@@ -20,6 +20,9 @@ struct VolumeMap {
 // Whether a segmentation is read (texels::segments; a pipeline variant). Off, the
 // functions below read the density alone, as without one.
 override SEGMENTS: bool = false;
+// Whether a segment's colour tints (0) or replaces (1) the transfer function's in every
+// class, or each class says (2): texels::segments::SegmentTexels::modes.
+override SEGMENT_MODES: u32 = 2u;
 // Per voxel: the class colour × its opacity weight, and the weight (filtered).
 @group(3) @binding(4) var segment_look: texture_3d<f32>;
 // Per voxel: its class (a combination of segments), read nearest.
@@ -27,6 +30,9 @@ override SEGMENTS: bool = false;
 // Per class: the clip shapes that carve it (bit s), flags (bit 0: its colour replaces
 // the transfer function's), packed RGB, unused (texels::segments::ClassLook::gpu).
 @group(3) @binding(6) var<storage, read> segment_table: array<vec4<u32>>;
+// Per voxel: the weight's differences one voxel either side, w(x + 1) − w(x − 1) per
+// axis (snorm, filtered): its gradient wherever it is sampled, in one fetch.
+@group(3) @binding(7) var segment_gradient: texture_3d<f32>;
 
 // The texel value at texture coordinates `uvw`, trilinear, clamped at the edges.
 fn value_at(uvw: vec3<f32>) -> f32 {
@@ -71,6 +77,14 @@ fn segment_look_at(uvw: vec3<f32>) -> vec4<f32> {
         return textureSampleLevel(segment_look, volume_sampler, uvw, 0.0);
     }
     return vec4<f32>(1.0);
+}
+
+// The weight's differences one voxel either side at `uvw` (0 without a segmentation).
+fn segment_gradient_at(uvw: vec3<f32>) -> vec3<f32> {
+    if SEGMENTS {
+        return textureSampleLevel(segment_gradient, volume_sampler, uvw, 0.0).xyz;
+    }
+    return vec3<f32>(0.0);
 }
 
 // The segmentation's opacity weight of voxel `k` (1 without one).
@@ -121,7 +135,10 @@ fn classify_at(uvw: vec3<f32>, value: f32) -> vec4<f32> {
         return vec4<f32>(tf.rgb, 0.0);
     }
     let c = look.rgb / look.a;
-    let replace = f32(segment_table[segment_class_at(uvw)].y & 1u);
+    var replace = f32(SEGMENT_MODES);
+    if SEGMENT_MODES == 2u {
+        replace = f32(segment_table[segment_class_at(uvw)].y & 1u);
+    }
     return vec4<f32>(mix(tf.rgb * c, c, replace), tf.a * look.a);
 }
 

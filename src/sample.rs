@@ -64,6 +64,8 @@ pub struct SegmentSampler {
     pub dims: [usize; 3],
     /// Colour × weight (r, g, b) and weight, each in [0, 1].
     look: [Vec<f32>; 4],
+    /// The weight's differences (x, y, z) as the snorm texture holds them.
+    gradient: [Vec<f32>; 3],
     classes: Vec<u16>,
     table: Vec<[u32; 4]>,
 }
@@ -73,6 +75,12 @@ impl SegmentSampler {
         SegmentSampler {
             dims: s.dims,
             look: std::array::from_fn(|c| s.look.iter().map(|l| l[c] as f32 / 255.0).collect()),
+            gradient: std::array::from_fn(|c| {
+                s.gradient
+                    .iter()
+                    .map(|g| (g[c] as f32 / 127.0).max(-1.0))
+                    .collect()
+            }),
             classes: s.classes.clone(),
             table: s.gpu_table(),
         }
@@ -86,6 +94,13 @@ impl SegmentSampler {
     pub fn look_at(&self, uvw: Vec3) -> Vec4 {
         Vec4::from_array(std::array::from_fn(|c| {
             trilinear(&self.look[c], self.dims, uvw)
+        }))
+    }
+
+    /// `segment_gradient_at`: the weight's differences at `uvw`, trilinear.
+    pub fn gradient_at(&self, uvw: Vec3) -> Vec3 {
+        Vec3::from_array(std::array::from_fn(|c| {
+            trilinear(&self.gradient[c], self.dims, uvw)
         }))
     }
 

@@ -977,6 +977,8 @@ fn every_variant_draws_the_general_pixels() {
                 gradient: Some(true),
                 // Half the variants read the (absent) segmentation: the same pixels.
                 segments: on(0) ^ on(5),
+                segment_modes: 2,
+                segment_edges: on(1),
             };
             // Never chosen: lavapipe crashes on it (see `Variant::of`).
             if variant.shadows && !variant.surfaces {

@@ -524,7 +524,7 @@ fn hiding_a_segment_updates_v_pao_near_it_to_the_bits_of_a_recomputation() {
         );
         let before = texels_of(&p, &shown, &shapes);
         let after = texels_of(&p, &hidden, &shapes);
-        let changed = before.bricks_changed_by(&after.table, volao::ao::sparse::BRICK);
+        let changed = before.voxels_changed_by(&after.table);
         let rays = Rays::uniform(RaySet::Fourteen.directions());
         let setup = CaoSetup {
             tf: &tf,
@@ -562,7 +562,7 @@ fn hiding_a_segment_updates_v_pao_near_it_to_the_bits_of_a_recomputation() {
             .unwrap_or_else(|e| panic!("{e}"));
         vol.set_segments(&gpu, Some(after.clone()));
         let update = cao
-            .update_pao(&gpu, &vol.texels, &changed, &|_, _| {})
+            .update_pao(&gpu, &vol.texels, &changed)
             .unwrap_or_else(|e| panic!("{e}"));
         let pao = cao
             .read(&gpu, CaoVolume::Precomputed)

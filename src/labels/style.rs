@@ -309,7 +309,7 @@ pub fn looks(
             .index_of(key)
             .map_or([255; 3], |i| labels.segments[i].color)
     };
-    classes
+    let mut looks: Vec<ClassLook> = classes
         .members
         .iter()
         .map(|members| {
@@ -350,7 +350,16 @@ pub fn looks(
                 carved_by,
             }
         })
-        .collect()
+        .collect();
+    // A hidden class's colour never shows: it takes the mode of the shown ones where they
+    // agree, so that the shaders need not look the mode up per sample (`SEGMENT_MODES`).
+    let shown = |c: &&ClassLook| c.opacity > 0.0;
+    if let Some(first) = looks.iter().find(shown).map(|c| c.replace)
+        && looks.iter().filter(shown).all(|c| c.replace == first)
+    {
+        looks.iter_mut().for_each(|c| c.replace = first);
+    }
+    looks
 }
 
 /// Checks that every segment a clip shape names is in `labels`: one line per problem.

@@ -124,8 +124,8 @@ fn shade(
         let mut g = differences(&|o| volume.value_at(uvw + o));
         let mut strength = g.length() * volume.map.lut[0].abs() * p.voxel_uvw[3] * p.edge[0];
         if let Some(segments) = volume.segments {
-            // raycast.wgsl's segment_gradient: the weight's edge where it is the stronger.
-            let gw = differences(&|o| segments.look_at(uvw + o).w);
+            // The weight's edge where it is the stronger.
+            let gw = segments.gradient_at(uvw) / (2.0 * p.voxel_uvw[3]);
             let sw = gw.length() * p.voxel_uvw[3] * 2.0;
             if sw > strength {
                 (g, strength) = (gw, sw);

@@ -28,8 +28,11 @@ pub struct Variant {
     /// A gradient volume is bound (one fetch per gradient instead of six); `None`: the
     /// uniform `box_half.w` decides (the general shader).
     pub gradient: Option<bool>,
-    /// A segmentation is read (`SEGMENTS` of `volume.wgsl`).
+    /// A segmentation is read (`SEGMENTS` of `volume.wgsl`), with its colour modes
+    /// (`SEGMENT_MODES`) and whether its weight has edges (`SEGMENT_EDGES`).
     pub segments: bool,
+    pub segment_modes: u32,
+    pub segment_edges: bool,
 }
 
 impl Variant {
@@ -67,6 +70,8 @@ impl Variant {
             // same pipeline whether a gradient volume is bound or not.
             gradient: Some(vol.gradient_volume().is_some() && (phong || ao_volume || live_vao)),
             segments: vol.segments.on,
+            segment_modes: vol.segments.modes,
+            segment_edges: vol.segments.edges && (phong || ao_volume || live_vao),
         }
     }
 
@@ -85,11 +90,13 @@ impl Variant {
             skipping: true,
             gradient: None,
             segments: true,
+            segment_modes: 2,
+            segment_edges: true,
         }
     }
 
     /// The values of the shader's `override` constants.
-    pub(super) fn constants(&self) -> [(&'static str, f64); 13] {
+    pub(super) fn constants(&self) -> [(&'static str, f64); 15] {
         let b = |on: bool| f64::from(u8::from(on));
         // Shading that fetches: worth finding a sample with opacity before shading.
         let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
@@ -107,6 +114,8 @@ impl Variant {
             ("SKIPPING", b(self.skipping)),
             ("GRADIENT", self.gradient.map_or(2.0, b)),
             ("SEGMENTS", b(self.segments)),
+            ("SEGMENT_MODES", f64::from(self.segment_modes)),
+            ("SEGMENT_EDGES", b(self.segment_edges)),
         ]
     }
 }

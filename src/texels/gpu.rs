@@ -201,10 +201,14 @@ impl GpuVolume {
         self.lut_step = step_voxels;
         gpu.queue
             .write_buffer(&self.lut_buffer, 0, bytemuck::cast_slice(&self.lut.rgba));
-        let occ = self.ranges.occupancy(&self.texels, &self.lut);
-        let grid = self.ranges.grid.map(|d| d as u32);
-        crate::gpu::write_texture_3d(&gpu.queue, &self.occupancy, 0, grid, 1, &occ);
+        self.write_occupancy(gpu);
         true
+    }
+
+    /// Writes the occupancy grid of the transfer function and the segmentation.
+    fn write_occupancy(&self, gpu: &Gpu) {
+        let grid = self.ranges.grid.map(|d| d as u32);
+        crate::gpu::write_texture_3d(&gpu.queue, &self.occupancy, 0, grid, 1, &self.occupancy());
     }
 
     /// Sets the segmentation every stage reads beside the density (`None`: none). One on
@@ -215,6 +219,7 @@ impl GpuVolume {
             let had = self.segment_texels.take().is_some();
             if had {
                 self.segments = GpuSegments::none(gpu);
+                self.write_occupancy(gpu);
             }
             return had;
         };
@@ -233,6 +238,7 @@ impl GpuVolume {
             _ => self.segments = GpuSegments::new(gpu, &s),
         }
         self.segment_texels = Some(s);
+        self.write_occupancy(gpu);
         true
     }
 
@@ -246,8 +252,15 @@ impl GpuVolume {
         &self.ranges
     }
 
-    /// The occupancy grid for the current LUT (for the CPU twin).
+    /// The occupancy grid for the current LUT and segmentation: blocks where every
+    /// voxel a sample reads is hidden are empty too.
     pub fn occupancy(&self) -> Vec<u8> {
-        self.ranges.occupancy(&self.texels, &self.lut)
+        let mut occ = self.ranges.occupancy(&self.texels, &self.lut);
+        if let Some(s) = &self.segment_texels {
+            for (o, shown) in occ.iter_mut().zip(s.shown_blocks(self.ranges.edge)) {
+                *o &= u8::from(shown);
+            }
+        }
+        occ
     }
 }

@@ -27,6 +27,7 @@ pub fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
             entry::texture(4, c, D3, Some(true)),
             entry::texture(5, c, D3, None),
             entry::storage(6, c, true),
+            entry::texture(7, c, D3, Some(true)),
         ],
     })
 }
@@ -56,8 +57,8 @@ pub struct Reading<'a> {
 }
 
 /// Which of a segmentation's bindings a stage's shader uses (`volume.wgsl`): none (it
-/// reads no opacity), the look (4: `opacity_at`, `opacity_of_voxel`) or all three (4–6:
-/// `classify_at`, `carved_by_*`). Every pipeline binds them, with or without
+/// reads no opacity), the look (4: `opacity_at`, `opacity_of_voxel`) or all (4–7:
+/// `classify_at`, `carved_by_*`, `segment_gradient_at`). Every pipeline binds them, with or without
 /// `SEGMENTS`: without a segmentation they are [`GpuSegments::none`]'s.
 #[derive(Debug, Clone, Copy)]
 pub enum SegmentBindings<'a> {
@@ -112,6 +113,7 @@ impl<'a> Reading<'a> {
                 entries.push((4, wgpu::BindingResource::TextureView(&s.look_view)));
                 entries.push((5, wgpu::BindingResource::TextureView(&s.classes_view)));
                 entries.push((6, s.table.as_entire_binding()));
+                entries.push((7, wgpu::BindingResource::TextureView(&s.gradient_view)));
             }
         }
         let entries: Vec<_> = entries

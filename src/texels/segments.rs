@@ -62,6 +62,11 @@ impl ClassLook {
     }
 }
 
+/// `x` in [−1, 1] as an 8-bit snorm texel holds it.
+pub fn snorm8(x: f32) -> i8 {
+    (x.clamp(-1.0, 1.0) * 127.0).round() as i8
+}
+
 /// Flag bit of [`ClassLook::gpu`]: the class colour replaces the transfer function's.
 pub const REPLACE: u32 = 1;
 
@@ -75,6 +80,9 @@ pub struct SegmentTexels {
     pub table: Vec<ClassLook>,
     /// Per voxel: colour × weight and weight, as RGBA8 (what the look texture holds).
     pub look: Vec<[u8; 4]>,
+    /// Per voxel: the weight's differences one voxel either side, `w(x + 1) − w(x − 1)`
+    /// per axis (clamped at the faces), as RGBA8 snorm (the gradient texture).
+    pub gradient: Vec<[i8; 4]>,
 }
 
 impl SegmentTexels {
@@ -86,8 +94,10 @@ impl SegmentTexels {
             classes,
             table,
             look: Vec::new(),
+            gradient: Vec::new(),
         };
         s.look = s.looks();
+        s.gradient = s.differences();
         s
     }
 
@@ -98,13 +108,13 @@ impl SegmentTexels {
         }
         self.table = table;
         self.look = self.looks();
+        self.gradient = self.differences();
         true
     }
 
-    /// Per brick of `edge`³ voxels (x fastest over the volume's dims ÷ `edge`, rounded
-    /// up): whether a voxel in it is of a class whose opacity weight `table` changes (what
-    /// `V_o` and `V_PAO` read; colours and cuts change neither).
-    pub fn bricks_changed_by(&self, table: &[ClassLook], edge: usize) -> Vec<bool> {
+    /// Per voxel: whether `table` changes its opacity weight (what `V_o` and `V_PAO`
+    /// read; colours and cuts change neither).
+    pub fn voxels_changed_by(&self, table: &[ClassLook]) -> Vec<bool> {
         let weight = |c: &ClassLook| (c.opacity.clamp(0.0, 1.0).to_bits(), c.outline);
         let changed: Vec<bool> = self
             .table
@@ -112,15 +122,30 @@ impl SegmentTexels {
             .zip(table)
             .map(|(a, b)| weight(a) != weight(b))
             .collect();
-        let grid = self.dims.map(|d| d.div_ceil(edge));
-        let mut bricks = vec![false; grid.iter().product()];
-        for (i, &c) in self.classes.iter().enumerate() {
-            if changed.get(c as usize).copied().unwrap_or(true) {
-                let v = voxel_of(i, self.dims).map(|x| x / edge);
-                bricks[v[0] + grid[0] * (v[1] + grid[1] * v[2])] = true;
-            }
+        self.classes
+            .iter()
+            .map(|&c| changed.get(c as usize).copied().unwrap_or(true))
+            .collect()
+    }
+
+    /// Whether every class's colour tints (0) or replaces (1) the transfer function's, or
+    /// they differ (2): `SEGMENT_MODES` of `volume.wgsl`.
+    pub fn modes(&self) -> u32 {
+        let replace = |c: &ClassLook| c.replace;
+        match (
+            self.table.iter().all(replace),
+            self.table.iter().any(replace),
+        ) {
+            (true, _) => 1,
+            (false, false) => 0,
+            (false, true) => 2,
         }
-        bricks
+    }
+
+    /// Whether the weight has edges (a class hidden, fainter or outlined); without, its
+    /// gradient is 0 everywhere (`SEGMENT_EDGES` of `raycast.wgsl`).
+    pub fn edges(&self) -> bool {
+        self.table.iter().any(|c| c.opacity < 1.0 || c.outline)
     }
 
     /// The class table as the shaders read it.
@@ -152,6 +177,48 @@ impl SegmentTexels {
                 } else {
                     entries[class as usize]
                 }
+            })
+            .collect()
+    }
+
+    /// Per block of `edge`³ voxels widened by one voxel (what a trilinear sample in it
+    /// reads, as [`super::BlockRanges::new`]): whether any voxel there has weight. A
+    /// block without is empty whatever the transfer function: the ray caster skips it.
+    pub fn shown_blocks(&self, edge: usize) -> Vec<bool> {
+        let dims = self.dims;
+        let grid: [usize; 3] = std::array::from_fn(|a| dims[a].div_ceil(edge));
+        (0..grid.iter().product::<usize>())
+            .into_par_iter()
+            .map(|b| {
+                let bi = voxel_of(b, grid);
+                let lo: [usize; 3] = std::array::from_fn(|a| (bi[a] * edge).saturating_sub(1));
+                let hi: [usize; 3] = std::array::from_fn(|a| ((bi[a] + 1) * edge + 1).min(dims[a]));
+                (lo[2]..hi[2]).any(|z| {
+                    (lo[1]..hi[1]).any(|y| {
+                        let row = dims[0] * (y + dims[1] * z);
+                        self.look[row + lo[0]..row + hi[0]].iter().any(|l| l[3] > 0)
+                    })
+                })
+            })
+            .collect()
+    }
+
+    /// The weight's differences of every voxel (see [`Self::gradient`]).
+    fn differences(&self) -> Vec<[i8; 4]> {
+        let dims = self.dims;
+        let stride = [1, dims[0], dims[0] * dims[1]];
+        let w = |i: usize| self.look[i][3] as f32 / 255.0;
+        (0..self.look.len())
+            .into_par_iter()
+            .map(|i| {
+                let v = voxel_of(i, dims);
+                let mut d = [0i8; 4];
+                for a in 0..3 {
+                    let lo = if v[a] > 0 { i - stride[a] } else { i };
+                    let hi = if v[a] + 1 < dims[a] { i + stride[a] } else { i };
+                    d[a] = snorm8(w(hi) - w(lo));
+                }
+                d
             })
             .collect()
     }
@@ -198,10 +265,15 @@ pub struct GpuSegments {
     look: wgpu::Texture,
     pub look_view: wgpu::TextureView,
     pub classes_view: wgpu::TextureView,
+    gradient: wgpu::Texture,
+    pub gradient_view: wgpu::TextureView,
     pub table: wgpu::Buffer,
     dims: [u32; 3],
     /// Whether a segmentation is uploaded (the stages then read it: `SEGMENTS`).
     pub on: bool,
+    /// [`SegmentTexels::modes`] and [`SegmentTexels::edges`] of what is uploaded.
+    pub modes: u32,
+    pub edges: bool,
 }
 
 impl GpuSegments {
@@ -225,6 +297,14 @@ impl GpuSegments {
             wgpu::TextureFormat::Rgba8Unorm,
             bytemuck::cast_slice(&segments.look),
         );
+        let gradient = filled(
+            device,
+            queue,
+            "GpuSegments::gradient",
+            dims,
+            wgpu::TextureFormat::Rgba8Snorm,
+            bytemuck::cast_slice(&segments.gradient),
+        );
         let classes = filled(
             device,
             queue,
@@ -236,6 +316,8 @@ impl GpuSegments {
         GpuSegments {
             look_view: look.create_view(&Default::default()),
             classes_view: classes.create_view(&Default::default()),
+            gradient_view: gradient.create_view(&Default::default()),
+            gradient,
             look,
             table: storage_buffer(
                 gpu,
@@ -245,12 +327,15 @@ impl GpuSegments {
             ),
             dims,
             on: true,
+            modes: segments.modes(),
+            edges: segments.edges(),
         }
     }
 
     /// Writes the looks and the class table of `segments` (the same classes as uploaded).
     pub fn update(&mut self, gpu: &Gpu, segments: &SegmentTexels) {
         debug_assert_eq!(segments.dims.map(|d| d as u32), self.dims);
+        (self.modes, self.edges) = (segments.modes(), segments.edges());
         crate::gpu::write_texture_3d(
             &gpu.queue,
             &self.look,
@@ -258,6 +343,14 @@ impl GpuSegments {
             self.dims,
             4,
             bytemuck::cast_slice(&segments.look),
+        );
+        crate::gpu::write_texture_3d(
+            &gpu.queue,
+            &self.gradient,
+            0,
+            self.dims,
+            4,
+            bytemuck::cast_slice(&segments.gradient),
         );
         let table = segments.gpu_table();
         let bytes: &[u8] = bytemuck::cast_slice(&table);

@@ -1,84 +1,115 @@
 //! Updating `V_PAO` where only part of the opacity changed — a segment hidden, shown or
 //! made fainter ([`crate::texels::segments`]) — instead of recomputing it: the voxels
 //! whose LAO rays can read a changed `V_o` are those within [`reach_mm`] of it, so only
-//! the bricks that close to a changed brick are ray cast again, with the passes and lists
-//! of [`CaoGpu::new`]'s precomputation, which is why the values are the same bits.
+//! they are ray cast again, by the `lao` every CAO ray cast runs, on the `V_o` the
+//! precomputation read, which is why the values are the same bits.
 
 use super::{CaoGpu, CaoMode, Lists, reach_mm};
 use crate::ao::sparse::BRICK;
 use crate::clip::gpu::MapRequest;
-use crate::gpu::{Gpu, GpuError, validated};
+use crate::gpu::{Gpu, GpuError, read_texture_f32, validated};
 use crate::texels::VolumeTexels;
 use std::time::Instant;
+
+/// Step IV's mark of a voxel step V ray casts (`RECOMPUTE` in the shaders).
+const RECOMPUTE: f32 = -1.0;
 
 /// What one [`CaoGpu::update_pao`] did.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PaoUpdate {
     /// Bricks whose unclipped `V_o` was written again (step IV).
     pub clip_bricks: usize,
-    /// Bricks whose `V_PAO` was ray cast again (step V).
+    /// Bricks whose voxels within the reach were ray cast again (step V).
     pub lao_bricks: usize,
+    /// Voxels ray cast again.
+    pub recomputed: u64,
     /// Of all bricks.
     pub bricks: usize,
     pub seconds: f64,
 }
 
-/// `mask` (one flag per brick of `grid`) grown by `k[a]` bricks along each axis a (a box,
-/// which holds every brick within that distance).
+/// `mask` (one flag per cell of `grid`, x fastest) grown by `k[a]` cells along each axis
+/// a: a box, which holds every cell within that distance.
 pub fn dilate(mask: &[bool], grid: [usize; 3], k: [usize; 3]) -> Vec<bool> {
     let mut out = mask.to_vec();
     let stride = [1, grid[0], grid[0] * grid[1]];
+    let mut prefix = Vec::new();
     for a in 0..3 {
         let src = out.clone();
-        for (i, o) in out.iter_mut().enumerate() {
-            let c = crate::volume::voxel_of(i, grid)[a];
-            let (lo, hi) = (c.saturating_sub(k[a]), (c + k[a]).min(grid[a] - 1));
-            *o = (lo..=hi).any(|d| src[i - c * stride[a] + d * stride[a]]);
+        let n = grid[a];
+        // Every line along axis a: a running count, then "any set within ±k".
+        for start in (0..src.len()).filter(|&i| crate::volume::voxel_of(i, grid)[a] == 0) {
+            prefix.clear();
+            prefix.push(0usize);
+            for c in 0..n {
+                let set = usize::from(src[start + c * stride[a]]);
+                prefix.push(prefix[c] + set);
+            }
+            for c in 0..n {
+                let (lo, hi) = (c.saturating_sub(k[a]), (c + k[a]).min(n - 1));
+                out[start + c * stride[a]] = prefix[hi + 1] > prefix[lo];
+            }
         }
     }
     out
 }
 
 impl CaoGpu {
-    /// Recomputes `V_PAO` after the opacity changed only inside the bricks `changed`
-    /// flags (by [`crate::ao::sparse::Bricks`] index): step V ray casts the readable
-    /// bricks within the rays' reach of them, after step IV with nothing clipped wrote
-    /// the unclipped `V_o` of every brick within the reach of those (all step V reads), and
-    /// those are copied into `V_PAO` — the values [`CaoGpu::new`] computes, bit for bit.
-    /// `V_AO` holds `V_PAO` in every brick written here: the next frame ([`Self::update`]
-    /// or [`Self::begin`]) clips for its pose again.
+    /// Recomputes `V_PAO` after the opacity changed only at the voxels `changed` flags (a
+    /// segment hidden: [`crate::texels::segments::SegmentTexels::voxels_changed_by`]).
+    /// The voxels within the rays' reach of them ([`reach_mm`], a box per axis) are
+    /// marked and ray cast from a list, as a frame's step V does, after step IV with
+    /// nothing clipped wrote the unclipped `V_o` of every brick within the reach of
+    /// theirs (all they read); their bricks are then copied into `V_PAO`. The same `lao`
+    /// of the same `V_o` as [`CaoGpu::new`]'s precomputation: the same bits. `V_AO` holds
+    /// `V_PAO` in every brick written here: the next frame ([`Self::update`] or
+    /// [`Self::begin`]) clips for its pose again.
     pub fn update_pao(
         &mut self,
         gpu: &Gpu,
         texels: &VolumeTexels,
         changed: &[bool],
-        progress: &dyn Fn(usize, usize),
     ) -> Result<PaoUpdate, GpuError> {
         let start = Instant::now();
-        let b = &self.bricks;
-        assert_eq!(changed.len(), b.count());
+        let dims = self.dims.map(|d| d as usize);
+        assert_eq!(changed.len(), dims.iter().product::<usize>());
         let reach = reach_mm(self.samples, texels.spacing);
-        // Bricks along each axis that hold every point within the reach of a brick.
+        let within = texels.spacing.map(|s| (reach / s).floor() as usize);
+        let recompute = dilate(changed, dims, within);
+        let b = &self.bricks;
+        let mut near = vec![false; b.count()];
+        for (i, _) in recompute.iter().enumerate().filter(|(_, r)| **r) {
+            let v = crate::volume::voxel_of(i, dims).map(|c| c / BRICK);
+            near[v[0] + b.grid[0] * (v[1] + b.grid[1] * v[2])] = true;
+        }
+        // What their rays read: the reach again, in whole bricks.
         let k = texels
             .spacing
             .map(|s| (reach / (BRICK as f32 * s)).ceil() as usize);
-        // The voxels to ray cast, and what their rays read: the reach again from any of
-        // them (the far side of the last brick of `near` may be k bricks out).
-        let near = dilate(changed, b.grid, k);
         let far = dilate(&near, b.grid, k);
+        let lao: Vec<bool> = (0..b.count())
+            .map(|i| near[i] && b.readable[i] != 0)
+            .collect();
         let lists = Lists {
             clip: b.list(|i| far[i] && b.used(i)),
-            lao: b.list(|i| near[i] && b.readable[i] != 0),
+            lao: b.list_flagged(|i| lao[i], |_| true),
         };
-        let update = PaoUpdate {
+        let grid = b.grid;
+        // Bricks step IV writes, and whether step V's too.
+        let written: Vec<(usize, bool)> = (0..b.count())
+            .filter(|&i| far[i] && b.used(i))
+            .map(|i| (i, lao[i]))
+            .collect();
+        let mut update = PaoUpdate {
             clip_bricks: lists.clip.len(),
             lao_bricks: lists.lao.len(),
             bricks: b.count(),
-            seconds: 0.0,
+            ..Default::default()
         };
         if lists.clip.is_empty() {
             return Ok(update);
         }
+        let pao = read_texture_f32(gpu, &self.v_pao, self.dims, "Cao::update_pao")?;
         let nothing = MapRequest {
             shapes: &[],
             volume_radius: 1.0,
@@ -88,43 +119,85 @@ impl CaoGpu {
         self.clip.update(gpu, nothing)?;
         // The next frame lists every brick again, as after the precomputation.
         self.was_near.iter_mut().for_each(|n| *n = true);
+        self.reserve_list(gpu, &lists)?;
         self.write_lists(gpu, &lists);
         self.step_iv(gpu, &lists, CaoMode::Full)?;
-        self.step_v(gpu, &lists, false, progress)?;
-        self.last = (lists.clone(), CaoMode::Full);
+        // Step IV marked every voxel of its bricks: step V's keep V_PAO but where a
+        // readable voxel is within the reach (V_PAO holds UNREAD > 1 where it is not).
+        for &(i, _) in written.iter().filter(|(_, lao)| *lao) {
+            let (origin, size) = brick_box(i, grid, self.dims);
+            let marks: Vec<f32> = (0..size.iter().product::<u32>() as usize)
+                .map(|j| {
+                    let o = crate::volume::voxel_of(j, size.map(|s| s as usize));
+                    let v: [usize; 3] = std::array::from_fn(|a| origin[a] as usize + o[a]);
+                    let at = v[0] + dims[0] * (v[1] + dims[1] * v[2]);
+                    match recompute[at] && pao[at] <= 1.0 {
+                        true => RECOMPUTE,
+                        false => pao[at],
+                    }
+                })
+                .collect();
+            self.write_region(gpu, origin, size, &marks);
+        }
+        update.recomputed = match self.step_v_listed(gpu, &lists)? {
+            Some(n) => n,
+            None => recompute.iter().filter(|&&r| r).count() as u64,
+        };
         // Step V's bricks into V_PAO; step IV's others (marked, not ray cast) back from it.
-        let lao: Vec<bool> = (0..b.count())
-            .map(|i| near[i] && b.readable[i] != 0)
-            .collect();
         let device = &gpu.device;
         validated(device, "Cao::update_pao", || {
             let mut encoder = device.create_command_encoder(&Default::default());
-            for i in (0..b.count()).filter(|&i| far[i] && b.used(i)) {
-                let (from, to) = match lao[i] {
+            for &(i, lao) in &written {
+                let (from, to) = match lao {
                     true => (&self.v_ao, &self.v_pao),
                     false => (&self.v_pao, &self.v_ao),
                 };
-                let v = crate::volume::voxel_of(i, b.grid);
-                let origin = v.map(|c| (c * BRICK) as u32);
-                let size: [u32; 3] =
-                    std::array::from_fn(|a| (BRICK as u32).min(self.dims[a] - origin[a]));
-                encoder.copy_texture_to_texture(
-                    at(from, origin),
-                    at(to, origin),
-                    wgpu::Extent3d {
-                        width: size[0],
-                        height: size[1],
-                        depth_or_array_layers: size[2],
-                    },
-                );
+                let (origin, size) = brick_box(i, grid, self.dims);
+                encoder.copy_texture_to_texture(at(from, origin), at(to, origin), extent(size));
             }
             gpu.queue.submit([encoder.finish()]);
         })?;
         crate::gpu::wait(device, "Cao::update_pao", crate::gpu::WAIT)?;
-        Ok(PaoUpdate {
-            seconds: start.elapsed().as_secs_f64(),
-            ..update
-        })
+        update.seconds = start.elapsed().as_secs_f64();
+        Ok(update)
+    }
+
+    /// Writes `values` (x fastest) into `V_AO` at `origin`, in its format.
+    fn write_region(&self, gpu: &Gpu, origin: [u32; 3], size: [u32; 3], values: &[f32]) {
+        let bytes: Vec<u8> = match self.pipelines.format {
+            wgpu::TextureFormat::R16Float => values
+                .iter()
+                .flat_map(|&v| half::f16::from_f32(v).to_le_bytes())
+                .collect(),
+            _ => bytemuck::cast_slice(values).to_vec(),
+        };
+        let texel = (bytes.len() / values.len()) as u32;
+        gpu.queue.write_texture(
+            at(&self.v_ao, origin),
+            &bytes,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(size[0] * texel),
+                rows_per_image: Some(size[1]),
+            },
+            extent(size),
+        );
+    }
+}
+
+/// The first voxel and the size of brick `i` of `grid` in a volume of `dims`.
+fn brick_box(i: usize, grid: [usize; 3], dims: [u32; 3]) -> ([u32; 3], [u32; 3]) {
+    let v = crate::volume::voxel_of(i, grid);
+    let origin = v.map(|c| (c * BRICK) as u32);
+    let size = std::array::from_fn(|a| (BRICK as u32).min(dims[a] - origin[a]));
+    (origin, size)
+}
+
+fn extent(size: [u32; 3]) -> wgpu::Extent3d {
+    wgpu::Extent3d {
+        width: size[0],
+        height: size[1],
+        depth_or_array_layers: size[2],
     }
 }
 

@@ -6,6 +6,7 @@ mod lao;
 mod load;
 mod raymarch;
 mod render;
+mod segments;
 mod shadows;
 
 use anyhow::Result;

@@ -48,6 +48,17 @@ pub struct RenderBenchArgs {
     /// samples per gradient). Each configuration is timed with each, one after the other.
     #[arg(long, value_delimiter = ',', default_value = "volume")]
     pub gradient: Vec<GradientSource>,
+    /// A segmentation of the (one) volume: each configuration is timed without and with
+    /// it, and V_PAO's update after hiding a segment against its recomputation.
+    #[command(flatten)]
+    pub labels: crate::args::LabelArgs,
+    /// How the segments show (as `volao render --segment`).
+    #[arg(long, value_name = "SPEC")]
+    pub segment: Vec<String>,
+    /// The segments hidden for V_PAO's update (a name pattern or value; default: the one
+    /// covering the most bricks below a tenth of them).
+    #[arg(long, value_name = "PATTERN", requires = "labels")]
+    pub hide: Option<String>,
 }
 
 /// `--gradient`: where the ray caster's shading takes its gradients.
@@ -63,7 +74,7 @@ pub enum GradientSource {
 impl RenderBenchArgs {
     /// Whether only the fixed tables were asked for.
     fn is_fixed(&self) -> bool {
-        self.files.is_empty() && !self.json && self.clip.is_empty()
+        self.files.is_empty() && !self.json && self.clip.is_empty() && self.labels.labels.is_none()
     }
 }
 
@@ -75,6 +86,8 @@ struct Timed {
     mode: String,
     shading: volao::render::Shading,
     gradient: GradientSource,
+    /// Rendered with the segmentation.
+    labels: bool,
     ao: volao::ao::AoMethod,
     median_frame_ms: f64,
     /// Time to compute the AO volume (once per file and method), 0 without.
@@ -89,7 +102,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
     use std::sync::Arc;
     use volao::ao::{Ambient, AoEngine, AoInput, AoRequest, AoSettings};
     use volao::render::RenderSettings;
-    use volao::render::gpu::{RayCaster, RenderVolume};
+    use volao::render::gpu::RayCaster;
     use volao::texels::{UploadLimits, VolumeTexels};
     use volao::tf::{Preset, TransferFunction};
 
@@ -113,11 +126,25 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
     if !args.json {
         println!("adapter: {adapter}");
         println!();
-        println!("| volume | size | mode | shading | gradient | AO | median frame | AO time |");
-        println!("|---|---|---|---|---|---|---|---|");
+        println!(
+            "| volume | size | mode | shading | gradient | labels | AO | median frame | AO time |"
+        );
+        println!("|---|---|---|---|---|---|---|---|---|");
+    }
+    if args.labels.labels.is_some() && args.files.len() != 1 {
+        anyhow::bail!("bench render --labels: name exactly one volume (the one it segments)");
     }
     for path in &args.files {
         let volume = volume::load(path, &LoadOptions::default())?.volume.to_ras();
+        let segmentation = match &args.labels.labels {
+            Some(seg) => Some(super::segments::Segmentation::load(
+                seg,
+                args.labels.label_table.as_deref(),
+                &args.segment,
+                &volume,
+            )?),
+            None => None,
+        };
         let stats = volume.stats();
         let preset = match &args.tf {
             Some(name) => Preset::from_name(name)?,
@@ -126,19 +153,19 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
         let tf = TransferFunction::preset(preset, &stats);
         let name = path.display().to_string();
         let texels = VolumeTexels::new(&volume, UploadLimits::of(&gpu));
-        let step = RenderSettings::default().step_voxels;
-        // One volume per gradient source.
+        // One volume per gradient source, without and with the segmentation (the AO of
+        // the first shown on all: the frames' times are what is compared).
         let mut vols = Vec::new();
         for &gradient in &args.gradient {
-            let texels = texels.clone();
-            let vol = match gradient {
-                GradientSource::Volume => RenderVolume::from_texels(&gpu, texels, &tf, step)?,
-                GradientSource::Samples => RenderVolume::for_compute(&gpu, texels, &tf, step)?,
-            };
-            if vol.gradient_volume().is_some() != (gradient == GradientSource::Volume) {
-                anyhow::bail!("{name}: --gradient volume: the gradient volume does not fit");
+            vols.push((
+                (gradient, false),
+                gradient_volume(&gpu, &texels, &tf, gradient)?,
+            ));
+            if let Some(s) = &segmentation {
+                let mut vol = gradient_volume(&gpu, &texels, &tf, gradient)?;
+                vol.set_segments(&gpu, Some(s.texels.clone()));
+                vols.push(((gradient, true), vol));
             }
-            vols.push((gradient, vol));
         }
         // The AO, computed once on the first and shown on each.
         let ao = AoSettings {
@@ -212,13 +239,14 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
             .collect();
         let timed: Vec<_> = configs.iter().map(|(f, (_, vol))| (*f, vol)).collect();
         let seconds = interleaved_frames(&gpu, &rc, &timed, maps.as_ref(), args.runs)?;
-        for ((frame, (gradient, _)), seconds) in configs.iter().zip(seconds) {
+        for ((frame, ((gradient, labels), _)), seconds) in configs.iter().zip(seconds) {
             let t = Timed {
                 file: name.clone(),
                 size: [args.width, args.height],
                 mode: frame.settings.mode.to_string(),
                 shading: frame.settings.shading,
                 gradient: *gradient,
+                labels: *labels,
                 ao: args.ao,
                 median_frame_ms: seconds * 1e3,
                 ao_ms,
@@ -229,21 +257,48 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
                 println!("{}", serde_json::to_string(&t)?);
             } else {
                 println!(
-                    "| {} | {}×{} | {} | {:?} | {:?} | {} | {:.1} ms | {:.0} ms |",
+                    "| {} | {}×{} | {} | {:?} | {:?} | {} | {} | {:.1} ms | {:.0} ms |",
                     t.file,
                     args.width,
                     args.height,
                     t.mode,
                     t.shading,
                     gradient,
+                    if t.labels { "yes" } else { "no" },
                     ao_name,
                     t.median_frame_ms,
                     ao_ms
                 );
             }
         }
+        if let Some(s) = &segmentation {
+            let labelled = vols.iter().find(|((_, labels), _)| *labels).map(|(_, v)| v);
+            if let Some(vol) = labelled {
+                super::segments::pao_update(&gpu, vol, &tf, s, args.hide.as_deref(), args.json)?;
+            }
+        }
     }
     Ok(())
+}
+
+/// A ray-casting volume of `texels` whose shading takes its gradients from `gradient`.
+fn gradient_volume(
+    gpu: &volao::gpu::Gpu,
+    texels: &volao::texels::VolumeTexels,
+    tf: &volao::tf::TransferFunction,
+    gradient: GradientSource,
+) -> Result<volao::render::gpu::RenderVolume> {
+    use volao::render::gpu::RenderVolume;
+    let step = volao::render::RenderSettings::default().step_voxels;
+    let texels = texels.clone();
+    let vol = match gradient {
+        GradientSource::Volume => RenderVolume::from_texels(gpu, texels, tf, step)?,
+        GradientSource::Samples => RenderVolume::for_compute(gpu, texels, tf, step)?,
+    };
+    if vol.gradient_volume().is_some() != (gradient == GradientSource::Volume) {
+        anyhow::bail!("--gradient volume: the gradient volume does not fit");
+    }
+    Ok(vol)
 }
 
 /// The median frame time of each configuration in seconds, image readback included:
