@@ -1306,6 +1306,29 @@ fn segments_hidden_and_cut_from_the_panels_match_volao_render_and_reopen() {
     );
     settle(&mut h);
 
+    // The status bar names what the pointer is over: the right hip somewhere across the
+    // pelvis, never the hidden left one.
+    let r = h.state().viewport_rect();
+    let mut named = Vec::new();
+    for fy in [0.6, 0.65, 0.7, 0.75] {
+        for i in 1..12 {
+            let fx = i as f32 / 12.0;
+            h.hover_at(r.min + egui::vec2(r.width() * fx, r.height() * fy));
+            h.run_steps(2);
+            for who in ["hip_right", "hip_left"] {
+                if h.query_by_label_contains(&format!("Under the pointer: {who}"))
+                    .is_some()
+                {
+                    named.push(who);
+                }
+            }
+        }
+    }
+    assert!(
+        named.iter().any(|n| n.contains("hip_right")),
+        "the right hip was never named: {named:?}"
+    );
+    assert!(!named.iter().any(|n| n.contains("hip_left")), "{named:?}");
     // The viewport is `volao render` of the saved scene, which keeps all of it.
     h.state_mut().show_outlines = false;
     h.run_steps(2);

@@ -1,7 +1,7 @@
-//! The hover line: which segments the pointer is over in the 3-D view. The first
-//! visible sample along the pixel's ray (as the ray caster casts it,
-//! [`crate::render::cpu::ray`]) is found on the CPU with the stages' own reader
-//! ([`VolumeSampler`] with the segmentation), its class named by the label map.
+//! The hover line: which segments the pointer is over in the 3-D view. The pixel's ray
+//! (as the ray caster casts it, [`crate::render::cpu::ray`]) is walked on the CPU with
+//! the stages' own reader ([`VolumeSampler`] with the segmentation) until it is nearly
+//! opaque, and the class that took the largest share of it is named by the label map.
 //!
 //! Clipping is tested on the shapes themselves (inside a sphere, box, cylinder, torus,
 //! beyond a plane), not on the clip maps the GPU reads: the two agree up to the maps'
@@ -116,8 +116,12 @@ impl Viewer {
     }
 }
 
-/// The class of the first visible sample along pixel `px`'s ray: unclipped, with
-/// opacity, in a voxel whose class shows (an outline's inside does not).
+/// The class that shows most in pixel `px`: front to back along its ray, as the ray
+/// caster composites it (unclipped samples, opacity with the segments' weights), the
+/// class of the voxel each sample lies in takes its share `(1 − α_acc)·α` (unless that
+/// class is hidden: then the share is its neighbours', left unnamed); the ray stops
+/// once nearly opaque. (The very first visible sample is often a voxel outside every
+/// segment at an organ's rim, where the segmentation is coarser than the image.)
 fn class_under(
     p: &RaycastParams,
     volume: &VolumeSampler,
@@ -128,22 +132,40 @@ fn class_under(
     let (origin, dir, t_enter, t_exit) = crate::render::cpu::ray(p, px[0], px[1]);
     let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
     let dt = p.step[0].max(1e-3);
-    let dims = segments.dims;
+    let mut shares: Vec<(usize, f32)> = Vec::new();
+    let mut acc = 0.0f32;
     let mut t = t_enter;
-    while t < t_exit {
+    while t < t_exit && acc < 0.95 {
         let pos = origin + dir * t;
         t += dt;
         let uvw = pos / (2.0 * half) + Vec3::splat(0.5);
-        if !visible(shapes, pos, segments.carved_by_at(uvw)) || volume.opacity_at(uvw) <= 0.0 {
+        if !visible(shapes, pos, segments.carved_by_at(uvw)) {
             continue;
         }
+        let a = volume.opacity_at(uvw).clamp(0.0, 1.0);
+        if a <= 0.0 {
+            continue;
+        }
+        let share = (1.0 - acc) * a;
+        acc += share;
+        // A hidden class's voxel shows only its neighbours' weight (the look is
+        // filtered): the share is theirs, not its.
+        let dims = segments.dims;
         let k: [usize; 3] =
             std::array::from_fn(|a| ((uvw[a].max(0.0) * dims[a] as f32) as usize).min(dims[a] - 1));
-        if segments.weight_of_voxel(k) > 0.0 {
-            return Some(segments.class_at(uvw));
+        if segments.weight_of_voxel(k) <= 0.0 {
+            continue;
+        }
+        let class = segments.class_at(uvw);
+        match shares.iter_mut().find(|(c, _)| *c == class) {
+            Some((_, s)) => *s += share,
+            None => shares.push((class, share)),
         }
     }
-    None
+    shares
+        .into_iter()
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(class, _)| class)
 }
 
 /// Whether `pos` (mm from the volume's centre) in a voxel the shapes of `carve` (bit s)

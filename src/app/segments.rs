@@ -159,6 +159,7 @@ impl SegmentsPanel {
         });
         egui::ScrollArea::vertical()
             .id_salt("segments")
+            .min_scrolled_height(ROW_HEIGHT * 10.0)
             .max_height(ROW_HEIGHT * 12.0)
             .auto_shrink([false, true])
             .show_rows(ui, ROW_HEIGHT, rows.len(), |ui, range| {
@@ -193,7 +194,8 @@ fn only(styles: &mut Styles, labels: &LabelMap, row: Row) {
     set_visible(styles, labels, &[row], true);
 }
 
-/// One row: colour, visibility and name, value, opacity, only, tint/replace, outline.
+/// One row: colour, opacity, only, tint/replace, outline, and visibility with the name
+/// and value.
 fn row_ui(ui: &mut egui::Ui, seg: &mut Segmentation, labels: &LabelMap, row: Row) {
     let (name, value, own) = match row {
         Row::Unlabelled => (UNLABELLED.to_owned(), None, [255; 3]),
@@ -217,31 +219,30 @@ fn row_ui(ui: &mut egui::Ui, seg: &mut Segmentation, labels: &LabelMap, row: Row
         {
             st.color = Some(rgb);
         }
+        ui.spacing_mut().slider_width = 46.0;
+        ui.add(egui::Slider::new(&mut st.opacity, 0.0..=1.0).show_value(false))
+            .on_hover_text(format!("Opacity {:.2}", st.opacity));
+        only_this = ui
+            .small_button("only")
+            .on_hover_text("Show this one alone")
+            .clicked();
+        let mode = if st.replace { "R" } else { "T" };
+        if ui
+            .selectable_label(st.replace, mode)
+            .on_hover_text("T: the colour tints the transfer function's · R: replaces it")
+            .clicked()
+        {
+            st.replace = !st.replace;
+        }
+        ui.toggle_value(&mut st.outline, "O")
+            .on_hover_text("Outline: only the segment's boundary shows");
+        // The name last: long names run to the panel's edge without covering a control.
         let label = match value {
             Some(k) if k.layer > 0 => format!("{name} ({}:{})", k.layer, k.value),
             Some(k) => format!("{name} ({})", k.value),
             None => name.clone(),
         };
         ui.checkbox(&mut st.visible, label);
-        ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
-            ui.toggle_value(&mut st.outline, "O")
-                .on_hover_text("Outline: only the segment's boundary shows");
-            let mode = if st.replace { "R" } else { "T" };
-            if ui
-                .selectable_label(st.replace, mode)
-                .on_hover_text("T: the colour tints the transfer function's · R: replaces it")
-                .clicked()
-            {
-                st.replace = !st.replace;
-            }
-            only_this = ui
-                .small_button("only")
-                .on_hover_text("Show this one alone")
-                .clicked();
-            ui.spacing_mut().slider_width = 46.0;
-            ui.add(egui::Slider::new(&mut st.opacity, 0.0..=1.0).show_value(false))
-                .on_hover_text(format!("Opacity {:.2}", st.opacity));
-        });
     });
     if only_this {
         only(&mut seg.styles, labels, row);
