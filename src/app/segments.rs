@@ -35,7 +35,7 @@ impl Segmentation {
     ) -> Result<(Segmentation, Vec<String>), String> {
         let what = display_path(&source.path);
         let loaded = labels::load(&source.path, source.table.as_deref(), volume)
-            .map_err(|e| format!("segmentation {what}: {e}"))?;
+            .map_err(|e| format!("segmentation: {e}"))?;
         let mut notes: Vec<String> = loaded
             .warnings
             .iter()
