@@ -120,7 +120,29 @@ fn bucky() -> OpenRequest {
     OpenRequest::Volume {
         path: data("pvm/Bucky.pvm"),
         options: LoadOptions::default(),
+        labels: None,
     }
+}
+
+/// TotalSegmentator's example CT (122×101×112) with its segmentation (117 names).
+fn ct_with_segments() -> OpenRequest {
+    OpenRequest::Volume {
+        path: data("labels/totalsegmentator/example_ct.nii.gz"),
+        options: LoadOptions::default(),
+        labels: Some(Box::new(volao::scene::SegmentationSource {
+            path: data("labels/totalsegmentator/example_seg_fast_force_split.nii.gz"),
+            table: None,
+            styles: Default::default(),
+        })),
+    }
+}
+
+/// Types `text` into the text field labelled `label` (focused by a click first).
+fn type_into(h: &mut Harness<'static, Viewer>, label: &str, text: &str) {
+    click(h, label);
+    h.run_steps(2);
+    h.get_by_label(label).type_text(text);
+    h.run_steps(2);
 }
 
 fn rgba_image(img: &image::RgbaImage) -> Image {
@@ -1227,4 +1249,124 @@ fn dragging_a_clip_shape_with_cao_keeps_the_ui_running() {
     h.run_steps(2);
     settle(&mut h);
     viewport_is_volao_render(&mut h, &dir.path().join("dragged.json"), "dragged_cao");
+}
+
+#[test]
+fn segments_hidden_and_cut_from_the_panels_match_volao_render_and_reopen() {
+    use volao::clip::Cuts;
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(ct_with_segments(), dir.path());
+    settle(&mut h);
+    let doc = h.state().document().expect("CT and segmentation loaded");
+    let seg = doc.segmentation.as_ref().expect("the segmentation opened");
+    let hip = seg.labels.find("hip_left");
+    assert_eq!(hip.len(), 1, "one left hip");
+    let hip = hip[0];
+    let label = format!("hip_left ({})", hip.value);
+
+    // Find the left hip bone by the search box and hide it by its checkbox.
+    type_into(&mut h, "Search segments", "HIP_L");
+    click(&mut h, &label);
+    settle(&mut h);
+    let styles = &h
+        .state()
+        .document()
+        .expect("doc")
+        .segmentation
+        .as_ref()
+        .expect("seg")
+        .styles;
+    assert!(!styles.get(hip).visible, "the checkbox hid the left hip");
+    assert!(styles.unlabelled.visible);
+
+    // A plane that cuts only the vertebrae and ribs (a name naming nothing is refused).
+    // (A plane: the viewer dilates a sphere's clip maps by the LAO reach, `volao render`
+    // by 1 mm, which moves its silhouette in the maps by a texel.)
+    click(&mut h, "Plane");
+    settle(&mut h);
+    choose(&mut h, "Cuts", "Only");
+    h.run_steps(2);
+    type_into(&mut h, "Cut segments", "vertebrae*, no_such_organ");
+    assert!(
+        h.query_by_label_contains("no_such_organ").is_some(),
+        "the panel says why the names are not used"
+    );
+    let shape = &h.state().document().expect("doc").clip_shapes[0];
+    assert_eq!(shape.cuts, Cuts::Only(vec![]), "the last good cuts stay");
+    // Select the text and type it again without the bad name.
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+    h.run_steps(1);
+    h.get_by_label("Cut segments").type_text("vertebrae*,rib*");
+    h.run_steps(2);
+    let shape = h.state().document().expect("doc").clip_shapes[0].clone();
+    assert_eq!(
+        shape.cuts,
+        Cuts::Only(vec!["vertebrae*".into(), "rib*".into()])
+    );
+    settle(&mut h);
+
+    // The status bar names what the pointer is over: the right hip somewhere across the
+    // pelvis, never the hidden left one.
+    let r = h.state().viewport_rect();
+    let mut named = Vec::new();
+    for fy in [0.6, 0.65, 0.7, 0.75] {
+        for i in 1..12 {
+            let fx = i as f32 / 12.0;
+            h.hover_at(r.min + egui::vec2(r.width() * fx, r.height() * fy));
+            h.run_steps(2);
+            for who in ["hip_right", "hip_left"] {
+                if h.query_by_label_contains(&format!("Under the pointer: {who}"))
+                    .is_some()
+                {
+                    named.push(who);
+                }
+            }
+        }
+    }
+    assert!(
+        named.iter().any(|n| n.contains("hip_right")),
+        "the right hip was never named: {named:?}"
+    );
+    assert!(!named.iter().any(|n| n.contains("hip_left")), "{named:?}");
+    // The viewport is `volao render` of the saved scene, which keeps all of it.
+    h.state_mut().show_outlines = false;
+    h.run_steps(2);
+    let scene = dir.path().join("segments.json");
+    let viewport = viewport_is_volao_render(&mut h, &scene, "viewport_segments_vs_render");
+    let saved = volao::scene::Scene::load(&scene).expect("scene");
+    let source = saved
+        .segmentation
+        .as_ref()
+        .expect("the scene keeps the segmentation");
+    assert!(!source.styles.get(hip).visible);
+    assert_eq!(saved.clip_shapes[0].cuts, shape.cuts);
+
+    // Hiding the hip changed the picture: with it shown, `volao render` differs.
+    let mut shown = saved.clone();
+    if let Some(s) = &mut shown.segmentation {
+        s.styles.segments.clear();
+    }
+    let shown_path = dir.path().join("hip.json");
+    shown.save(&shown_path).expect("save");
+    let with_hip = volao_render(&shown_path, &dir.path().join("hip.png"));
+    let changed = common::differing(&viewport.pixels, &with_hip.pixels);
+    assert!(
+        changed > 2000,
+        "hiding the hip changed only {changed} pixels"
+    );
+
+    // Reopening the scene restores the segmentation, its styles and the cuts.
+    h.state_mut().open(OpenRequest::Scene(scene.clone()));
+    settle(&mut h);
+    let doc = h.state().document().expect("reopened");
+    let (w, ht) = (saved.width, saved.height);
+    let mut again = doc.scene(w, ht, false);
+    again.volume.path = saved.volume.path.clone();
+    if let (Some(a), Some(b)) = (&mut again.segmentation, &saved.segmentation) {
+        a.path = b.path.clone();
+    }
+    assert_eq!(again.segmentation, saved.segmentation);
+    assert_eq!(again.clip_shapes[0].cuts, saved.clip_shapes[0].cuts);
+    assert!(!h.state().has_unsaved_changes());
 }

@@ -7,6 +7,7 @@ use super::jobs::Progress;
 use crate::ao::{Ambient, AoEngine, AoMethod, AoRequest, AoSettings};
 use crate::gpu::Gpu;
 use crate::texels::gpu::GpuVolume;
+use crate::texels::segments::SegmentTexels;
 use crate::texels::{UploadLimits, VolumeTexels};
 use crate::tf::TransferFunction;
 use crate::volume::Volume;
@@ -31,6 +32,9 @@ pub struct AoInput {
     pub clipping: bool,
     /// Which voxels LAO and CAO compute.
     pub coverage: crate::ao::sparse::Coverage,
+    /// The segmentation as the viewport shows it (LAO and CAO read its weights and
+    /// carve bits, as in `volao render`).
+    pub segments: Option<Arc<SegmentTexels>>,
 }
 
 /// A finished AO computation.
@@ -62,6 +66,7 @@ pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, Strin
         step_voxels,
         clipping,
         coverage,
+        segments,
     } = input;
     let report = |d: usize, t: usize| progress.set(d as u64, t as u64);
     let engine = AoEngine::on(Some(Arc::clone(&gpu)));
@@ -70,8 +75,9 @@ pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, Strin
         // CAO precomputes V_PAO on its own copy of the uploaded texels; V_AO follows the
         // clip shapes from the next sync. With clip shapes LAO runs as CAO.
         let texels = texels.ok_or("no volume uploaded")?;
-        let vol =
+        let mut vol =
             GpuVolume::for_compute(&gpu, texels, &tf, step_voxels).map_err(|e| e.to_string())?;
+        vol.set_segments(&gpu, segments.as_deref().cloned());
         if !settings.method.is_clipped() {
             settings.method = AoMethod::Cao;
         }
@@ -79,7 +85,18 @@ pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, Strin
     } else {
         // The viewer's own device (the engine sends a filter map on a CPU adapter to the
         // twin), on the volume at full resolution.
-        (None, Some(VolumeTexels::new(&volume, UploadLimits::NONE)))
+        let full = VolumeTexels::new(&volume, UploadLimits::NONE);
+        match &segments {
+            // The stages that read a segmentation read it from the volume it is uploaded
+            // with, as in `volao render` (the others read the texels as they would).
+            Some(s) if UploadLimits::of(&gpu).fits(&full) => {
+                let mut vol = GpuVolume::for_compute(&gpu, full, &tf, step_voxels)
+                    .map_err(|e| e.to_string())?;
+                vol.set_segments(&gpu, Some(SegmentTexels::clone(s)));
+                (Some(vol), None)
+            }
+            _ => (None, Some(full)),
+        }
     };
     let input = match (&uploaded, &texels) {
         (Some(vol), _) => crate::ao::AoInput::Uploaded(vol),

@@ -6,7 +6,8 @@
 //! the view plane; Ctrl+drag to rotate it; the wheel over a selected plane pushes it
 //! along its normal (NiiVue's convention). Elsewhere the mouse moves the camera.
 
-use crate::clip::{ClipMode, ClipShape, Shape};
+use crate::clip::{ClipMode, ClipShape, Cuts, Shape};
+use crate::labels::LabelMap;
 use crate::render::Camera;
 use glam::{Quat, Vec3};
 
@@ -23,6 +24,58 @@ pub struct ClipEditor {
     drag: Option<usize>,
     /// Draw the shapes as translucent surfaces as well as outlines.
     pub translucent: bool,
+    /// The selected shape's cuts as typed (shape index, text) and why the text is not
+    /// used (the shape keeps its last good cuts meanwhile).
+    cuts_text: Option<(usize, String)>,
+    cuts_error: Option<String>,
+}
+
+/// Which segments a shape cuts, as the panel's combo box names them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum CutsKind {
+    All,
+    Only,
+    Except,
+}
+
+impl CutsKind {
+    fn of(cuts: &Cuts) -> Self {
+        match cuts {
+            Cuts::All => CutsKind::All,
+            Cuts::Only(_) => CutsKind::Only,
+            Cuts::Except(_) => CutsKind::Except,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            CutsKind::All => "All segments",
+            CutsKind::Only => "Only",
+            CutsKind::Except => "All except",
+        }
+    }
+}
+
+/// The cuts of `kind` with the comma-separated names or patterns of `text`.
+fn cuts_from(kind: CutsKind, text: &str) -> Cuts {
+    let names: Vec<String> = text
+        .split(',')
+        .map(|n| n.trim().to_owned())
+        .filter(|n| !n.is_empty())
+        .collect();
+    match kind {
+        CutsKind::All => Cuts::All,
+        CutsKind::Only => Cuts::Only(names),
+        CutsKind::Except => Cuts::Except(names),
+    }
+}
+
+/// The names of `cuts`, comma-separated.
+fn cuts_text(cuts: &Cuts) -> String {
+    match cuts {
+        Cuts::All => String::new(),
+        Cuts::Only(n) | Cuts::Except(n) => n.join(", "),
+    }
 }
 
 /// The front-facing triangles of `shape` projected over the viewport, filled with
@@ -266,7 +319,15 @@ fn distance_to_outline(
 
 impl ClipEditor {
     /// The clipping panel. Returns whether the shapes changed.
-    pub fn panel(&mut self, ui: &mut egui::Ui, shapes: &mut Vec<ClipShape>, radius: f32) -> bool {
+    /// With a segmentation (`labels`), the selected shape's row also says which segments
+    /// it cuts.
+    pub fn panel(
+        &mut self,
+        ui: &mut egui::Ui,
+        shapes: &mut Vec<ClipShape>,
+        radius: f32,
+        labels: Option<&LabelMap>,
+    ) -> bool {
         let before = shapes.clone();
         ui.horizontal_wrapped(|ui| {
             ui.label("Add");
@@ -323,6 +384,14 @@ impl ClipEditor {
                     }
                 });
             };
+            if let Some(labels) = labels {
+                self.cuts_ui(ui, i, &mut s.cuts, labels);
+            } else if !s.cuts.is_all() {
+                ui.weak(format!(
+                    "Cuts {:?} (open a segmentation to edit)",
+                    cuts_text(&s.cuts)
+                ));
+            }
             row(ui, "Centre mm", &mut s.translation, 0.5);
             row(ui, "Rotation °", &mut s.rotation_deg, 1.0);
             if s.shape != Shape::Plane {
@@ -337,6 +406,70 @@ impl ClipEditor {
             self.selected = None;
         }
         *shapes != before
+    }
+
+    /// Which segments shape `index` cuts: a combo box (all, only, all except) and the
+    /// names or patterns (`vertebrae*,rib*,aorta`), checked against `labels`; a text
+    /// naming nothing shows why and is not used.
+    fn cuts_ui(&mut self, ui: &mut egui::Ui, index: usize, cuts: &mut Cuts, labels: &LabelMap) {
+        if self.cuts_text.as_ref().is_none_or(|(i, _)| *i != index) {
+            self.cuts_text = Some((index, cuts_text(cuts)));
+            self.cuts_error = None;
+        }
+        let Some((_, text)) = &mut self.cuts_text else {
+            return;
+        };
+        let mut kind = CutsKind::of(cuts);
+        let before = kind;
+        let mut edited = false;
+        ui.horizontal(|ui| {
+            egui::ComboBox::from_label("Cuts")
+                .selected_text(kind.name())
+                .show_ui(ui, |ui| {
+                    for k in [CutsKind::All, CutsKind::Only, CutsKind::Except] {
+                        ui.selectable_value(&mut kind, k, k.name());
+                    }
+                });
+            if kind != CutsKind::All {
+                edited = ui
+                    .add(
+                        egui::TextEdit::singleline(text)
+                            .hint_text("vertebrae*,rib*,aorta")
+                            .desired_width(140.0),
+                    )
+                    .on_hover_text(
+                        "Segment names or values, comma-separated; * matches any run of \
+                         characters; unlabelled: the voxels in no segment",
+                    )
+                    .accessible_name("Cut segments")
+                    .changed();
+            }
+        });
+        if kind == before && !edited {
+            if let Some(e) = &self.cuts_error {
+                ui.colored_label(ui.visuals().error_fg_color, e);
+            }
+            return;
+        }
+        let wanted = cuts_from(kind, text);
+        let probe = ClipShape {
+            cuts: wanted.clone(),
+            ..ClipShape::new(Shape::Sphere, Vec3::ZERO, 1.0)
+        };
+        match crate::labels::style::check_cuts(labels, std::slice::from_ref(&probe)) {
+            Ok(()) => {
+                *cuts = wanted;
+                self.cuts_error = None;
+            }
+            Err(e) => {
+                // "clip shape 1: …" of the one-shape check: name this shape instead.
+                let e = e.split_once(": ").map_or(e.as_str(), |(_, m)| m).to_owned();
+                self.cuts_error = Some(e);
+            }
+        }
+        if let Some(e) = &self.cuts_error {
+            ui.colored_label(ui.visuals().error_fg_color, e);
+        }
     }
 
     /// Draws the outlines over the viewport (the selected one highlighted).

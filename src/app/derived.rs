@@ -7,7 +7,9 @@ use super::jobs::Keyed;
 use crate::ao::AoSettings;
 use crate::ao::cao::CaoStats;
 use crate::ao::filter::OpacityModulation;
+use crate::texels::segments::SegmentTexels;
 use crate::tf::TransferFunction;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// How long the transfer function must rest before AO is recomputed for it.
@@ -23,7 +25,38 @@ pub(super) struct AoKey {
     pub(super) opacity: Vec<crate::tf::OpacityPoint>,
     /// Which voxels LAO and CAO compute (the render mode and skipping decide).
     pub(super) coverage: crate::ao::sparse::Coverage,
+    /// What the AO sees of the segmentation ([`seen`]).
+    pub(super) segments: Option<Vec<[u32; 3]>>,
     pub(super) doc_generation: u64,
+}
+
+/// What AO and shadows see of a segmentation: per class its opacity weight (bits),
+/// whether only its outline shows, and the shapes that carve it. Colours and
+/// tint/replace are left out: they change no opacity, so no AO.
+pub(super) fn seen(s: &SegmentTexels) -> Vec<[u32; 3]> {
+    s.table
+        .iter()
+        .map(|c| [c.opacity.to_bits(), u32::from(c.outline), c.carved_by])
+        .collect()
+}
+
+/// What the segmentation's classes and looks were built for: the styles, each clip
+/// shape's cuts (carve bits are per shape index) and the document.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct SegmentsKey {
+    pub(super) styles: crate::labels::style::Styles,
+    pub(super) cuts: Vec<crate::clip::Cuts>,
+    pub(super) doc_generation: u64,
+}
+
+/// The segmentation as last built, and whether the viewport's volume has it.
+#[derive(Debug)]
+pub(super) struct SegmentsBuilt {
+    pub(super) key: SegmentsKey,
+    pub(super) texels: Arc<SegmentTexels>,
+    pub(super) uploaded: bool,
+    /// Bumped by every build (the hover line's copy follows it).
+    pub(super) version: u64,
 }
 
 /// What the viewer derives from the document and keeps on the GPU, each keyed by what it
@@ -52,6 +85,8 @@ pub(super) struct Derived {
     pub(super) ao_seconds: Option<(f64, String)>,
     /// The last CAO frame's figures.
     pub(super) cao_stats: Option<CaoStats>,
+    /// The segmentation's classes and looks (`None`: the document has none).
+    pub(super) segments: Option<SegmentsBuilt>,
 }
 
 impl Default for Derived {
@@ -67,6 +102,7 @@ impl Default for Derived {
             uploaded_tf: None,
             ao_seconds: None,
             cao_stats: None,
+            segments: None,
         }
     }
 }
@@ -88,6 +124,8 @@ pub(super) struct LightKey {
     pub(super) opacity: Vec<crate::tf::OpacityPoint>,
     /// Light passes through what the shapes carve away.
     pub(super) clip: Vec<crate::clip::ClipShape>,
+    /// What the light sees of the segmentation ([`seen`]).
+    pub(super) segments: Option<Vec<[u32; 3]>>,
     pub(super) doc_generation: u64,
 }
 

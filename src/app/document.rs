@@ -2,11 +2,12 @@
 //! how it is read: [`load_document`] runs on a worker thread and uploads the volume.
 
 use super::jobs::{Job, Progress};
+use super::segments::Segmentation;
 use crate::ao::AoSettings;
 use crate::gpu::Gpu;
 use crate::render::gpu::RenderVolume;
 use crate::render::{Camera, RenderSettings, Shading};
-use crate::scene::{Light, MeshSource, SCENE_VERSION, Scene, VolumeSource};
+use crate::scene::{Light, MeshSource, SCENE_VERSION, Scene, SegmentationSource, VolumeSource};
 use crate::texels::{UploadLimits, VolumeTexels};
 use crate::tf::{Preset, TransferFunction};
 use crate::volume::{self, Histogram, LoadOptions, Stats, Volume};
@@ -24,8 +25,13 @@ const HISTOGRAM_BINS: usize = 256;
 pub enum OpenRequest {
     /// The built-in demo volume.
     Demo,
-    /// A volume file with the options (raw layout, 4-D frame) to read it.
-    Volume { path: PathBuf, options: LoadOptions },
+    /// A volume file with the options (raw layout, 4-D frame) to read it, and a
+    /// segmentation to show with it.
+    Volume {
+        path: PathBuf,
+        options: LoadOptions,
+        labels: Option<Box<SegmentationSource>>,
+    },
     /// A scene file: its volume, transfer function, camera and settings.
     Scene(PathBuf),
 }
@@ -42,6 +48,7 @@ impl OpenRequest {
             OpenRequest::Volume {
                 path,
                 options: LoadOptions::default(),
+                labels: None,
             }
         }
     }
@@ -147,6 +154,8 @@ pub struct Document {
     pub downsampled: u32,
     /// A line for the status bar about how the document was set up (the demo's AO).
     pub note: Option<String>,
+    /// The segmentation shown with the volume, with its styles (the Segments panel).
+    pub segmentation: Option<Segmentation>,
 }
 
 impl Document {
@@ -200,7 +209,7 @@ impl Document {
             ambient_occlusion: self.ao,
             clip_shapes: self.clip_shapes.clone(),
             meshes: self.meshes.clone(),
-            segmentation: None,
+            segmentation: self.segmentation.as_ref().map(Segmentation::source),
         }
     }
 }
@@ -240,7 +249,7 @@ pub fn load_document(
         _ => (None, None),
     };
     let (path, options) = match (request, &scene, &scene_path) {
-        (OpenRequest::Volume { path, options }, _, _) => (Some(path.clone()), options.clone()),
+        (OpenRequest::Volume { path, options, .. }, _, _) => (Some(path.clone()), options.clone()),
         (OpenRequest::Scene(_), Some(s), Some(sp)) => (s.volume_path(sp), s.load_options()),
         _ => (None, LoadOptions::default()),
     };
@@ -280,6 +289,26 @@ pub fn load_document(
         (Some(s), Some(sp)) => (s.light, s.meshes_resolved(sp), s.clip_shapes_resolved(sp)),
         _ => Default::default(),
     };
+    // The segmentation is placed on the volume as uploaded (RAS), as `volao render` does.
+    let segmentation_source = match (request, &scene, &scene_path) {
+        (OpenRequest::Volume { labels, .. }, _, _) => labels.as_deref().cloned(),
+        (OpenRequest::Scene(_), Some(s), Some(sp)) => s.segmentation.clone().map(|mut s| {
+            let base = sp.parent().unwrap_or(Path::new("."));
+            s.path = base.join(&s.path);
+            s.table = s.table.as_ref().map(|t| base.join(t));
+            s
+        }),
+        _ => None,
+    };
+    let segmentation = match segmentation_source {
+        Some(source) => {
+            let (seg, notes) = Segmentation::load(source, &volume, &clip_shapes)?;
+            warnings.extend(notes);
+            Some(seg)
+        }
+        None => None,
+    };
+    progress.check();
     let info = format!(
         "{info}, {} {}, {} × {} × {} mm",
         volume::fmt_dims(volume.dims),
@@ -353,6 +382,7 @@ pub fn load_document(
         radius,
         downsampled,
         note: demo.map(|d| d.note),
+        segmentation,
     };
     Ok(LoadedDocument {
         doc,

@@ -29,11 +29,13 @@ pub mod clip_panel;
 pub mod demo;
 mod derived;
 mod document;
+mod hover;
 pub mod jobs;
 mod panels;
 mod preview;
 pub mod screenshot;
 mod scripted;
+pub mod segments;
 mod shots;
 mod sync;
 pub mod tf_editor;
@@ -126,6 +128,9 @@ pub struct Viewer {
 struct Chrome {
     tf_editor: tf_editor::TfEditor,
     clip_editor: clip_panel::ClipEditor,
+    segments_panel: segments::SegmentsPanel,
+    /// The hover line: the segment under the pointer.
+    hover: hover::Hover,
     toasts: Vec<Toast>,
     recent: Vec<PathBuf>,
     prompt: Option<Pending>,
@@ -328,6 +333,7 @@ impl Viewer {
                 .modulation
                 .pending(self.modulation_key().as_ref())
             || self.derived.light.pending(self.light_key().as_ref())
+            || self.segments_waiting()
             || self.shots.request.is_some()
             || self.shots.pending.is_some()
             || self.shots.write_job.is_some()
@@ -602,6 +608,7 @@ impl Viewer {
         self.viewport.pacer.begin_frame(&gpu);
         self.poll_load();
         self.handle_input(ui);
+        self.sync_segments();
         self.update_ao();
         self.update_modulation();
         self.update_light();
@@ -644,6 +651,7 @@ impl Viewer {
         let slot = egui::CentralPanel::no_frame()
             .show(ui, |ui| self.viewport(ui))
             .inner;
+        self.update_hover(ui);
         self.pump_viewport();
         self.paint_viewport(slot);
     }

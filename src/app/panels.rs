@@ -7,6 +7,7 @@ use super::{ao_panel, camera_input, screenshot, tf_editor, viewport};
 use crate::render::{Camera, RenderMode, Shading};
 use crate::scene::Light;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use viewport::ViewportCallback;
 
@@ -230,6 +231,11 @@ impl Viewer {
                     &modulation_status,
                 );
             });
+        if let Some(seg) = &mut doc.segmentation {
+            egui::CollapsingHeader::new("Segments")
+                .default_open(true)
+                .show(ui, |ui| self.chrome.segments_panel.show(ui, seg));
+        }
         egui::CollapsingHeader::new("Ambient occlusion")
             .default_open(true)
             .show(ui, |ui| {
@@ -274,12 +280,13 @@ impl Viewer {
             interactive_controls(ui, &mut self.viewport.interactive);
         });
         let radius = doc.radius;
+        let labels = doc.segmentation.as_ref().map(|s| Arc::clone(&s.labels));
         egui::CollapsingHeader::new("Clipping")
             .default_open(true)
             .show(ui, |ui| {
                 self.chrome
                     .clip_editor
-                    .panel(ui, &mut doc.clip_shapes, radius);
+                    .panel(ui, &mut doc.clip_shapes, radius, labels.as_deref());
             });
         egui::CollapsingHeader::new("Screenshot")
             .default_open(true)
@@ -404,6 +411,9 @@ impl Viewer {
                 ui.label(text);
             }
             self.view_status(ui);
+            if let Some(text) = &self.chrome.hover.text {
+                ui.label(format!("Under the pointer: {text}"));
+            }
             if let Some(note) = self.opened.doc.as_ref().and_then(|d| d.note.as_deref()) {
                 ui.weak(note);
             }

@@ -16,6 +16,7 @@ use crate::render::Frame;
 use crate::render::gpu::RenderVolume;
 use crate::texels::VolumeTexels;
 use crate::texels::gpu::GpuVolume;
+use crate::texels::segments::SegmentTexels;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -43,8 +44,76 @@ impl Viewer {
             clipping: matches!(doc.ao.method, AoMethod::Cao | AoMethod::LaoFull),
             opacity: doc.tf.opacity.clone(),
             coverage: crate::ao::sparse::Coverage::for_render(&doc.render),
+            segments: self.segments_seen(),
             doc_generation: self.opened.generation,
         })
+    }
+
+    /// What AO and shadows see of the segmentation as built ([`seen`]).
+    fn segments_seen(&self) -> Option<Vec<[u32; 3]>> {
+        self.derived.segments.as_ref().map(|b| seen(&b.texels))
+    }
+
+    /// Whether the segmentation's looks wait to be sent to the viewport's volume.
+    pub(super) fn segments_waiting(&self) -> bool {
+        self.derived.segments.as_ref().is_some_and(|b| !b.uploaded)
+    }
+
+    /// Keeps the segmentation on the viewport's volume in step with the styles and the
+    /// clip shapes' cuts: rebuilt when they change (only the looks and the class table
+    /// are uploaded again: the classes stay). A change the AO sees (visibility, opacity,
+    /// outline, cuts) restarts the AO once it rests, as a transfer-function edit does;
+    /// colours and tint/replace only redraw.
+    pub(super) fn sync_segments(&mut self) {
+        let want = self.opened.doc.as_ref().and_then(|d| {
+            d.segmentation.as_ref().map(|s| SegmentsKey {
+                styles: s.styles.clone(),
+                cuts: d.clip_shapes.iter().map(|c| c.cuts.clone()).collect(),
+                doc_generation: self.opened.generation,
+            })
+        });
+        let current = self.derived.segments.as_ref().map(|b| &b.key);
+        if want.as_ref() != current {
+            let built = want.and_then(|key| {
+                let doc = self.opened.doc.as_ref()?;
+                let texels = doc.segmentation.as_ref()?.texels(&doc.clip_shapes);
+                Some((key, texels))
+            });
+            let before = self.segments_seen();
+            let version = self.derived.segments.as_ref().map_or(0, |b| b.version) + 1;
+            self.derived.segments = built.map(|(key, texels)| SegmentsBuilt {
+                key,
+                texels: Arc::new(texels),
+                uploaded: false,
+                version,
+            });
+            if self.segments_seen() != before {
+                self.derived.tf_changed_at = Instant::now();
+            }
+            if self.derived.segments.is_none() {
+                let gpu = Arc::clone(&self.gpu);
+                self.upload(|g| g.set_segments(&gpu, None));
+            }
+        }
+        if !self.segments_waiting() {
+            return;
+        }
+        // As with the transfer function: edits go in between images, as motion.
+        if self.viewport.gpu.working() {
+            self.ctx.request_repaint();
+            return;
+        }
+        self.viewport.motion.changed_at = Instant::now();
+        let gpu = Arc::clone(&self.gpu);
+        let Some(built) = &mut self.derived.segments else {
+            return;
+        };
+        let texels = SegmentTexels::clone(&built.texels);
+        built.uploaded = true;
+        self.upload(|g| {
+            g.set_segments(&gpu, Some(texels));
+            true
+        });
     }
 
     /// Keeps the AO on the GPU in step with the settings and the transfer function.
@@ -152,6 +221,11 @@ impl Viewer {
             step_voxels: doc.render.step_voxels,
             clipping: key.clipping,
             coverage: key.coverage,
+            segments: self
+                .derived
+                .segments
+                .as_ref()
+                .map(|b| Arc::clone(&b.texels)),
         };
         let job = Job::spawn(label, self.repaint_fn(), move |p| compute_ao(input, p));
         self.derived.ao.start(key, job);
@@ -263,6 +337,7 @@ impl Viewer {
             direction: doc.view_settings().light_direction,
             opacity: doc.tf.opacity.clone(),
             clip: doc.clip_shapes.clone(),
+            segments: self.segments_seen(),
             doc_generation: self.opened.generation,
         })
     }
@@ -310,8 +385,11 @@ impl Viewer {
         };
         let (gpu, tf) = (Arc::clone(&self.gpu), doc.tf.clone());
         let (shapes, radius, resolution) = (key.clip.clone(), doc.radius, doc.ao.clip_resolution);
-        // The viewer shows no segmentation yet.
-        let segments: Option<crate::texels::segments::SegmentTexels> = None;
+        let segments = self
+            .derived
+            .segments
+            .as_ref()
+            .map(|b| Arc::clone(&b.texels));
         let dir = match crate::render::shadow::light_direction(key.direction) {
             Ok(d) => d,
             Err(message) => {
@@ -321,6 +399,11 @@ impl Viewer {
         };
         let job = Job::spawn("Shadows", self.repaint_fn(), move |p| {
             let lut = crate::render::shadow::light_lut(&tf, &texels);
+            // On the grid of the uploaded texels (halved to fit, if it was).
+            let segments = segments.map(|s| match s.dims == texels.dims {
+                true => SegmentTexels::clone(&s),
+                false => s.subsampled(texels.dims, 1 << texels.downsampled),
+            });
             // Its own clip maps, as `volao render` makes them (the margin is unused).
             let maps = match shapes.is_empty() {
                 true => None,
@@ -514,9 +597,10 @@ impl Viewer {
                 ..want.clone()
             });
         // A transfer function waiting for the image being made to finish is not shown yet.
-        let tf_waiting = self.opened.doc.as_ref().is_some_and(|d| {
-            self.derived.uploaded_tf.as_ref() != Some(&(d.view_tf(), d.render.step_voxels))
-        });
+        let tf_waiting = self.segments_waiting()
+            || self.opened.doc.as_ref().is_some_and(|d| {
+                self.derived.uploaded_tf.as_ref() != Some(&(d.view_tf(), d.render.step_voxels))
+            });
         self.viewport.current = !busy && !moving && !tf_waiting;
         if let Some(stats) = pumped.stats {
             self.derived.cao_stats = Some(stats);

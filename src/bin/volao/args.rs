@@ -70,6 +70,9 @@ pub struct ViewArgs {
     pub no_skipping: bool,
     #[command(flatten)]
     pub load: LoadArgs,
+    /// A segmentation to show with the volume (the Segments panel styles it).
+    #[command(flatten)]
+    pub labels: LabelArgs,
 }
 
 pub fn parse_size(s: &str) -> Result<[f32; 2], String> {

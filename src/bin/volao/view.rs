@@ -2,6 +2,7 @@
 
 use crate::args::{TargetRate, ViewArgs};
 use anyhow::{Result, bail};
+use volao::scene::SegmentationSource;
 
 /// `volao view`.
 pub fn run(args: &ViewArgs) -> Result<()> {
@@ -17,8 +18,29 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         Some(p) => OpenRequest::Volume {
             path: p.clone(),
             options: args.load.options(),
+            labels: args.labels.labels.clone().map(|path| {
+                Box::new(SegmentationSource {
+                    path,
+                    table: args.labels.label_table.clone(),
+                    styles: Default::default(),
+                })
+            }),
         },
     };
+    if args.labels.labels.is_some() && !matches!(open, OpenRequest::Volume { .. }) {
+        bail!(
+            "--labels needs a volume file: a scene keeps its own segmentation \
+             (its \"segmentation\" entry)"
+        );
+    }
+    for p in [&args.labels.labels, &args.labels.label_table]
+        .into_iter()
+        .flatten()
+    {
+        if !p.exists() {
+            bail!("{}: no such file", p.display());
+        }
+    }
     if let Some(p) = &args.file
         && !p.exists()
     {
