@@ -28,10 +28,12 @@ override SEGMENT_MODES: u32 = 2u;
 // Per voxel: its class (a combination of segments), read nearest.
 @group(3) @binding(5) var segment_classes: texture_3d<u32>;
 // Per class: the clip shapes that carve it (bit s), flags (bit 0: its colour replaces
-// the transfer function's), packed RGB, unused (texels::segments::ClassLook::gpu).
+// the transfer function's; the shaders read it filtered from segment_gradient.w), packed
+// RGB, unused (texels::segments::ClassLook::gpu).
 @group(3) @binding(6) var<storage, read> segment_table: array<vec4<u32>>;
 // Per voxel: the weight's differences one voxel either side, w(x + 1) − w(x − 1) per
-// axis (snorm, filtered): its gradient wherever it is sampled, in one fetch.
+// axis (snorm, filtered): its gradient wherever it is sampled, in one fetch; and in w
+// whether its colour replaces the transfer function's, × the weight.
 @group(3) @binding(7) var segment_gradient: texture_3d<f32>;
 
 // The texel value at texture coordinates `uvw`, trilinear, clamped at the edges.
@@ -137,7 +139,9 @@ fn classify_at(uvw: vec3<f32>, value: f32) -> vec4<f32> {
     let c = look.rgb / look.a;
     var replace = f32(SEGMENT_MODES);
     if SEGMENT_MODES == 2u {
-        replace = f32(segment_table[segment_class_at(uvw)].y & 1u);
+        // Filtered as the colour is, so a tinted class meets a replacing one smoothly.
+        let r = textureSampleLevel(segment_gradient, volume_sampler, uvw, 0.0).w;
+        replace = clamp(r / look.a, 0.0, 1.0);
     }
     return vec4<f32>(mix(tf.rgb * c, c, replace), tf.a * look.a);
 }

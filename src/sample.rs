@@ -6,7 +6,7 @@
 //! `render::cpu`, …) samples through these, so the GPU and CPU paths read the same values.
 
 use crate::texels::gpu_data::VolumeMap;
-use crate::texels::segments::{REPLACE, SegmentTexels};
+use crate::texels::segments::SegmentTexels;
 use crate::texels::{TexelFormat, VolumeTexels};
 use crate::tf::{Lut, TransferFunction, correct_opacity};
 use glam::{Vec3, Vec4};
@@ -64,10 +64,13 @@ pub struct SegmentSampler {
     pub dims: [usize; 3],
     /// Colour × weight (r, g, b) and weight, each in [0, 1].
     look: [Vec<f32>; 4],
-    /// The weight's differences (x, y, z) as the snorm texture holds them.
-    gradient: [Vec<f32>; 3],
+    /// The weight's differences (x, y, z) and replace × weight, as the snorm texture
+    /// holds them.
+    gradient: [Vec<f32>; 4],
     classes: Vec<u16>,
     table: Vec<[u32; 4]>,
+    /// [`SegmentTexels::modes`].
+    modes: u32,
 }
 
 impl SegmentSampler {
@@ -83,6 +86,7 @@ impl SegmentSampler {
             }),
             classes: s.classes.clone(),
             table: s.gpu_table(),
+            modes: s.modes(),
         }
     }
 
@@ -102,6 +106,12 @@ impl SegmentSampler {
         Vec3::from_array(std::array::from_fn(|c| {
             trilinear(&self.gradient[c], self.dims, uvw)
         }))
+    }
+
+    /// How much the colour at `uvw` replaces the transfer function's (`classify_at`'s
+    /// per-class mode: filtered, over the weight `w` there).
+    fn replacing_at(&self, uvw: Vec3, w: f32) -> f32 {
+        (trilinear(&self.gradient[3], self.dims, uvw) / w).clamp(0.0, 1.0)
     }
 
     /// `segment_weight_of_voxel`.
@@ -125,11 +135,6 @@ impl SegmentSampler {
     /// `carved_by_voxel`.
     pub fn carved_by_voxel(&self, k: [usize; 3]) -> u32 {
         self.table[self.classes[self.index(k)] as usize][0]
-    }
-
-    /// Whether the class at `uvw` replaces the transfer function's colour.
-    fn replaces_at(&self, uvw: Vec3) -> bool {
-        self.table[self.class_at(uvw)][1] & REPLACE != 0
     }
 }
 
@@ -217,7 +222,11 @@ impl<'a> VolumeSampler<'a> {
             return [tf[0], tf[1], tf[2], 0.0];
         }
         let c = look.truncate() / look.w;
-        let out = if s.replaces_at(uvw) { c } else { rgb * c };
+        let replace = match s.modes {
+            2 => s.replacing_at(uvw, look.w),
+            m => m as f32,
+        };
+        let out = (rgb * c).lerp(c, replace);
         [out.x, out.y, out.z, tf[3] * look.w]
     }
 

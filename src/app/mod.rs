@@ -32,6 +32,7 @@ mod document;
 mod hover;
 pub mod jobs;
 mod panels;
+mod pointer;
 mod preview;
 pub mod screenshot;
 mod scripted;

@@ -135,7 +135,10 @@ impl SegmentsPanel {
         let present = labels.segments.iter().filter(|s| s.voxels > 0).count();
         ui.weak(format!(
             "{}: {present} segments",
-            super::document::file_name(&seg.path)
+            seg.path.file_name().map_or_else(
+                || seg.path.display().to_string(),
+                |n| n.to_string_lossy().into_owned()
+            )
         ));
         ui.horizontal(|ui| {
             ui.label("Search");

@@ -265,6 +265,25 @@ pub fn write_texture_3d(
     );
 }
 
+/// How the volume's textures are used: sampled by the shaders, written by the upload.
+const SAMPLED: wgpu::TextureUsages =
+    wgpu::TextureUsages::TEXTURE_BINDING.union(wgpu::TextureUsages::COPY_DST);
+
+/// A volume texture of `dims` holding `bytes` (tightly packed texels of `format`).
+pub fn filled_texture_3d(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    bytes: &[u8],
+) -> wgpu::Texture {
+    let texture = texture_3d(device, label, dims, format, SAMPLED);
+    let texel = format.block_copy_size(None).unwrap_or(1);
+    write_texture_3d(queue, &texture, 0, dims, texel, bytes);
+    texture
+}
+
 /// A 2-D texture of `size` (an image, a tile, a render target).
 pub fn image_texture(
     device: &wgpu::Device,

@@ -7,9 +7,10 @@
 use super::extras::GpuLight;
 use super::gradient::GradientVolume;
 use super::shadow::LightVolume;
+use crate::gpu::filled_texture_3d;
 use crate::gpu::{Gpu, GpuError, validated};
 use crate::texels::VolumeTexels;
-use crate::texels::gpu::{GpuVolume, filled};
+use crate::texels::gpu::GpuVolume;
 use crate::tf::TransferFunction;
 use glam::Vec3;
 
@@ -162,7 +163,8 @@ impl RenderVolume {
         bytes: &[u8],
     ) -> wgpu::TextureView {
         let dims = self.texels.dims.map(|d| d as u32);
-        filled(&gpu.device, &gpu.queue, label, dims, format, bytes).create_view(&Default::default())
+        filled_texture_3d(&gpu.device, &gpu.queue, label, dims, format, bytes)
+            .create_view(&Default::default())
     }
 
     /// Uses `values` (one per voxel, x fastest, in [0, 1]) as the ambient factor A(x).
@@ -245,14 +247,15 @@ impl RenderVolume {
 fn no_modulation(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::TextureView {
     let format = wgpu::TextureFormat::R8Unorm;
     let label = "GpuVolume::opacity_modulation";
-    filled(device, queue, label, [1, 1, 1], format, &[255]).create_view(&Default::default())
+    filled_texture_3d(device, queue, label, [1, 1, 1], format, &[255])
+        .create_view(&Default::default())
 }
 
 /// No ambient occlusion: a single texel of 1.
 fn no_ambient_occlusion(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::TextureView {
     let (format, one) = (wgpu::TextureFormat::R32Float, bytemuck::bytes_of(&1.0f32));
     let label = "GpuVolume::ambient_occlusion";
-    filled(device, queue, label, [1, 1, 1], format, one).create_view(&Default::default())
+    filled_texture_3d(device, queue, label, [1, 1, 1], format, one).create_view(&Default::default())
 }
 
 impl RenderVolume {

@@ -7,7 +7,7 @@
 
 use super::segments::{GpuSegments, SegmentTexels};
 use super::{BlockRanges, UploadLimits, VolumeTexels};
-use crate::gpu::{Gpu, GpuError, validated};
+use crate::gpu::{Gpu, GpuError, filled_texture_3d, validated};
 use crate::sample::bake_lut;
 use crate::tf::{Lut, TransferFunction};
 
@@ -47,25 +47,6 @@ fn next_generation() -> u64 {
     NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
-/// How the volume's textures are used: sampled by the shaders, written by the upload.
-const SAMPLED: wgpu::TextureUsages =
-    wgpu::TextureUsages::TEXTURE_BINDING.union(wgpu::TextureUsages::COPY_DST);
-
-/// A volume texture of `dims` holding `bytes` (tightly packed texels of `format`).
-pub fn filled(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    label: &str,
-    dims: [u32; 3],
-    format: wgpu::TextureFormat,
-    bytes: &[u8],
-) -> wgpu::Texture {
-    let texture = crate::gpu::texture_3d(device, label, dims, format, SAMPLED);
-    let texel = format.block_copy_size(None).unwrap_or(1);
-    crate::gpu::write_texture_3d(queue, &texture, 0, dims, texel, bytes);
-    texture
-}
-
 impl GpuVolume {
     /// Uploads a volume (halving it until it fits the adapter) with a transfer function
     /// baked for `step_voxels`.
@@ -94,7 +75,7 @@ impl GpuVolume {
         let occ = ranges.occupancy(&texels, &lut);
         let grid = ranges.grid.map(|d| d as u32);
         validated(device, "GpuVolume::upload", || {
-            let volume = filled(
+            let volume = filled_texture_3d(
                 device,
                 queue,
                 "GpuVolume::volume",
@@ -102,7 +83,7 @@ impl GpuVolume {
                 texels.format.wgpu(),
                 &texels.bytes,
             );
-            let occupancy = filled(
+            let occupancy = filled_texture_3d(
                 device,
                 queue,
                 "GpuVolume::occupancy",
@@ -111,7 +92,7 @@ impl GpuVolume {
                 &occ,
             );
             let range_texels: Vec<[f32; 2]> = ranges.ranges.iter().map(|&(a, b)| [a, b]).collect();
-            let block_range = filled(
+            let block_range = filled_texture_3d(
                 device,
                 queue,
                 "GpuVolume::block_range",

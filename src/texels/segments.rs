@@ -18,8 +18,7 @@
 //!   whether its colour replaces the transfer function's;
 //! - the class table: per class, the shapes that carve it and its flags.
 
-use super::gpu::filled;
-use crate::gpu::{Gpu, storage_buffer};
+use crate::gpu::{Gpu, filled_texture_3d, storage_buffer};
 use crate::volume::voxel_of;
 use rayon::prelude::*;
 
@@ -81,7 +80,8 @@ pub struct SegmentTexels {
     /// Per voxel: colour × weight and weight, as RGBA8 (what the look texture holds).
     pub look: Vec<[u8; 4]>,
     /// Per voxel: the weight's differences one voxel either side, `w(x + 1) − w(x − 1)`
-    /// per axis (clamped at the faces), as RGBA8 snorm (the gradient texture).
+    /// per axis (clamped at the faces), and whether its colour replaces the transfer
+    /// function's × its weight, as RGBA8 snorm (the gradient texture).
     pub gradient: Vec<[i8; 4]>,
 }
 
@@ -218,6 +218,8 @@ impl SegmentTexels {
                     let hi = if v[a] + 1 < dims[a] { i + stride[a] } else { i };
                     d[a] = snorm8(w(hi) - w(lo));
                 }
+                let replace = self.table[self.classes[i] as usize].replace;
+                d[3] = snorm8(if replace { w(i) } else { 0.0 });
                 d
             })
             .collect()
@@ -289,7 +291,7 @@ impl GpuSegments {
     pub fn new(gpu: &Gpu, segments: &SegmentTexels) -> Self {
         let (device, queue) = (&gpu.device, &gpu.queue);
         let dims = segments.dims.map(|d| d as u32);
-        let look = filled(
+        let look = filled_texture_3d(
             device,
             queue,
             "GpuSegments::look",
@@ -297,7 +299,7 @@ impl GpuSegments {
             wgpu::TextureFormat::Rgba8Unorm,
             bytemuck::cast_slice(&segments.look),
         );
-        let gradient = filled(
+        let gradient = filled_texture_3d(
             device,
             queue,
             "GpuSegments::gradient",
@@ -305,7 +307,7 @@ impl GpuSegments {
             wgpu::TextureFormat::Rgba8Snorm,
             bytemuck::cast_slice(&segments.gradient),
         );
-        let classes = filled(
+        let classes = filled_texture_3d(
             device,
             queue,
             "GpuSegments::classes",
