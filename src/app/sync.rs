@@ -99,11 +99,9 @@ impl Viewer {
             return;
         }
         // As with the transfer function: edits go in between images, as motion.
-        if self.viewport.gpu.working() {
-            self.ctx.request_repaint();
+        if !self.between_images() {
             return;
         }
-        self.viewport.motion.changed_at = Instant::now();
         let gpu = Arc::clone(&self.gpu);
         let Some(built) = &mut self.derived.segments else {
             return;
@@ -114,6 +112,18 @@ impl Viewer {
             g.set_segments(&gpu, Some(texels));
             true
         });
+    }
+
+    /// Whether an edit of what the viewport reads may go to the GPU now: not while an
+    /// image is being ray-cast (it is asked for again at the next frame); then the edit
+    /// counts as motion (interactive quality).
+    fn between_images(&mut self) -> bool {
+        if self.viewport.gpu.working() {
+            self.ctx.request_repaint();
+            return false;
+        }
+        self.viewport.motion.changed_at = Instant::now();
+        true
     }
 
     /// Keeps the AO on the GPU in step with the settings and the transfer function.
@@ -518,11 +528,9 @@ impl Viewer {
         }
         // An image being ray-cast would start again with every edit while a curve is
         // dragged: edits go in between images, and count as motion (interactive quality).
-        if self.viewport.gpu.working() {
-            self.ctx.request_repaint();
+        if !self.between_images() {
             return;
         }
-        self.viewport.motion.changed_at = Instant::now();
         let gpu = Arc::clone(&self.gpu);
         let v = &mut self.viewport.gpu;
         if let Some(g) = &mut v.volume {

@@ -203,6 +203,16 @@ pub struct MapRequest<'a> {
     pub resolution: u32,
 }
 
+impl MapRequest<'static> {
+    /// No shapes: maps that clip nothing (CAO's precomputation of `V_PAO`).
+    pub const NOTHING: MapRequest<'static> = MapRequest {
+        shapes: &[],
+        volume_radius: 1.0,
+        reach_mm: 1.0,
+        resolution: 16,
+    };
+}
+
 impl<'a> MapRequest<'a> {
     /// Maps that only clip the picture (no AO depends on the clipping, so the dilation
     /// is unused: 1 mm).

@@ -99,6 +99,12 @@ impl Styles {
             change(&mut self.unlabelled);
             return Ok(());
         }
+        if pattern.trim() == "*" {
+            // Every segment: the default, and those styled apart.
+            change(&mut self.segments_default);
+            self.segments.iter_mut().for_each(|s| change(&mut s.style));
+            return Ok(());
+        }
         let keys = labels.find(pattern);
         if keys.is_empty() {
             return Err(format!(

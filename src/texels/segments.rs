@@ -291,27 +291,21 @@ impl GpuSegments {
     pub fn new(gpu: &Gpu, segments: &SegmentTexels) -> Self {
         let (device, queue) = (&gpu.device, &gpu.queue);
         let dims = segments.dims.map(|d| d as u32);
-        let look = filled_texture_3d(
-            device,
-            queue,
+        let upload = |label, format, bytes: &[u8]| {
+            filled_texture_3d(device, queue, label, dims, format, bytes)
+        };
+        let look = upload(
             "GpuSegments::look",
-            dims,
             wgpu::TextureFormat::Rgba8Unorm,
             bytemuck::cast_slice(&segments.look),
         );
-        let gradient = filled_texture_3d(
-            device,
-            queue,
+        let gradient = upload(
             "GpuSegments::gradient",
-            dims,
             wgpu::TextureFormat::Rgba8Snorm,
             bytemuck::cast_slice(&segments.gradient),
         );
-        let classes = filled_texture_3d(
-            device,
-            queue,
+        let classes = upload(
             "GpuSegments::classes",
-            dims,
             wgpu::TextureFormat::R16Uint,
             bytemuck::cast_slice(&segments.classes),
         );

@@ -489,13 +489,7 @@ impl CaoGpu {
         let start = Instant::now();
         // V_PAO: the baseline pipeline with nothing clipped, copied aside. Step IV writes
         // every brick whose V_o or V_m is read; unwritten texels stay 0 (V_o's α there).
-        let nothing = MapRequest {
-            shapes: &[],
-            volume_radius: 1.0,
-            reach_mm: 1.0,
-            resolution: 16,
-        };
-        cao.clip.update(gpu, nothing)?;
+        cao.clip.update(gpu, MapRequest::NOTHING)?;
         let b = &cao.bricks;
         let lists = Lists {
             clip: b.list(|i| b.used(i)),

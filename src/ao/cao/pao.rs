@@ -110,13 +110,7 @@ impl CaoGpu {
             return Ok(update);
         }
         let pao = read_texture_f32(gpu, &self.v_pao, self.dims, "Cao::update_pao")?;
-        let nothing = MapRequest {
-            shapes: &[],
-            volume_radius: 1.0,
-            reach_mm: 1.0,
-            resolution: 16,
-        };
-        self.clip.update(gpu, nothing)?;
+        self.clip.update(gpu, MapRequest::NOTHING)?;
         // The next frame lists every brick again, as after the precomputation.
         self.was_near.iter_mut().for_each(|n| *n = true);
         self.reserve_list(gpu, &lists)?;

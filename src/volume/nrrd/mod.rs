@@ -249,6 +249,32 @@ pub fn data_paths(h: &Header, header_path: &Path) -> Vec<PathBuf> {
 
 /// Opens one data file with its skips applied: the decoded byte stream and an upper
 /// bound on how many bytes it yields.
+/// The text of every data file of an ASCII or hex NRRD, one after another (each ended
+/// by a newline); refused beyond what `max_bytes` of voxels could be written as.
+fn read_text_parts(
+    h: &Header,
+    parts: &[PathBuf],
+    offset: u64,
+    per_part: u64,
+    max_bytes: u64,
+) -> Result<Vec<u8>, VolumeError> {
+    let mut text = Vec::new();
+    for p in parts {
+        let (r, bound) = open_part(h, p, offset, per_part)?;
+        if bound > max_bytes.saturating_mul(24) {
+            return Err(invalid(
+                p,
+                "text data larger than any volume that fits in memory",
+            ));
+        }
+        r.take(bound)
+            .read_to_end(&mut text)
+            .map_err(|e| VolumeError::io(p, e))?;
+        text.push(b'\n');
+    }
+    Ok(text)
+}
+
 fn open_part(
     h: &Header,
     path: &Path,
@@ -386,21 +412,10 @@ pub fn load(
             data.fix_endianness(h.little_endian);
         }
         Encoding::Ascii | Encoding::Hex => {
-            let mut text = Vec::new();
-            for p in &parts {
+            let offset = if attached { h.header_len } else { 0 };
+            let text = read_text_parts(&h, &parts, offset, per_part, max_bytes)?;
+            if let Some(p) = parts.last() {
                 last_path = p.clone();
-                let offset = if attached { h.header_len } else { 0 };
-                let (r, bound) = open_part(&h, p, offset, per_part)?;
-                if bound > max_bytes.saturating_mul(24) {
-                    return Err(invalid(
-                        p,
-                        "text data larger than any volume that fits in memory",
-                    ));
-                }
-                r.take(bound)
-                    .read_to_end(&mut text)
-                    .map_err(|e| VolumeError::io(p, e))?;
-                text.push(b'\n');
             }
             decode_text(
                 &h,
@@ -482,20 +497,7 @@ pub fn read_all_values(h: &Header, path: &Path, max_bytes: u64) -> Result<VoxelD
             data.fix_endianness(h.little_endian);
         }
         Encoding::Ascii | Encoding::Hex => {
-            let mut text = Vec::new();
-            for p in &parts {
-                let (r, bound) = open_part(h, p, offset, per_part)?;
-                if bound > max_bytes.saturating_mul(24) {
-                    return Err(invalid(
-                        p,
-                        "text data larger than any volume that fits in memory",
-                    ));
-                }
-                r.take(bound)
-                    .read_to_end(&mut text)
-                    .map_err(|e| VolumeError::io(p, e))?;
-                text.push(b'\n');
-            }
+            let text = read_text_parts(h, &parts, offset, per_part, max_bytes)?;
             decode_text(h, &text, 0, &mut data, path, total)?;
         }
     }
