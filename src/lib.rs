@@ -5,10 +5,14 @@
 //! 1. [`volume`] loads a file (NIfTI, Analyze, NRRD, DICOM series, PVM/DDS, raw) into a [`volume::Volume`]: voxels in
 //!    their stored type and units, spacing in mm, orientation in RAS.
 //!    [`labels`] places a segmentation label map on a volume's grid through the two
-//!    affines, with its segments' names and colours and statistics of the volume under each.
+//!    affines, with its segments' names and colours and statistics of the volume under
+//!    each; [`labels::style`] turns what the user chose per segment (visible, opacity,
+//!    colour, tint/replace, outline) and which segments each clip shape cuts into
+//!    classes (one per combination of overlapping segments) and their looks.
 //! 2. [`tf`] maps values to colour and opacity (the transfer function, in the data's
 //!    units); [`scene`] files hold a volume, its transfer function, camera, light, AO
-//!    settings, clip shapes and meshes, so any view can be reproduced headlessly.
+//!    settings, clip shapes, meshes and segmentation, so any view can be reproduced
+//!    headlessly.
 //! 3. [`texels`] turns the volume into texels for the GPU (halved until it fits), with
 //!    the block ranges every stage's skipping reads, and uploads them
 //!    ([`texels::gpu::GpuVolume`]: the density, occupancy, block ranges and baked table);
@@ -17,7 +21,11 @@
 //!    `shaders/volume.wgsl` (bind group 3: texels, sampler, [`texels::gpu_data::VolumeMap`],
 //!    table; built by [`texels::reader`]), and every CPU twin through its twin
 //!    [`sample::VolumeSampler`]; [`sample`] also holds trilinear sampling, f16 mip
-//!    chains and how far off a sample AO is read, exactly as the shaders do them.
+//!    chains and how far off a sample AO is read, exactly as the shaders do them. A
+//!    segmentation is part of the same reader ([`texels::segments`]: bindings 4–7, the
+//!    classes' filtered look and weight gradient, their cuts), compiled into a stage's
+//!    pipeline only where a volume has one, so `opacity_at` and `classify_at` give every
+//!    mode, shading and AO stage the segments' opacity and colour.
 //! 4. [`gpu`] owns the device (one path for viewer, CLI and tests), the shaders, the
 //!    resource helpers, [`gpu::dispatch::SlabDispatch`] (the z-slab loop of the dense
 //!    per-voxel compute stages) and [`gpu::dispatch::BrickDispatch`] (CAO's lists of
