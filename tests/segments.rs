@@ -601,3 +601,120 @@ fn hiding_a_segment_updates_v_pao_near_it_to_the_bits_of_a_recomputation() {
         );
     }
 }
+
+/// LAO with a segment hidden (GPU) against its CPU twin, and CAO's step IV with
+/// segment-aware carving (`V_o`, the mask) against its twin: as close as without a
+/// segmentation (`tests/lao.rs`, `tests/cao.rs`).
+#[test]
+fn lao_and_cao_step_iv_with_a_segmentation_match_their_cpu_twins() {
+    use volao::ao::cao::{CaoVolume, clip_volume_cpu_reading};
+    use volao::ao::lao::{LaoGpu, LaoSetup, lao_cpu_reading, lao_lut};
+    let gpu = device();
+    let lao = gpu.stage::<LaoGpu>().unwrap_or_else(|e| panic!("{e}"));
+    for p in [totalsegmentator(), slicer()] {
+        let tf = TransferFunction::preset(Preset::CtSoftTissue, &p.image.stats());
+        let keep = skeleton_and_vessels(&p);
+        let shapes = [sphere(Vec3::new(0.0, 15.0, 0.0), 35.0, Cuts::Except(keep))];
+        let mut styles = Styles::default();
+        let biggest = p
+            .labels
+            .segments
+            .iter()
+            .max_by_key(|s| s.voxels)
+            .expect("a segment");
+        styles.set(
+            biggest.key,
+            SegmentStyle {
+                opacity: 0.3,
+                ..Default::default()
+            },
+        );
+        let segments = texels_of(&p, &styles, &shapes);
+        let sampler = SegmentSampler::new(&segments);
+        let t = common::texels(&p.image);
+        let mut vol =
+            RenderVolume::from_texels(&gpu, t.clone(), &tf, 1.0).unwrap_or_else(|e| panic!("{e}"));
+        vol.set_segments(&gpu, Some(segments));
+        // LAO: dense, every voxel.
+        let lut = lao_lut(&tf, &t);
+        let rays = Rays::uniform(RaySet::Fourteen.directions());
+        let setup = LaoSetup {
+            lut: &lut,
+            rays: &rays,
+            samples: 12,
+        };
+        let dense = Coverage::Dense.bricks(&t, vol.ranges(), &tf);
+        let g = lao
+            .compute(&gpu, &vol, setup, &dense, &|_, _| {})
+            .unwrap_or_else(|e| panic!("{e}"));
+        let c = lao_cpu_reading(&t, setup, Some(&sampler), &dense, &|_, _| {});
+        let max = g
+            .iter()
+            .zip(&c)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        eprintln!("{}: LAO max |GPU − CPU| = {max:.2e}", p.name);
+        // As without a segmentation (tests/lao.rs).
+        assert!(
+            max <= 1.0 / 255.0,
+            "{}: LAO GPU vs CPU twin differ by {max}",
+            p.name
+        );
+        // The weight changes LAO: without it the twin differs.
+        let plain = volao::ao::lao::lao_cpu(&t, &lut, &rays, 12, &dense, &|_, _| {});
+        let changed = plain
+            .iter()
+            .zip(&c)
+            .filter(|(a, b)| (*a - *b).abs() > 0.01)
+            .count();
+        assert!(
+            changed > 100,
+            "{}: the weight changed {changed} voxels' LAO",
+            p.name
+        );
+        // CAO step IV, dense (the paper's mask).
+        let cao_setup = CaoSetup {
+            tf: &tf,
+            rays: &rays,
+            samples: SAMPLES,
+            msaa: 32,
+        };
+        let mut cao = CaoGpu::new(&gpu, &vol, cao_setup, dense.clone(), &|_, _| {})
+            .unwrap_or_else(|e| panic!("{e}"));
+        let pose = Pose {
+            shapes: &shapes,
+            resolution: MAP,
+            reach_mm: reach_mm(SAMPLES, t.spacing),
+            mode: CaoMode::Selective,
+        };
+        cao.update(&gpu, &t, pose).unwrap_or_else(|e| panic!("{e}"));
+        let maps = cao.clip.read_back(&gpu).unwrap_or_else(|e| panic!("{e}"));
+        let (mut v_o, v_m) = clip_volume_cpu_reading(&t, &lut, &maps, 32, Some(&sampler));
+        cao.round_as_stored(&mut v_o);
+        let g_o = cao
+            .read(&gpu, CaoVolume::ClippedOpacity)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let g_m = cao
+            .read(&gpu, CaoVolume::Mask)
+            .unwrap_or_else(|e| panic!("{e}"));
+        // As in tests/cao.rs: a sample on a map boundary may round the other way (one
+        // mask class, one MSAA sample of V_o) for 0.1 % of voxels, nothing else.
+        let mask_flips = v_m.iter().zip(&g_m).filter(|(a, b)| a != b).count();
+        assert!(
+            mask_flips * 1000 <= v_m.len(),
+            "{}: {mask_flips} voxels of V_m differ",
+            p.name
+        );
+        let flips = v_o
+            .iter()
+            .zip(&g_o)
+            .filter(|(a, b)| (*a - *b).abs() > a.abs().max(b.abs()) * 1e-3 + 1e-6)
+            .count();
+        assert!(
+            flips * 1000 <= v_o.len(),
+            "{}: {flips} voxels of V_o differ",
+            p.name
+        );
+        assert!(g_m.contains(&0.0), "{}: something is clipped", p.name);
+    }
+}

@@ -13,7 +13,7 @@ use crate::gpu::{
     Gpu, GpuError, Segmentable, output_buffer, read_buffer, readback_buffer, storage_buffer,
     uniform_group, validated,
 };
-use crate::sample::{VolumeSampler, voxel_centre};
+use crate::sample::{SegmentSampler, VolumeSampler, voxel_centre};
 use crate::texels::VolumeTexels;
 use crate::texels::gpu::GpuVolume;
 use crate::texels::gpu_data::VolumeMap;
@@ -167,9 +167,23 @@ pub fn lao_cpu(
     bricks: &Bricks,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Vec<f32> {
+    let setup = LaoSetup { lut, rays, samples };
+    lao_cpu_reading(texels, setup, None, bricks, progress)
+}
+
+/// [`lao_cpu`] reading `segments` beside the density (the twin of [`LaoGpu::compute`]
+/// on a volume with a segmentation).
+pub fn lao_cpu_reading(
+    texels: &VolumeTexels,
+    setup: LaoSetup<'_>,
+    segments: Option<&SegmentSampler>,
+    bricks: &Bricks,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Vec<f32> {
+    let LaoSetup { lut, rays, samples } = setup;
     let p = params(texels, rays, samples, bricks);
     let norm = texels.norm_values();
-    let volume = VolumeSampler::density(&norm, texels, lut);
+    let volume = VolumeSampler::density(&norm, texels, lut).with_segments(segments);
     let packed = rays.packed();
     let dims = texels.dims;
     let list = bricks.list(|i| bricks.readable[i] != 0);

@@ -4,7 +4,7 @@ use super::super::lao::{Rays, STEP_MM, ray_sum};
 use super::super::sparse::Bricks;
 use super::{CaoMode, msaa_offsets};
 use crate::clip::cpu::ClipMapsCpu;
-use crate::sample::{VolumeSampler, trilinear};
+use crate::sample::{SegmentSampler, VolumeSampler, trilinear};
 use crate::texels::VolumeTexels;
 use crate::tf::Lut;
 use glam::Vec3;
@@ -17,18 +17,40 @@ pub fn clip_volume_cpu(
     maps: &ClipMapsCpu,
     msaa: u32,
 ) -> (Vec<f32>, Vec<f32>) {
+    clip_volume_cpu_reading(texels, lut, maps, msaa, None)
+}
+
+/// [`clip_volume_cpu`] with a segmentation: each voxel's weight on its opacity, and
+/// only the shapes that cut its class clipping it (`cao_clip.wgsl` with `SEGMENTS`).
+pub fn clip_volume_cpu_reading(
+    texels: &VolumeTexels,
+    lut: &Lut,
+    maps: &ClipMapsCpu,
+    msaa: u32,
+    segments: Option<&SegmentSampler>,
+) -> (Vec<f32>, Vec<f32>) {
     let [nx, ny, nz] = texels.dims;
     let norm = texels.norm_values();
-    let volume = VolumeSampler::density(&norm, texels, lut);
+    let volume = VolumeSampler::density(&norm, texels, lut).with_segments(segments);
     let spacing = Vec3::from(texels.spacing);
     let half = Vec3::from(texels.extent()) * 0.5;
     let offsets = msaa_offsets(msaa.max(1));
-    // TF_o: the transfer function's opacity of the voxel itself (`voxel_opacity`).
-    let voxel_opacity = |k: [usize; 3]| volume.opacity(volume.value_of_voxel(k));
+    // TF_o: the transfer function's opacity of the voxel itself, with its weight
+    // (`voxel_opacity`).
+    let voxel_opacity = |k: [usize; 3]| volume.opacity_of_voxel(k);
+    // clip_classify's (visible, affected); visible by the shapes that cut the class.
+    let classify = |pos: Vec3, carve: u32| {
+        let (visible, affected) = maps.classify(pos);
+        match segments {
+            Some(_) => (maps.visible_for(pos, carve), affected),
+            None => (visible, affected),
+        }
+    };
     let per_voxel: Vec<(f32, f32)> = (0..nx * ny * nz)
         .into_par_iter()
         .map(|i| {
             let k = crate::volume::voxel_of(i, texels.dims);
+            let carve = volume.carved_by_voxel(k);
             let v = Vec3::new(k[0] as f32, k[1] as f32, k[2] as f32);
             let at = |o: Vec3| (v + Vec3::splat(0.5) + o) * spacing - half;
             let (mut visible, mut dilated) = (0u32, 0u32);
@@ -40,7 +62,7 @@ pub fn clip_volume_cpu(
                     Vec3::new((c & 1) as f32, ((c >> 1) & 1) as f32, ((c >> 2) & 1) as f32)
                         - Vec3::splat(0.5)
                 };
-                let (vis, aff) = maps.classify(at(o));
+                let (vis, aff) = classify(at(o), carve);
                 visible += u32::from(vis);
                 dilated += u32::from(aff);
             }
@@ -49,7 +71,7 @@ pub fn clip_volume_cpu(
                 o = voxel_opacity(k);
             } else if visible > 0 {
                 for off in offsets.iter().take(msaa as usize) {
-                    let (vis, aff) = maps.classify(at(*off));
+                    let (vis, aff) = classify(at(*off), carve);
                     visible += u32::from(vis);
                     dilated += u32::from(aff);
                 }

@@ -43,7 +43,7 @@ use glam::Vec3;
 use std::time::Instant;
 
 pub use super::settings::DEFAULT_MSAA;
-pub use cpu::{StepVInputs, clip_volume_cpu, lao_on_opacity_cpu};
+pub use cpu::{StepVInputs, clip_volume_cpu, clip_volume_cpu_reading, lao_on_opacity_cpu};
 pub use frame::{CaoFrame, Pose};
 pub use pao::{PaoUpdate, dilate};
 pub use pipelines::CaoPipelines;
