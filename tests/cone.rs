@@ -40,7 +40,7 @@ fn filled(n: usize, f: impl Fn(usize, usize, usize) -> u8) -> Volume {
 
 fn cpu(v: &Volume, cones: ConeSet, preset: ConePreset, reach: f32) -> Vec<f32> {
     let t = texels(v);
-    let pyramid = MipPyramid::new(t.dims, opacity(&t, &step_tf()));
+    let pyramid = MipPyramid::new(t.dims, opacity(&t, &step_tf(), None));
     cone_cpu(&t, &pyramid, cones, preset, reach)
 }
 
@@ -143,7 +143,7 @@ fn gpu_matches_cpu_twin() {
         let v = crop(&full, origin, size);
         let tf = TransferFunction::preset(Preset::CtBone, &v.stats());
         let t = texels(&v);
-        let pyramid = MipPyramid::new(t.dims, opacity(&t, &tf));
+        let pyramid = MipPyramid::new(t.dims, opacity(&t, &tf, None));
         for (cones, preset) in [
             (ConeSet::Six, ConePreset::Low),
             (ConeSet::Fourteen, ConePreset::Medium),

@@ -718,3 +718,59 @@ fn lao_and_cao_step_iv_with_a_segmentation_match_their_cpu_twins() {
         assert!(g_m.contains(&0.0), "{}: something is clipped", p.name);
     }
 }
+
+/// The AO methods that read the volume's opacity read the segmentation's weights: hiding
+/// a segment changes LAO's and cone tracing's ambient factors.
+#[test]
+fn ao_methods_read_the_segment_weights() {
+    use volao::ao::{AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
+    let gpu = std::sync::Arc::new(device());
+    let p = totalsegmentator();
+    let tf = TransferFunction::preset(Preset::CtBone, &p.image.stats());
+    let mut hidden = Styles::default();
+    for k in p.labels.find("vertebrae*") {
+        hidden.set(
+            k,
+            SegmentStyle {
+                visible: false,
+                ..Default::default()
+            },
+        );
+    }
+    for method in [AoMethod::Lao, AoMethod::Cone] {
+        let settings = AoSettings {
+            method,
+            rays: RaySet::Fourteen,
+            samples: SAMPLES,
+            ..Default::default()
+        };
+        let request = AoRequest {
+            tf: &tf,
+            settings: &settings,
+            clip: None,
+            coverage: Coverage::Dense,
+        };
+        let ambient = |styles: &Styles| {
+            let mut vol = RenderVolume::from_texels(&gpu, common::texels(&p.image), &tf, 1.0)
+                .unwrap_or_else(|e| panic!("{e}"));
+            vol.set_segments(&gpu, Some(texels_of(&p, styles, &[])));
+            let computed = AoEngine::on(Some(std::sync::Arc::clone(&gpu)))
+                .compute(AoInput::Uploaded(&vol), &request, &|_, _| {})
+                .unwrap_or_else(|e| panic!("{e}"));
+            match computed.ambient {
+                volao::ao::Ambient::Values(v) => v,
+                other => panic!("{method:?}: {other:?}"),
+            }
+        };
+        let (shown, without_spine) = (ambient(&Styles::default()), ambient(&hidden));
+        let changed = shown
+            .iter()
+            .zip(&without_spine)
+            .filter(|(a, b)| (*a - *b).abs() > 0.01)
+            .count();
+        assert!(
+            changed > 500,
+            "{method:?}: hiding the spine changed {changed} voxels' AO"
+        );
+    }
+}

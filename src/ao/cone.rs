@@ -22,6 +22,7 @@ use crate::gpu::{
 };
 use crate::sample::{VolumeSampler, bake_lut, trilinear};
 use crate::texels::VolumeTexels;
+use crate::texels::segments::SegmentTexels;
 use crate::tf::TransferFunction;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -65,13 +66,23 @@ impl MipPyramid {
     }
 }
 
-/// Opacity per voxel for one voxel of path, from the transfer function: each voxel read
-/// through [`VolumeSampler`] (the pyramid the cones read is built from these).
-pub fn opacity(texels: &VolumeTexels, tf: &TransferFunction) -> Vec<f32> {
+/// Opacity per voxel for one voxel of path, from the transfer function and a
+/// segmentation's weights: each voxel read through [`VolumeSampler`] (the pyramid the
+/// cones read is built from these).
+pub fn opacity(
+    texels: &VolumeTexels,
+    tf: &TransferFunction,
+    segments: Option<&SegmentTexels>,
+) -> Vec<f32> {
     let lut = bake_lut(tf, texels, 1.0);
     let values = texels.norm_values();
     let volume = VolumeSampler::density(&values, texels, &lut);
-    values.par_iter().map(|&v| volume.opacity(v)).collect()
+    let weight = |i: usize| segments.map_or(1.0, |s| s.look[i][3] as f32 / 255.0);
+    values
+        .par_iter()
+        .enumerate()
+        .map(|(i, &v)| volume.opacity(v) * weight(i))
+        .collect()
 }
 
 /// Where the spheres of a cone sit: `(distance of the centre in mm, mip level)`.

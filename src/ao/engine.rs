@@ -212,7 +212,8 @@ impl AoEngine {
                     .compute(g, texels.dims, &inputs, progress)
             }
             AoMethod::Cone => {
-                let pyramid = MipPyramid::new(texels.dims, opacity(texels, tf));
+                let opacity = opacity(texels, tf, vol.segment_texels.as_ref());
+                let pyramid = MipPyramid::new(texels.dims, opacity);
                 g.stage::<ConeGpu>()?.compute(
                     g,
                     texels,
@@ -258,7 +259,7 @@ impl AoEngine {
                 progress,
             ),
             AoMethod::Cone => {
-                let pyramid = MipPyramid::new(texels.dims, opacity(texels, tf));
+                let pyramid = MipPyramid::new(texels.dims, opacity(texels, tf, None));
                 cone_cpu(texels, &pyramid, s.cones, s.cone_preset, cone_reach(s))
             }
             method => match map_of(method) {

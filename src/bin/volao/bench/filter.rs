@@ -264,7 +264,7 @@ fn quality(
     } else {
         ""
     };
-    let alpha = opacity(&et, &etf);
+    let alpha = opacity(&et, &etf, None);
     // Surface voxels: visible (α > 0) with a transparent or missing 6-neighbour. They
     // are the voxels a viewer sees; the interior of opaque parts never shows.
     let [ex, ey, ez] = et.dims;
@@ -357,7 +357,7 @@ fn quality(
     for cones in [ConeSet::Six, ConeSet::Fourteen, ConeSet::TwentySix] {
         for preset in [ConePreset::Low, ConePreset::Medium, ConePreset::High] {
             // Timed from the opacity volume on: pyramid (CPU) + cones (GPU or CPU).
-            let build = || MipPyramid::new(et.dims, opacity(&et, &etf));
+            let build = || MipPyramid::new(et.dims, opacity(&et, &etf, None));
             let pyramid = build();
             let a = cg.compute(gpu, &et, &pyramid, cones, preset, reach)?;
             let g = median_ms(args.runs, || {
