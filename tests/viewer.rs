@@ -1370,3 +1370,51 @@ fn segments_hidden_and_cut_from_the_panels_match_volao_render_and_reopen() {
     assert_eq!(again.clip_shapes[0].cuts, saved.clip_shapes[0].cuts);
     assert!(!h.state().has_unsaved_changes());
 }
+
+/// Hiding a segment under CAO updates `V_PAO` near it (the CAO state is kept, not
+/// recomputed), and the viewport then is `volao render` of the saved scene, which
+/// computes CAO anew with the segment hidden.
+#[test]
+fn hiding_a_segment_under_cao_updates_v_pao_and_matches_volao_render() {
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness(ct_with_segments(), dir.path());
+    settle(&mut h);
+    let hip = {
+        let doc = h
+            .state_mut()
+            .document_mut()
+            .expect("CT and segmentation loaded");
+        doc.ao.method = volao::ao::AoMethod::Cao;
+        doc.ao.rays = volao::ao::rays::RaySet::Six;
+        doc.ao.samples = 8;
+        doc.clip_shapes.push(volao::clip::ClipShape {
+            rotation_deg: [-90.0, 0.0, 0.0],
+            ..volao::clip::ClipShape::new(
+                volao::clip::Shape::Plane,
+                glam::Vec3::new(0.0, 20.0, 0.0),
+                1.0,
+            )
+        });
+        let seg = doc.segmentation.as_ref().expect("the segmentation opened");
+        seg.labels.find("hip_left")[0]
+    };
+    settle(&mut h);
+    {
+        let doc = h.state_mut().document_mut().expect("doc");
+        let seg = doc.segmentation.as_mut().expect("seg");
+        let mut style = seg.styles.get(hip);
+        style.visible = false;
+        seg.styles.set(hip, style);
+    }
+    settle(&mut h);
+    let how = h.state().ao_computed_on().unwrap_or_default().to_owned();
+    assert!(
+        how.contains("V_PAO updated"),
+        "the AO after hiding the hip was an update of V_PAO, not a recomputation: {how}"
+    );
+    h.state_mut().show_outlines = false;
+    h.run_steps(2);
+    let scene = dir.path().join("hidden.json");
+    viewport_is_volao_render(&mut h, &scene, "viewport_hidden_cao_vs_render");
+}

@@ -35,6 +35,9 @@ pub struct AoInput {
     /// The segmentation as the viewport shows it (LAO and CAO read its weights and
     /// carve bits, as in `volao render`).
     pub segments: Option<Arc<SegmentTexels>>,
+    /// CAO made for another look of the segmentation, and the voxels whose opacity
+    /// changed: `V_PAO` is updated near them instead of recomputed.
+    pub update: Option<(Box<crate::ao::cao::CaoGpu>, Vec<bool>)>,
 }
 
 /// A finished AO computation.
@@ -67,7 +70,26 @@ pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, Strin
         clipping,
         coverage,
         segments,
+        update,
     } = input;
+    if let (Some((mut cao, changed)), Some(s), Some(t)) = (update, &segments, &texels) {
+        // The same classes on the same grid: new looks and cuts into CAO's textures,
+        // then V_PAO near what changed.
+        if cao.set_segments(&gpu, s) && changed.len() == t.dims.iter().product::<usize>() {
+            let u = cao
+                .update_pao(&gpu, t, &changed)
+                .map_err(|e| e.to_string())?;
+            return Ok(AoResult {
+                kind: AoData::Cao(cao),
+                device: format!(
+                    "{} (V_PAO updated: {} voxels ray cast again)",
+                    gpu.describe(),
+                    u.recomputed
+                ),
+                seconds: start.elapsed().as_secs_f64(),
+            });
+        }
+    }
     let report = |d: usize, t: usize| progress.set(d as u64, t as u64);
     let engine = AoEngine::on(Some(Arc::clone(&gpu)));
     let mut settings = settings;

@@ -87,6 +87,36 @@ pub(super) struct Derived {
     pub(super) cao_stats: Option<CaoStats>,
     /// The segmentation's classes and looks (`None`: the document has none).
     pub(super) segments: Option<SegmentsBuilt>,
+    /// CAO's state made for the AO key given, kept when only what the AO sees of the
+    /// segmentation moved on: its `V_PAO` is then updated near the segments whose
+    /// opacity changed ([`crate::ao::cao::CaoGpu::update_pao`]) instead of recomputed.
+    pub(super) reusable_cao: Option<(AoKey, Box<crate::ao::cao::CaoGpu>)>,
+}
+
+impl AoKey {
+    /// Whether `self` and `other` differ only in what the AO sees of the segmentation,
+    /// with the same classes.
+    pub(super) fn differs_in_segments_only(&self, other: &AoKey) -> bool {
+        let classes = |k: &AoKey| k.segments.as_ref().map(Vec::len);
+        classes(self).is_some()
+            && classes(self) == classes(other)
+            && AoKey {
+                segments: None,
+                ..self.clone()
+            } == AoKey {
+                segments: None,
+                ..other.clone()
+            }
+    }
+
+    /// Per class of the segmentation: whether `other` sees its opacity other than
+    /// `self` (weight or outline; cuts change no `V_PAO`).
+    pub(super) fn opacity_changes(&self, other: &AoKey) -> Vec<bool> {
+        let (Some(a), Some(b)) = (&self.segments, &other.segments) else {
+            return Vec::new();
+        };
+        a.iter().zip(b).map(|(x, y)| x[..2] != y[..2]).collect()
+    }
 }
 
 impl Default for Derived {
@@ -103,6 +133,7 @@ impl Default for Derived {
             ao_seconds: None,
             cao_stats: None,
             segments: None,
+            reusable_cao: None,
         }
     }
 }

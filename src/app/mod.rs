@@ -317,6 +317,12 @@ impl Viewer {
         self.opened.doc.as_ref()
     }
 
+    /// What the AO on screen was last computed on, and how (the AO panel's
+    /// "AO precomputation" line): its device, or that `V_PAO` was updated.
+    pub fn ao_computed_on(&self) -> Option<&str> {
+        self.derived.ao_seconds.as_ref().map(|(_, d)| d.as_str())
+    }
+
     /// The document, for edits through the API (marks the transfer function as changed).
     pub fn document_mut(&mut self) -> Option<&mut Document> {
         self.derived.tf_changed_at = Instant::now();

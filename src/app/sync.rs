@@ -236,7 +236,25 @@ impl Viewer {
                 .segments
                 .as_ref()
                 .map(|b| Arc::clone(&b.texels)),
+            update: None,
         };
+        // Only the segments' look moved on since the CAO kept: update its V_PAO.
+        let update = match self.derived.reusable_cao.take() {
+            Some((old, cao)) if old.differs_in_segments_only(&key) => {
+                let by_class = old.opacity_changes(&key);
+                input.segments.as_ref().map(|s| {
+                    let changed = s
+                        .classes
+                        .iter()
+                        .map(|&c| by_class.get(c as usize).copied().unwrap_or(true))
+                        .collect();
+                    (cao, changed)
+                })
+            }
+            _ => None,
+        };
+        let mut input = input;
+        input.update = update;
         let job = Job::spawn(label, self.repaint_fn(), move |p| compute_ao(input, p));
         self.derived.ao.start(key, job);
     }
@@ -252,6 +270,7 @@ impl Viewer {
             .ao
             .on_gpu()
             .is_some_and(|k| k.settings.method == AoMethod::VaoLive);
+        let on_gpu = self.derived.ao.on_gpu().cloned();
         let stale_exact = self.derived.ao.reset();
         let stale_preview = self
             .derived
@@ -269,6 +288,15 @@ impl Viewer {
         let gpu = Arc::clone(&self.gpu);
         let tf = self.opened.doc.as_ref().map(|d| d.tf.clone());
         let v = &mut self.viewport.gpu;
+        // CAO for the same settings but another look of the segmentation is kept, to
+        // update rather than recompute (update_ao); anything else goes.
+        let reusable = match (on_gpu, want) {
+            (Some(old), Some(new)) if old.differs_in_segments_only(new) => {
+                v.cao.take().map(|c| (old, Box::new(c)))
+            }
+            _ => None,
+        };
+        self.derived.reusable_cao = reusable;
         v.set_cao(None);
         if let Some(g) = &mut v.volume {
             if !keep {

@@ -261,8 +261,8 @@ impl SegmentTexels {
 /// A segmentation on the GPU: the look and class textures and the class table
 /// (`volume.wgsl` bindings 4–6). Every volume has one: without a segmentation, one
 /// voxel of class 0 with [`ClassLook::PLAIN`]'s look, which pipelines without `SEGMENTS`
-/// bind and never read.
-#[derive(Debug)]
+/// bind and never read. A clone shares the textures (what a stage's bind groups hold).
+#[derive(Debug, Clone)]
 pub struct GpuSegments {
     look: wgpu::Texture,
     pub look_view: wgpu::TextureView,

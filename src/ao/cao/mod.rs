@@ -249,6 +249,9 @@ pub struct CaoGpu {
     lao_params: LaoParams,
     /// Whether step IV reads the volume's segmentation (segment-aware carving).
     segments: bool,
+    /// The segmentation's textures step IV reads (shared with the volume it was made
+    /// from): [`Self::set_segments`] writes new looks and cuts into them.
+    segment_textures: Option<crate::texels::segments::GpuSegments>,
     dims: [u32; 3],
     rays: usize,
     samples: u32,
@@ -454,6 +457,7 @@ impl CaoGpu {
             CaoGpu {
                 pipelines,
                 segments,
+                segment_textures: segments.then(|| vol.segments.clone()),
                 clip,
                 v_o,
                 v_pao,

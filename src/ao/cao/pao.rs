@@ -9,6 +9,7 @@ use crate::ao::sparse::BRICK;
 use crate::clip::gpu::MapRequest;
 use crate::gpu::{Gpu, GpuError, read_texture_f32, validated};
 use crate::texels::VolumeTexels;
+use crate::texels::segments::SegmentTexels;
 use std::time::Instant;
 
 /// Step IV's mark of a voxel step V ray casts (`RECOMPUTE` in the shaders).
@@ -154,6 +155,22 @@ impl CaoGpu {
         crate::gpu::wait(device, "Cao::update_pao", crate::gpu::WAIT)?;
         update.seconds = start.elapsed().as_secs_f64();
         Ok(update)
+    }
+
+    /// Writes the looks and cuts of `segments` (the classes this CAO was made with) into
+    /// the textures step IV reads; whether it reads a segmentation at all.
+    pub fn set_segments(&mut self, gpu: &Gpu, segments: &SegmentTexels) -> bool {
+        let dims = self.dims.map(|d| d as usize);
+        match &mut self.segment_textures {
+            // The same classes: the same table size, so the bind groups' buffers stay.
+            Some(t)
+                if segments.dims == dims && t.table.size() == 16 * segments.table.len() as u64 =>
+            {
+                t.update(gpu, segments);
+                true
+            }
+            _ => false,
+        }
     }
 
     /// Writes `values` (x fastest) into `V_AO` at `origin`, in its format.
