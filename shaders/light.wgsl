@@ -43,7 +43,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) || t < T_STOP {
             break;
         }
-        if clip.counts.x == 0u || clip_visible((uvw - vec3<f32>(0.5)) * 2.0 * p.half.xyz) {
+        // Clipped space lets light through: the shapes that cut the sample's segment.
+        let pos = (uvw - vec3<f32>(0.5)) * 2.0 * p.half.xyz;
+        var open = clip.counts.x == 0u;
+        if !open && SEGMENTS {
+            open = clip_visible_for(pos, carved_by_at(uvw));
+        } else if !open {
+            open = clip_visible(pos);
+        }
+        if open {
             t = t * (1.0 - opacity_at(uvw));
         }
     }

@@ -774,3 +774,73 @@ fn ao_methods_read_the_segment_weights() {
         );
     }
 }
+
+/// The light volume with a segmentation (GPU) against its CPU twin: the weights dim it
+/// and a shape lets light through only where it cuts the segments.
+#[test]
+fn the_light_volume_with_a_segmentation_matches_its_cpu_twin() {
+    use volao::clip::gpu::{ClipMaps, MapRequest};
+    use volao::render::shadow::{LightGpu, Lit, light_cpu_reading, light_direction, light_lut};
+    let gpu = device();
+    let p = totalsegmentator();
+    let tf = TransferFunction::preset(Preset::CtSoftTissue, &p.image.stats());
+    let keep = skeleton_and_vessels(&p);
+    let shapes = [sphere(Vec3::new(0.0, 25.0, 0.0), 30.0, Cuts::Except(keep))];
+    let mut styles = Styles::default();
+    let biggest = p
+        .labels
+        .segments
+        .iter()
+        .max_by_key(|s| s.voxels)
+        .expect("a segment");
+    styles.set(
+        biggest.key,
+        SegmentStyle {
+            opacity: 0.2,
+            ..Default::default()
+        },
+    );
+    let segments = texels_of(&p, &styles, &shapes);
+    let t = common::texels(&p.image);
+    let dir = light_direction([0.2, 0.9, 0.3]).expect("a direction");
+    let mut maps = ClipMaps::new(&gpu).unwrap_or_else(|e| panic!("{e}"));
+    let radius = Vec3::from(t.extent()).length() * 0.5;
+    maps.update(&gpu, MapRequest::clipping(&shapes, radius, MAP))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let lut = light_lut(&tf, &t);
+    let g = gpu
+        .stage::<LightGpu>()
+        .unwrap_or_else(|e| panic!("{e}"))
+        .compute(
+            &gpu,
+            Lit {
+                texels: &t,
+                segments: Some(&segments),
+                lut: &lut,
+            },
+            dir,
+            Some(&maps),
+            &|_, _| {},
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    let cpu_maps = maps.read_back(&gpu).unwrap_or_else(|e| panic!("{e}"));
+    let sampler = SegmentSampler::new(&segments);
+    let c = light_cpu_reading(&t, &lut, Some(&sampler), dir, Some(&cpu_maps), &|_, _| {});
+    let worst = g
+        .iter()
+        .zip(&c)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f32::max);
+    eprintln!("light with a segmentation: max |GPU − CPU| = {worst:.2e}");
+    assert!(worst < 2e-3, "GPU vs CPU: {worst}");
+    let plain = light_cpu_reading(&t, &lut, None, dir, Some(&cpu_maps), &|_, _| {});
+    let changed = plain
+        .iter()
+        .zip(&c)
+        .filter(|(a, b)| (*a - *b).abs() > 0.01)
+        .count();
+    assert!(
+        changed > 100,
+        "the segmentation changed {changed} voxels' light"
+    );
+}

@@ -4,7 +4,7 @@
 
 use super::cpu;
 use super::gpu::{RayCaster, RenderVolume};
-use super::shadow::{LightGpu, LightVolume, Lit, light_cpu, light_direction, light_lut};
+use super::shadow::{LightGpu, LightVolume, Lit, light_cpu_reading, light_direction, light_lut};
 use super::{Frame, Image, RenderSettings};
 use crate::ao::cao::CaoStats;
 use crate::ao::vao::PositionalAo;
@@ -271,10 +271,9 @@ fn render_cpu(
     let mut notes = Vec::new();
     if let Some(s) = job.segments {
         cv.segments = Some(crate::sample::SegmentSampler::new(s));
-        if ao.method != AoMethod::None || frame.settings.shadows {
+        if ao.method != AoMethod::None {
             notes.push(
-                "the CPU twin computes AO and shadows without the segmentation (the GPU's read it)"
-                    .to_owned(),
+                "the CPU twin computes AO without the segmentation (the GPU's reads it)".to_owned(),
             );
         }
     }
@@ -306,7 +305,9 @@ fn render_cpu(
     let light_start = std::time::Instant::now();
     if frame.settings.shadows {
         let dir = light_dir(frame)?;
-        let t = light_cpu(&texels, &light_lut(tf, &texels), dir, None, progress);
+        let lut = light_lut(tf, &texels);
+        let segments = cv.segments.as_ref();
+        let t = light_cpu_reading(&texels, &lut, segments, dir, None, progress);
         cv.light = Some(LightVolume::new(&t, texels.dims, dir));
     }
     let light_seconds = light_start.elapsed().as_secs_f64();

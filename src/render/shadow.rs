@@ -13,7 +13,9 @@
 use crate::gpu::dispatch::{Grid, Pass, SlabDispatch, SlabOrigin, budget, slab_fields};
 use crate::gpu::{Gpu, GpuError, output_buffer, readback_buffer, uniform_group, validated};
 use crate::sample::bake_lut;
-use crate::sample::{VolumeSampler, f16_volume_map, per_voxel, trilinear, voxel_centre};
+use crate::sample::{
+    SegmentSampler, VolumeSampler, f16_volume_map, per_voxel, trilinear, voxel_centre,
+};
 use crate::texels::VolumeTexels;
 use crate::texels::reader::{self, Reading, SegmentBindings, VOLUME_GROUP};
 use crate::texels::segments::{GpuSegments, SegmentTexels};
@@ -112,11 +114,13 @@ fn light_voxel(
         if uvw.cmplt(Vec3::ZERO).any() || uvw.cmpgt(Vec3::ONE).any() || t < T_STOP {
             break;
         }
+        let pos = (uvw - Vec3::splat(0.5)) * 2.0 * Vec3::from(p.half);
         if let Some(c) = clip
             && c.uniforms.counts[0] > 0
-            && !c
-                .classify((uvw - Vec3::splat(0.5)) * 2.0 * Vec3::from(p.half))
-                .0
+            && !match volume.segments {
+                Some(_) => c.visible_for(pos, volume.carved_by_at(uvw)),
+                None => c.classify(pos).0,
+            }
         {
             continue;
         }
@@ -134,6 +138,19 @@ pub fn light_cpu(
     clip: Option<&crate::clip::cpu::ClipMapsCpu>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Vec<f32> {
+    light_cpu_reading(texels, lut, None, direction, clip, progress)
+}
+
+/// [`light_cpu`] reading `segments` beside the density (their weights, and the shapes
+/// that cut each sample's segment), as [`LightGpu::compute`] with a segmentation.
+pub fn light_cpu_reading(
+    texels: &VolumeTexels,
+    lut: &Lut,
+    segments: Option<&SegmentSampler>,
+    direction: Vec3,
+    clip: Option<&crate::clip::cpu::ClipMapsCpu>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Vec<f32> {
     let p = params(texels, direction);
     let norm = crate::sample::f16_texels(texels);
     let volume = VolumeSampler {
@@ -141,8 +158,7 @@ pub fn light_cpu(
         dims: texels.dims,
         map: f16_volume_map(texels, lut),
         table: &lut.rgba,
-        // The twin lights without a segmentation (the GPU's light reads one).
-        segments: None,
+        segments,
     };
     per_voxel(texels.dims, progress, |v| light_voxel(&p, &volume, v, clip))
 }
@@ -211,8 +227,8 @@ impl LightGpu {
                 Some(s) => GpuSegments::new(gpu, s),
                 None => GpuSegments::none(gpu),
             };
-            let look = SegmentBindings::Look(&segments);
-            let reading = Reading::sampled(&volume, &stage.sampler, map, &table, look);
+            let cuts = SegmentBindings::Cuts(&segments);
+            let reading = Reading::sampled(&volume, &stage.sampler, map, &table, cuts);
             let volume_group = reading.group_of(gpu, "Light", &stage.pipeline);
             let out = output_buffer(device, "Light::transmittance", size);
             let readback = readback_buffer(device, "Light::readback", size);

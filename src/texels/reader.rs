@@ -57,13 +57,14 @@ pub struct Reading<'a> {
 }
 
 /// Which of a segmentation's bindings a stage's shader uses (`volume.wgsl`): none (it
-/// reads no opacity), the look (4: `opacity_at`, `opacity_of_voxel`) or all (4–7:
-/// `classify_at`, `carved_by_*`, `segment_gradient_at`). Every pipeline binds them, with or without
+/// reads no opacity), the look (4: `opacity_at`, `opacity_of_voxel`), the look and the
+/// cuts (4–6: `carved_by_*`) or all (4–7: `classify_at`, `segment_gradient_at`). Every pipeline binds them, with or without
 /// `SEGMENTS`: without a segmentation they are [`GpuSegments::none`]'s.
 #[derive(Debug, Clone, Copy)]
 pub enum SegmentBindings<'a> {
     None,
     Look(&'a GpuSegments),
+    Cuts(&'a GpuSegments),
     All(&'a GpuSegments),
 }
 
@@ -109,11 +110,13 @@ impl<'a> Reading<'a> {
             SegmentBindings::Look(s) => {
                 entries.push((4, wgpu::BindingResource::TextureView(&s.look_view)));
             }
-            SegmentBindings::All(s) => {
+            SegmentBindings::Cuts(s) | SegmentBindings::All(s) => {
                 entries.push((4, wgpu::BindingResource::TextureView(&s.look_view)));
                 entries.push((5, wgpu::BindingResource::TextureView(&s.classes_view)));
                 entries.push((6, s.table.as_entire_binding()));
-                entries.push((7, wgpu::BindingResource::TextureView(&s.gradient_view)));
+                if let SegmentBindings::All(_) = self.segments {
+                    entries.push((7, wgpu::BindingResource::TextureView(&s.gradient_view)));
+                }
             }
         }
         let entries: Vec<_> = entries
