@@ -28,6 +28,16 @@ fn source_value(norm: f32) -> f32 {
     return opacity(norm);
 }
 
+// The source value of voxel `k`: with a segmentation, its opacity × the voxel's weight
+// (`Source::decode` with weights).
+fn source_of_voxel(k: vec3<i32>) -> f32 {
+    let v = source_value(value_of_voxel(k));
+    if p.source.w == 0.0 {
+        return v;
+    }
+    return v * segment_weight_of_voxel(k);
+}
+
 // Voxels of the cropped window [i - r, i + r] ∩ [0, n).
 fn window_count(i: u32, r: u32, n: u32) -> u32 {
     return min(i + r, n - 1u) - (i - min(i, r)) + 1u;
@@ -89,6 +99,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         * window_count(gid.z, p.radius.z, dims.z));
     let s = textureLoad(stats, gid, 0);
     let m = vec4<f32>(s.x, s.y, s.z / n, s.w / n);
-    let v_x = source_value(value_of_voxel(vec3<i32>(gid)));
+    let v_x = source_of_voxel(vec3<i32>(gid));
     textureStore(out_map, gid, vec4<f32>(ambient(p.dims.w, v_x, m), 0.0, 0.0, 1.0));
 }

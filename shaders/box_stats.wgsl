@@ -30,6 +30,16 @@ fn source_value(norm: f32) -> f32 {
     return opacity(norm);
 }
 
+// The source value of voxel `k`: with a segmentation, its opacity × the voxel's weight
+// (`Source::decode` with weights).
+fn source_of_voxel(k: vec3<i32>) -> f32 {
+    let v = source_value(value_of_voxel(k));
+    if p.source.w == 0.0 {
+        return v;
+    }
+    return v * segment_weight_of_voxel(k);
+}
+
 fn combine(a: vec4<f32>, b: vec4<f32>) -> vec4<f32> {
     return vec4<f32>(min(a.x, b.x), max(a.y, b.y), a.z + b.z, a.w + b.w);
 }
@@ -42,7 +52,7 @@ fn at(line: vec3<u32>, k: u32) -> vec3<u32> {
 
 fn fetch(pos: vec3<u32>) -> vec4<f32> {
     if p.run.w == 1u {
-        let v = source_value(value_of_voxel(vec3<i32>(pos)));
+        let v = source_of_voxel(vec3<i32>(pos));
         return vec4<f32>(v, v, v, v * v);
     }
     return textureLoad(stats_in, pos, 0);

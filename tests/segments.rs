@@ -844,3 +844,61 @@ fn the_light_volume_with_a_segmentation_matches_its_cpu_twin() {
         "the segmentation changed {changed} voxels' light"
     );
 }
+
+/// The filter AO methods with the opacity statistic read the segmentation's weights:
+/// GPU against its CPU twin as close as without one (`tests/filter.rs`), and hiding
+/// the spine changes the maps.
+#[test]
+fn filter_ao_of_opacity_reads_the_segment_weights_on_gpu_and_cpu_alike() {
+    use volao::ao::StatisticSource;
+    use volao::ao::filter::{AmbientMap, FilterGpu, Source, compute_cpu};
+    let gpu = device();
+    let filter = gpu.stage::<FilterGpu>().unwrap_or_else(|e| panic!("{e}"));
+    let p = totalsegmentator();
+    let tf = TransferFunction::preset(Preset::CtBone, &p.image.stats());
+    let mut hidden = Styles::default();
+    for k in p.labels.find("vertebrae*") {
+        hidden.set(
+            k,
+            SegmentStyle {
+                visible: false,
+                ..Default::default()
+            },
+        );
+    }
+    let t = common::texels(&p.image);
+    let maps = [AmbientMap::Cdf, AmbientMap::Gauss, AmbientMap::Penner];
+    let r = [5u32; 3];
+    let mut results = Vec::new();
+    for styles in [&Styles::default(), &hidden] {
+        let segments = texels_of(&p, styles, &[]);
+        let mut vol =
+            RenderVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+        vol.set_segments(&gpu, Some(segments.clone()));
+        let source = Source::new(&t, &tf, StatisticSource::Opacity);
+        let g = filter
+            .compute(&gpu, &vol, &source, r, &maps)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let c = compute_cpu(&t, &source.with_segments(Some(&segments)), r, &maps);
+        for ((map, gm), cm) in maps.iter().zip(&g).zip(&c) {
+            let max = gm
+                .iter()
+                .zip(cm)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            assert!(max <= 1e-3, "{map:?}: max |GPU − CPU| = {max}");
+        }
+        results.push(g);
+    }
+    for (i, map) in maps.iter().enumerate() {
+        let changed = results[0][i]
+            .iter()
+            .zip(&results[1][i])
+            .filter(|(a, b)| (*a - *b).abs() > 0.01)
+            .count();
+        assert!(
+            changed > 200,
+            "{map:?}: hiding the spine changed {changed} voxels"
+        );
+    }
+}

@@ -26,14 +26,15 @@
 
 use crate::gpu::dispatch::{Grid, SlabDispatch, fold_linear};
 use crate::gpu::{
-    Gpu, GpuError, compute_pipeline, copy_texture_out, read_buffer, shaders, storage_buffer,
-    submit_compute_with, texture_3d, texture_readback, uniform_group, unpad, validated,
+    Gpu, GpuError, copy_texture_out, read_buffer, storage_buffer, submit_compute_with, texture_3d,
+    texture_readback, uniform_group, unpad, validated,
 };
 use crate::sample::bake_lut;
 use crate::texels::VolumeTexels;
 use crate::texels::gpu::GpuVolume;
 use crate::texels::gpu_data::VolumeMap;
 use crate::texels::reader::{Reading, SegmentBindings, VOLUME_GROUP};
+use crate::texels::segments::SegmentTexels;
 use crate::tf::{Lut, TransferFunction};
 use rayon::prelude::*;
 
@@ -98,6 +99,9 @@ pub fn radius_voxels(radius: f32, in_mm: bool, spacing: [f32; 3]) -> [u32; 3] {
 pub struct Source {
     pub params: [f32; 4],
     pub alpha: Vec<f32>,
+    /// A segmentation's weight per voxel, on the opacity (the GPU reads the volume's
+    /// own: `source_of_voxel`); `None`: 1.
+    pub weights: Option<std::sync::Arc<Vec<f32>>>,
 }
 
 impl Source {
@@ -113,6 +117,7 @@ impl Source {
                 Source {
                     params: [a, b, 0.0, 0.0],
                     alpha: vec![0.0],
+                    weights: None,
                 }
             }
             StatisticSource::Opacity => {
@@ -129,7 +134,16 @@ impl Source {
         Source {
             params: [a, b, (lut.rgba.len().max(2) - 1) as f32, 1.0],
             alpha: lut.rgba.iter().map(|e| e[3]).collect(),
+            weights: None,
         }
+    }
+
+    /// The same with `segments`' weights on the opacity (the CPU twin of the shaders'
+    /// `source_of_voxel` on a volume with a segmentation).
+    pub fn with_segments(self, segments: Option<&SegmentTexels>) -> Self {
+        let weights = segments
+            .map(|s| std::sync::Arc::new(s.look.iter().map(|l| l[3] as f32 / 255.0).collect()));
+        Source { weights, ..self }
     }
 
     /// How the shaders read the source (`volume.wgsl`): the value map and the opacity
@@ -154,7 +168,7 @@ impl Source {
             texels: vol.volume_view(),
             sampler: None,
             lut: Some((self.map(), table)),
-            segments: SegmentBindings::None,
+            segments: SegmentBindings::Look(&vol.segments),
         }
     }
 
@@ -186,8 +200,19 @@ impl Source {
     /// format (the same numbers as `VolumeTexels::norm_at`).
     #[inline(always)]
     pub fn decode(&self, texels: &VolumeTexels, start: usize, out: &mut [f32]) {
-        use crate::texels::TexelFormat;
         let bytes = &texels.bytes[start * texels.format.bytes()..];
+        self.decode_texels(texels, bytes, out);
+        if let (Some(w), true) = (&self.weights, self.params[3] != 0.0) {
+            for (o, w) in out.iter_mut().zip(&w[start..]) {
+                *o *= w;
+            }
+        }
+    }
+
+    /// The texels of `bytes` decoded per format.
+    #[inline(always)]
+    fn decode_texels(&self, texels: &VolumeTexels, bytes: &[u8], out: &mut [f32]) {
+        use crate::texels::TexelFormat;
         match texels.format {
             TexelFormat::R8Unorm => self.decode_as(bytes, out, |[b]| b as f32 / 255.0),
             TexelFormat::R16Unorm => {
@@ -503,8 +528,8 @@ const _: () = assert!(std::mem::size_of::<MapParams>() == 48);
 /// Long-lived state of the filter stage: both pipelines, built once per device.
 #[derive(Debug)]
 pub struct FilterGpu {
-    box_pipeline: wgpu::ComputePipeline,
-    map_pipeline: wgpu::ComputePipeline,
+    box_stage: crate::gpu::Segmentable,
+    map_stage: crate::gpu::Segmentable,
 }
 
 fn stats_texture(device: &wgpu::Device, label: &str, dims: [u32; 3]) -> wgpu::Texture {
@@ -526,12 +551,10 @@ struct GpuStats {
 
 impl crate::gpu::Stage for FilterGpu {
     fn create(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let [box_module, map_module] =
-            shaders::modules(device, ["box_stats.wgsl", "ambient_maps.wgsl"])?;
-        let pipeline = |label, module| compute_pipeline(device, label, module, "main", None);
-        validated(device, "Filter::new", || FilterGpu {
-            box_pipeline: pipeline("Filter::box_stats", &box_module),
-            map_pipeline: pipeline("Filter::ambient_maps", &map_module),
+        use crate::gpu::Segmentable;
+        Ok(FilterGpu {
+            box_stage: Segmentable::new(device, "Filter::box_stats", "box_stats.wgsl", &[])?,
+            map_stage: Segmentable::new(device, "Filter::ambient_maps", "ambient_maps.wgsl", &[])?,
         })
     }
 }
@@ -547,6 +570,7 @@ impl FilterGpu {
         radius: [u32; 3],
     ) -> Result<GpuStats, GpuError> {
         let device = &gpu.device;
+        let box_pipeline = &self.box_stage.get(device, vol.segments.on)?.pipeline;
         let dims = vol.texels.dims.map(|d| d as u32);
         let [nx, ny, nz] = dims;
         let (tex_a, tex_b, lut) = validated(device, "Filter::buffers", || {
@@ -594,22 +618,21 @@ impl FilterGpu {
                 let (_uniforms, group) = uniform_group(
                     gpu,
                     "Filter::box",
-                    &self.box_pipeline,
+                    box_pipeline,
                     &p,
                     &[
                         wgpu::BindingResource::TextureView(input),
                         wgpu::BindingResource::TextureView(output),
                     ],
                 );
-                let volume =
-                    source
-                        .reading(vol, &lut)
-                        .group_of(gpu, "Filter::box", &self.box_pipeline);
+                let volume = source
+                    .reading(vol, &lut)
+                    .group_of(gpu, "Filter::box", box_pipeline);
                 submit_compute_with(
                     device,
                     &gpu.queue,
                     "Filter::box_stats",
-                    &self.box_pipeline,
+                    box_pipeline,
                     &[(0, &group), (VOLUME_GROUP, &volume)],
                     groups,
                     |_| {},
@@ -633,6 +656,7 @@ impl FilterGpu {
         let dims = vol.texels.dims.map(|d| d as u32);
         let [nx, ny, nz] = dims;
         let st = self.stats(gpu, vol, source, radius)?;
+        let map_pipeline = &self.map_stage.get(device, vol.segments.on)?.pipeline;
         let stats_view = st.stats.create_view(&Default::default());
         let (out, readback, row) = validated(device, "Filter::map_buffers", || {
             let out = crate::gpu::output_volume(device, "Filter::map", dims);
@@ -656,7 +680,7 @@ impl FilterGpu {
                 let (_uniforms, group) = uniform_group(
                     gpu,
                     "Filter::map",
-                    &self.map_pipeline,
+                    map_pipeline,
                     &p,
                     &[
                         wgpu::BindingResource::TextureView(&stats_view),
@@ -664,12 +688,12 @@ impl FilterGpu {
                     ],
                 );
                 let volume = source.reading(vol, &st.lut);
-                let volume = volume.group_of(gpu, "Filter::map", &self.map_pipeline);
+                let volume = volume.group_of(gpu, "Filter::map", map_pipeline);
                 submit_compute_with(
                     device,
                     &gpu.queue,
                     "Filter::ambient_map",
-                    &self.map_pipeline,
+                    map_pipeline,
                     &[(0, &group), (VOLUME_GROUP, &volume)],
                     whole_volume,
                     |encoder| copy_texture_out(encoder, &out, &readback, row, dims),
