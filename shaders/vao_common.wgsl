@@ -28,6 +28,18 @@ struct VaoParams {
 @group(2) @binding(2) var vao_sampler: sampler;
 @group(2) @binding(3) var<storage, read> vao_alpha: array<f32>;
 @group(2) @binding(4) var<storage, read> vao_rays: array<vec4<f32>>;  // xyz direction, w jitter
+// A segmentation's weights on the opacity as f16 (ao::vao::VaoInputs::with_segments;
+// float, so that Eq. 4's comparisons filter as in the twin), read where a pipeline sets
+// SEGMENTS (volume.wgsl).
+@group(2) @binding(9) var vao_segment_weight: texture_3d<f32>;
+
+// The segmentation's weight at `uvw` (1 without one).
+fn vao_weight(uvw: vec3<f32>) -> f32 {
+    if SEGMENTS {
+        return textureSampleLevel(vao_segment_weight, vao_sampler, uvw, 0.0).r;
+    }
+    return 1.0;
+}
 
 fn vao_inside(uvw: vec3<f32>) -> bool {
     return all(uvw >= vec3<f32>(0.0)) && all(uvw <= vec3<f32>(1.0));
@@ -78,7 +90,7 @@ fn vao_obscurance(x: vec3<f32>, ray: vec4<f32>) -> f32 {
     }
     var prev = 0.0;
     if vao_inside(x) && !vao_clipped(x) {
-        prev = vao_opacity(vao_value(x));
+        prev = vao_opacity(vao_value(x)) * vao_weight(x);
     }
     var product = 1.0;
     for (var i = 0u; i < n; i = i + 1u) {
@@ -89,7 +101,7 @@ fn vao_obscurance(x: vec3<f32>, ray: vec4<f32>) -> f32 {
         }
         var v = 0.0;
         if !vao_clipped(uvw) {
-            v = vao_opacity(vao_value(uvw));
+            v = vao_opacity(vao_value(uvw)) * vao_weight(uvw);
         }
         let accepted = v >= prev;
         prev = v;

@@ -902,3 +902,93 @@ fn filter_ao_of_opacity_reads_the_segment_weights_on_gpu_and_cpu_alike() {
         );
     }
 }
+
+/// Positional AO reads the segmentation's weights: the precomputed volume (GPU) against
+/// its CPU twin, and hiding the spine changes it; the live mode in the ray caster
+/// against the ray caster's twin.
+#[test]
+fn positional_ao_reads_the_segment_weights_on_gpu_and_cpu_alike() {
+    use volao::ao::vao::{PositionalAo, VaoGpu, VaoInputs, VaoSettings, vao_cpu};
+    let gpu = device();
+    let p = totalsegmentator();
+    let tf = TransferFunction::preset(Preset::CtBone, &p.image.stats());
+    let s = VaoSettings {
+        directions: 8,
+        samples: 6,
+        r_max_mm: 12.0,
+        ..Default::default()
+    };
+    let mut hidden = Styles::default();
+    for k in p.labels.find("vertebrae*") {
+        hidden.set(
+            k,
+            SegmentStyle {
+                visible: false,
+                ..Default::default()
+            },
+        );
+    }
+    let t = common::texels(&p.image);
+    let mut results = Vec::new();
+    for styles in [&Styles::default(), &hidden] {
+        let segments = texels_of(&p, styles, &[]);
+        let mut vol =
+            RenderVolume::from_texels(&gpu, t.clone(), &tf, 0.5).unwrap_or_else(|e| panic!("{e}"));
+        vol.set_segments(&gpu, Some(segments.clone()));
+        let inputs = VaoInputs::new(&gpu, &t, &tf, &s)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .with_segments(&gpu, Some(&segments));
+        let g = gpu
+            .stage::<VaoGpu>()
+            .unwrap_or_else(|e| panic!("{e}"))
+            .compute(&gpu, t.dims, &inputs, &|_, _| {})
+            .unwrap_or_else(|e| panic!("{e}"));
+        let twin = PositionalAo::new(&t, &tf, &s).with_segments(Some(&segments));
+        let c = vao_cpu(&twin, t.dims, &|_, _| {});
+        let max = g
+            .iter()
+            .zip(&c)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        eprintln!("positional AO with a segmentation: max |GPU − CPU| = {max:.2e}");
+        // As without one (tests/vao.rs): the weights are read as f16, filtered in float.
+        assert!(max <= 1e-4, "max |GPU − CPU| = {max}");
+        // Live: the ray caster evaluates it per sample, GPU and twin.
+        vol.set_live_vao(&gpu, &tf, Some(&s))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let f = frame(
+            RenderSettings {
+                jitter: false,
+                ..Default::default()
+            },
+            64,
+        );
+        let image = RayCaster::new(&gpu.device)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .render(&gpu, &vol, &f, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let lut = volao::sample::bake_lut(&tf, &t, f.settings.step_voxels);
+        let (mut cv, occ) = cpu::prepare(&t, &lut);
+        cv.segments = Some(SegmentSampler::new(&segments));
+        cv.live_vao = Some(twin);
+        let twin_image = cpu::render(&t, &cv, &lut, &occ, &f);
+        common::twin(
+            "segments_live_vao",
+            &image,
+            &twin_image,
+            common::TWIN,
+            &out_dir(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        results.push(g);
+    }
+    let changed = results[0]
+        .iter()
+        .zip(&results[1])
+        .filter(|(a, b)| (*a - *b).abs() > 0.01)
+        .count();
+    assert!(
+        changed > 200,
+        "hiding the spine changed {changed} voxels' positional AO"
+    );
+}

@@ -207,7 +207,8 @@ impl AoEngine {
                 )
             }
             AoMethod::Vao => {
-                let inputs = VaoInputs::new(g, texels, tf, &s.vao)?;
+                let inputs = VaoInputs::new(g, texels, tf, &s.vao)?
+                    .with_segments(g, vol.segment_texels.as_ref());
                 g.stage::<VaoGpu>()?
                     .compute(g, texels.dims, &inputs, progress)
             }

@@ -27,6 +27,7 @@ use crate::sample::{
 };
 use crate::texels::VolumeTexels;
 use crate::texels::gpu_data::VolumeMap;
+use crate::texels::segments::SegmentTexels;
 use crate::tf::{Lut, TransferFunction};
 use glam::Vec3;
 
@@ -137,6 +138,9 @@ pub struct PositionalAo {
     table: Vec<[f32; 4]>,
     /// Clip shapes' maps: clipped space is empty (twin of `vao_clipped`).
     pub clip: Option<crate::clip::cpu::ClipMapsCpu>,
+    /// A segmentation's weights on the opacity, as the f16 texture holds them, and
+    /// their dims (twin of `vao_weight`).
+    weights: Option<(Vec<f32>, [usize; 3])>,
 }
 
 impl PositionalAo {
@@ -158,7 +162,29 @@ impl PositionalAo {
             map: params.map,
             table: lut.rgba,
             clip: None,
+            weights: None,
         }
+    }
+
+    /// The same reading `segments`' weights on the opacity.
+    pub fn with_segments(self, segments: Option<&SegmentTexels>) -> Self {
+        let weights = segments.map(|s| {
+            let bits = f16_weights(s);
+            (
+                bits.iter()
+                    .map(|&b| half::f16::from_bits(b).to_f32())
+                    .collect(),
+                s.dims,
+            )
+        });
+        PositionalAo { weights, ..self }
+    }
+
+    /// `vao_weight`: the segmentation's weight at `uvw` (1 without one).
+    fn weight(&self, uvw: Vec3) -> f32 {
+        self.weights
+            .as_ref()
+            .map_or(1.0, |(w, dims)| crate::sample::trilinear(w, *dims, uvw))
     }
 
     /// The level read through the opacity table, as [`VolumeSampler`] reads a volume.
@@ -223,7 +249,7 @@ impl PositionalAo {
             return 0.0;
         }
         let mut prev = if inside(x) && !self.clipped(x) {
-            self.opacity(self.value(x))
+            self.opacity(self.value(x)) * self.weight(x)
         } else {
             0.0
         };
@@ -236,7 +262,7 @@ impl PositionalAo {
             let v = if self.clipped(uvw) {
                 0.0
             } else {
-                self.opacity(self.value(uvw))
+                self.opacity(self.value(uvw)) * self.weight(uvw)
             };
             let accepted = v >= prev;
             prev = v;
@@ -272,6 +298,27 @@ pub fn vao_cpu(
     })
 }
 
+/// A segmentation's weights (the look's alpha) as f16 bits, x fastest.
+fn f16_weights(s: &SegmentTexels) -> Vec<u16> {
+    s.look
+        .iter()
+        .map(|l| half::f16::from_f32(l[3] as f32 / 255.0).to_bits())
+        .collect()
+}
+
+/// An R16Float volume of `dims` holding `bits`.
+fn weight_texture(gpu: &Gpu, dims: [u32; 3], bits: &[u16]) -> wgpu::TextureView {
+    crate::gpu::filled_texture_3d(
+        &gpu.device,
+        &gpu.queue,
+        "Vao::segment_weight",
+        dims,
+        wgpu::TextureFormat::R16Float,
+        bytemuck::cast_slice(bits),
+    )
+    .create_view(&Default::default())
+}
+
 /// Layout entries of bind group 1 (`vao_common.wgsl`), bindings 0–4, for compute.
 pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     use crate::gpu::entry;
@@ -295,6 +342,10 @@ pub struct VaoInputs {
     alpha: wgpu::Buffer,
     rays: wgpu::Buffer,
     sampler: wgpu::Sampler,
+    /// A segmentation's weights as f16 (binding 9), and whether one is read
+    /// ([`Self::with_segments`]); a texel of 1 otherwise.
+    segment_weight: wgpu::TextureView,
+    segments: bool,
 }
 
 impl VaoInputs {
@@ -340,8 +391,28 @@ impl VaoInputs {
                 alpha: storage("Vao::alpha", bytemuck::cast_slice(&alpha)),
                 rays: storage("Vao::rays", bytemuck::cast_slice(&rays)),
                 sampler: crate::gpu::linear_sampler(device, "Vao::linear_clamp"),
+                segment_weight: weight_texture(gpu, [1, 1, 1], &[half::f16::ONE.to_bits()]),
+                segments: false,
             }
         })
+    }
+
+    /// The same reading `segments`' weights on the opacity (uploaded as f16).
+    pub fn with_segments(self, gpu: &Gpu, segments: Option<&SegmentTexels>) -> Self {
+        let Some(s) = segments else {
+            return self;
+        };
+        let dims = s.dims.map(|d| d as u32);
+        VaoInputs {
+            segment_weight: weight_texture(gpu, dims, &f16_weights(s)),
+            segments: true,
+            ..self
+        }
+    }
+
+    /// The segmentation's weights it reads (binding 9).
+    pub fn segment_weight(&self) -> &wgpu::TextureView {
+        &self.segment_weight
     }
 
     /// Re-bakes the opacity table for a new transfer function (the live mode follows TF
@@ -388,6 +459,10 @@ impl VaoInputs {
 #[derive(Debug)]
 pub struct VaoGpu {
     pipeline: wgpu::ComputePipeline,
+    /// The same reading a segmentation (`SEGMENTS`), built on first use.
+    segmented: std::sync::OnceLock<wgpu::ComputePipeline>,
+    module: wgpu::ShaderModule,
+    pipeline_layout: wgpu::PipelineLayout,
     slab_layout: wgpu::BindGroupLayout,
     vao_layout: wgpu::BindGroupLayout,
     no_clip: wgpu::BindGroup,
@@ -421,9 +496,16 @@ impl crate::gpu::Stage for VaoGpu {
                     crate::gpu::entry::storage(1, c, false),
                 ],
             });
+            let mut entries = layout_entries();
+            entries.push(crate::gpu::entry::texture(
+                9,
+                c,
+                wgpu::TextureViewDimension::D3,
+                Some(true),
+            ));
             let vao_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("Vao::inputs_layout"),
-                entries: &layout_entries(),
+                entries: &entries,
             });
             let clip_layout = crate::clip::gpu::bind_group_layout(device);
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -441,6 +523,9 @@ impl crate::gpu::Stage for VaoGpu {
                     Some(&pipeline_layout),
                 ),
                 no_clip: crate::clip::gpu::empty_bind_group(device, &clip_layout),
+                segmented: std::sync::OnceLock::new(),
+                module: module.clone(),
+                pipeline_layout: pipeline_layout.clone(),
                 slab_layout,
                 vao_layout,
             }
@@ -487,12 +572,39 @@ impl VaoGpu {
                 &self.slab_layout,
                 &[uniforms.as_entire_binding(), out.as_entire_binding()],
             );
-            let group2 = bind_group(device, "Vao::inputs", &self.vao_layout, &inputs.resources());
+            let mut resources: Vec<wgpu::BindGroupEntry<'_>> = inputs
+                .resources()
+                .into_iter()
+                .zip(0..)
+                .map(|(resource, binding)| wgpu::BindGroupEntry { binding, resource })
+                .collect();
+            resources.push(wgpu::BindGroupEntry {
+                binding: 9,
+                resource: wgpu::BindingResource::TextureView(inputs.segment_weight()),
+            });
+            let group2 = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("Vao::inputs"),
+                layout: &self.vao_layout,
+                entries: &resources,
+            });
             (uniforms, out, readback, group0, group2)
         })?;
+        let pipeline = match inputs.segments {
+            false => &self.pipeline,
+            true => self.segmented.get_or_init(|| {
+                crate::gpu::specialised_pipeline(
+                    device,
+                    "Vao::pipeline_segments",
+                    &self.module,
+                    Some(&self.pipeline_layout),
+                    &[("SEGMENTS", 1.0)],
+                    "main",
+                )
+            }),
+        };
         let pass = Pass {
             label: "Vao::slab",
-            pipeline: &self.pipeline,
+            pipeline,
             bind_groups: &[(0, &group0), (1, &self.no_clip), (2, &group2)],
             uniforms: &uniforms,
         };

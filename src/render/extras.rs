@@ -114,7 +114,8 @@ impl Placeholders {
 }
 
 /// Layout entries of the ray caster's group 1: positional AO (0–4), extras uniform (5),
-/// light volume (6), surface position and colour (7, 8).
+/// light volume (6), surface position and colour (7, 8), positional AO's segmentation
+/// look (9).
 pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     use crate::gpu::entry;
     use wgpu::TextureViewDimension::{D2, D3};
@@ -124,6 +125,7 @@ pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     entries.push(entry::texture(6, c, D3, Some(true)));
     entries.push(entry::texture(7, c, D2, Some(false)));
     entries.push(entry::texture(8, c, D2, Some(false)));
+    entries.push(entry::texture(9, c, D3, Some(true)));
     entries
 }
 
@@ -160,6 +162,12 @@ pub fn bind_group_2(
     ));
     resources.push(wgpu::BindingResource::TextureView(
         layer.map_or(&placeholders.layer, |l| &l.color),
+    ));
+    resources.push(wgpu::BindingResource::TextureView(
+        extras
+            .live_vao
+            .as_ref()
+            .map_or(&placeholders.texture, |v| v.segment_weight()),
     ));
     bind_group(device, "RayCaster::bind_group_2", layout, &resources)
 }

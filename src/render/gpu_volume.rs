@@ -268,7 +268,10 @@ impl RenderVolume {
         settings: Option<&crate::ao::vao::VaoSettings>,
     ) -> Result<(), GpuError> {
         self.extras.live_vao = match settings {
-            Some(s) => Some(crate::ao::vao::VaoInputs::new(gpu, &self.texels, tf, s)?),
+            Some(s) => Some(
+                crate::ao::vao::VaoInputs::new(gpu, &self.texels, tf, s)?
+                    .with_segments(gpu, self.segment_texels.as_ref()),
+            ),
             None => None,
         };
         Ok(())

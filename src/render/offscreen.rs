@@ -295,7 +295,10 @@ fn render_cpu(
     let computed = AoEngine::on(None).compute(AoInput::Texels(&texels), &request, progress)?;
     match computed.ambient {
         Ambient::Values(a) => cv.ao = Some(a),
-        Ambient::Live => cv.live_vao = Some(PositionalAo::new(&texels, tf, &ao.vao)),
+        Ambient::Live => {
+            let twin = PositionalAo::new(&texels, tf, &ao.vao).with_segments(job.segments);
+            cv.live_vao = Some(twin);
+        }
         Ambient::One | Ambient::Cao(_) => {}
     }
     if let Some(m) = &frame.settings.opacity_modulation {
