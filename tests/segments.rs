@@ -719,8 +719,9 @@ fn lao_and_cao_step_iv_with_a_segmentation_match_their_cpu_twins() {
     }
 }
 
-/// The AO methods that read the volume's opacity read the segmentation's weights: hiding
-/// a segment changes LAO's and cone tracing's ambient factors.
+/// The AO methods read the segmentation's weights through the engine (GPU stages, or
+/// the twins where the engine picks them: the filters on a CPU adapter): hiding a
+/// segment changes LAO's, cone tracing's, positional AO's and the filters' factors.
 #[test]
 fn ao_methods_read_the_segment_weights() {
     use volao::ao::{AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
@@ -737,11 +738,12 @@ fn ao_methods_read_the_segment_weights() {
             },
         );
     }
-    for method in [AoMethod::Lao, AoMethod::Cone] {
+    for method in [AoMethod::Lao, AoMethod::Cone, AoMethod::Vao, AoMethod::Cdf] {
         let settings = AoSettings {
             method,
             rays: RaySet::Fourteen,
             samples: SAMPLES,
+            statistic: volao::ao::StatisticSource::Opacity,
             ..Default::default()
         };
         let request = AoRequest {

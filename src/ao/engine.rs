@@ -10,13 +10,14 @@ use super::cao::{CaoGpu, CaoMode, CaoSetup, CaoStats};
 use super::cone::{ConeGpu, MipPyramid, cone_cpu, opacity};
 use super::fast::{box_radius, cone_reach, map_of, statistics_device, twin_is_faster};
 use super::filter::{FilterGpu, Source};
-use super::lao::{LaoGpu, LaoSetup, Rays, lao_cpu, lao_lut};
+use super::lao::{LaoGpu, LaoSetup, Rays, lao_cpu_reading, lao_lut};
 use super::sparse::Coverage;
 use super::vao::{PositionalAo, VaoGpu, VaoInputs, vao_cpu};
 use super::{AoMethod, AoSettings};
 use crate::clip::ClipShape;
 use crate::gpu::{Gpu, GpuError, GpuUse};
 use crate::texels::gpu::GpuVolume;
+use crate::texels::segments::SegmentTexels;
 use crate::texels::{BlockRanges, UploadLimits, VolumeTexels};
 use crate::tf::TransferFunction;
 use std::sync::Arc;
@@ -47,6 +48,14 @@ impl AoInput<'_> {
         match self {
             AoInput::Texels(t) => t,
             AoInput::Uploaded(v) => &v.texels,
+        }
+    }
+
+    /// The segmentation uploaded with the volume, if any (the twins read it too).
+    fn segments(&self) -> Option<&SegmentTexels> {
+        match self {
+            AoInput::Texels(_) => None,
+            AoInput::Uploaded(v) => v.segment_texels.as_ref(),
         }
     }
 }
@@ -150,7 +159,7 @@ impl AoEngine {
                 match (&self.gpu, fits) {
                     // A CPU adapter runs the box statistics ~20× slower than the twin.
                     (Some(g), _) if map.is_some() && twin_is_faster(g) => {
-                        let a = self.twin(texels, request, progress);
+                        let a = self.twin(input, request, progress);
                         done(Ambient::Values(a), statistics_device(g), notes)
                     }
                     (Some(g), Some(true)) => {
@@ -167,7 +176,7 @@ impl AoEngine {
                                     .into(),
                             );
                         }
-                        let a = self.twin(texels, request, progress);
+                        let a = self.twin(input, request, progress);
                         done(Ambient::Values(a), cpu_twin(), notes)
                     }
                 }
@@ -241,31 +250,38 @@ impl AoEngine {
     /// The CPU twin of [`Self::on_gpu`].
     fn twin(
         &self,
-        texels: &VolumeTexels,
+        input: AoInput<'_>,
         request: &AoRequest<'_>,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Vec<f32> {
+        let (texels, segments) = (input.texels(), input.segments());
         let (s, tf) = (request.settings, request.tf);
+        let sampler = segments.map(crate::sample::SegmentSampler::new);
         match s.method {
             AoMethod::Lao => {
                 let rays = Rays::uniform(s.rays.directions());
                 let ranges = BlockRanges::new(texels);
                 let bricks = request.coverage.bricks(texels, &ranges, tf);
                 let lut = lao_lut(tf, texels);
-                lao_cpu(texels, &lut, &rays, s.samples, &bricks, progress)
+                let setup = LaoSetup {
+                    lut: &lut,
+                    rays: &rays,
+                    samples: s.samples,
+                };
+                lao_cpu_reading(texels, setup, sampler.as_ref(), &bricks, progress)
             }
             AoMethod::Vao => vao_cpu(
-                &PositionalAo::new(texels, tf, &s.vao),
+                &PositionalAo::new(texels, tf, &s.vao).with_segments(segments),
                 texels.dims,
                 progress,
             ),
             AoMethod::Cone => {
-                let pyramid = MipPyramid::new(texels.dims, opacity(texels, tf, None));
+                let pyramid = MipPyramid::new(texels.dims, opacity(texels, tf, segments));
                 cone_cpu(texels, &pyramid, s.cones, s.cone_preset, cone_reach(s))
             }
             method => match map_of(method) {
                 Some(map) => {
-                    let source = Source::new(texels, tf, s.statistic);
+                    let source = Source::new(texels, tf, s.statistic).with_segments(segments);
                     let radius = box_radius(s, texels);
                     super::filter::compute_cpu(texels, &source, radius, &[map])
                         .pop()
