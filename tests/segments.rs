@@ -994,3 +994,52 @@ fn positional_ao_reads_the_segment_weights_on_gpu_and_cpu_alike() {
         "hiding the spine changed {changed} voxels' positional AO"
     );
 }
+
+/// `volao render` with a segmentation and LAO, on the GPU and on the CPU twin
+/// (`--cpu`): the twin's AO reads the segmentation too, so the images agree.
+#[test]
+fn rendering_with_a_segmentation_and_lao_on_gpu_and_cpu_alike() {
+    use volao::render::offscreen::{RenderJob, render};
+    let gpu = std::sync::Arc::new(device());
+    let p = totalsegmentator();
+    let tf = TransferFunction::preset(Preset::CtBone, &p.image.stats());
+    let mut styles = Styles::default();
+    for k in p.labels.find("vertebrae_L3") {
+        styles.set(
+            k,
+            SegmentStyle {
+                visible: false,
+                ..Default::default()
+            },
+        );
+    }
+    let segments = texels_of(&p, &styles, &[]);
+    let ao = volao::ao::AoSettings {
+        method: volao::ao::AoMethod::Lao,
+        rays: RaySet::Fourteen,
+        samples: SAMPLES,
+        ..Default::default()
+    };
+    let f = frame(
+        RenderSettings {
+            jitter: false,
+            ..Default::default()
+        },
+        96,
+    );
+    let job = RenderJob {
+        segments: Some(&segments),
+        ..RenderJob::new(&p.image, &tf, &f, &ao)
+    };
+    let g = render(Some(&gpu), &job, &|_, _| {}).unwrap_or_else(|e| panic!("{e}"));
+    let c = render(None, &job, &|_, _| {}).unwrap_or_else(|e| panic!("{e}"));
+    assert!(c.notes.is_empty(), "{:?}", c.notes);
+    common::twin(
+        "segments_lao_cpu",
+        &g.image,
+        &c.image,
+        common::TWIN,
+        &out_dir(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+}

@@ -35,18 +35,19 @@ pub struct AoRequest<'a> {
     pub coverage: Coverage,
 }
 
-/// The volume AO is computed for: texels (uploaded here if a GPU stage runs) or a
-/// volume already on the engine's device.
+/// The volume AO is computed for: texels (uploaded here if a GPU stage runs), the same
+/// with a segmentation on their grid, or a volume already on the engine's device.
 #[derive(Debug, Clone, Copy)]
 pub enum AoInput<'a> {
     Texels(&'a VolumeTexels),
+    Segmented(&'a VolumeTexels, &'a SegmentTexels),
     Uploaded(&'a GpuVolume),
 }
 
 impl AoInput<'_> {
     fn texels(&self) -> &VolumeTexels {
         match self {
-            AoInput::Texels(t) => t,
+            AoInput::Texels(t) | AoInput::Segmented(t, _) => t,
             AoInput::Uploaded(v) => &v.texels,
         }
     }
@@ -55,6 +56,7 @@ impl AoInput<'_> {
     fn segments(&self) -> Option<&SegmentTexels> {
         match self {
             AoInput::Texels(_) => None,
+            AoInput::Segmented(_, s) => Some(s),
             AoInput::Uploaded(v) => v.segment_texels.as_ref(),
         }
     }
@@ -366,6 +368,11 @@ fn on_device<'a>(
     Ok(match input {
         AoInput::Uploaded(v) => v,
         AoInput::Texels(t) => slot.insert(GpuVolume::for_compute(g, t.clone(), tf, 0.5)?),
+        AoInput::Segmented(t, s) => {
+            let vol = slot.insert(GpuVolume::for_compute(g, t.clone(), tf, 0.5)?);
+            vol.set_segments(g, Some(s.clone()));
+            vol
+        }
     })
 }
 

@@ -268,14 +268,8 @@ fn render_cpu(
     let texels = VolumeTexels::new(volume, UploadLimits::NONE);
     let lut = crate::sample::bake_lut(tf, &texels, frame.settings.step_voxels);
     let (mut cv, occ) = cpu::prepare(&texels, &lut);
-    let mut notes = Vec::new();
     if let Some(s) = job.segments {
         cv.segments = Some(crate::sample::SegmentSampler::new(s));
-        if ao.method != AoMethod::None {
-            notes.push(
-                "the CPU twin computes AO without the segmentation (the GPU's reads it)".to_owned(),
-            );
-        }
     }
     if !surfaces.is_empty() {
         cv.surfaces = Some(cpu::CpuSurfaces {
@@ -292,7 +286,11 @@ fn render_cpu(
         coverage: crate::ao::sparse::Coverage::for_render(&frame.settings),
     };
     // The GPU keeps AO volumes as f32 (R32Float), so the twin uses them as computed.
-    let computed = AoEngine::on(None).compute(AoInput::Texels(&texels), &request, progress)?;
+    let input = match job.segments {
+        Some(s) => AoInput::Segmented(&texels, s),
+        None => AoInput::Texels(&texels),
+    };
+    let computed = AoEngine::on(None).compute(input, &request, progress)?;
     match computed.ambient {
         Ambient::Values(a) => cv.ao = Some(a),
         Ambient::Live => {
@@ -324,7 +322,7 @@ fn render_cpu(
         light_seconds,
         cao: None,
         clip_errors: Vec::new(),
-        notes: notes.into_iter().chain(computed.notes).collect(),
+        notes: computed.notes,
     })
 }
 
