@@ -520,6 +520,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var t = 0.0;
             var uvw = vec3<f32>(0.0);
             var rgba = vec4<f32>(0.0);
+            var look = vec4<f32>(1.0);
             var found = false;
             var stop = false;
             loop {
@@ -569,7 +570,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     continue;
                 }
                 let norm = value_at(uvw);
-                rgba = classify_at(uvw, norm);
+                // The opacity first; the segments' colour only once a sample shows.
+                rgba = classify(norm);
+                look = segment_look_at(uvw);
+                rgba.a = rgba.a * look.a;
                 if rgba.a > 0.0 {
                     found = true;
                     break;
@@ -585,6 +589,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if !found {
                 continue;
             }
+            rgba = vec4<f32>(segment_colour(uvw, rgba.rgb, look), rgba.a);
             if MODULATION {
                 rgba.a = rgba.a * textureSampleLevel(opacity_modulation, linear_clamp, uvw, 0.0).r;
             }

@@ -133,8 +133,15 @@ fn classify_at(uvw: vec3<f32>, value: f32) -> vec4<f32> {
         return tf;
     }
     let look = segment_look_at(uvw);
-    if look.a <= 0.0 {
-        return vec4<f32>(tf.rgb, 0.0);
+    return vec4<f32>(segment_colour(uvw, tf.rgb, look), tf.a * look.a);
+}
+
+// The colour at `uvw` of a sample whose transfer-function colour is `rgb` and whose
+// segmentation look is `look` (segment_look_at(uvw)): classify_at's colour, for a caller
+// that weighed the opacity first and colours only samples that show.
+fn segment_colour(uvw: vec3<f32>, rgb: vec3<f32>, look: vec4<f32>) -> vec3<f32> {
+    if !SEGMENTS || look.a <= 0.0 {
+        return rgb;
     }
     let c = look.rgb / look.a;
     var replace = f32(SEGMENT_MODES);
@@ -143,7 +150,7 @@ fn classify_at(uvw: vec3<f32>, value: f32) -> vec4<f32> {
         let r = textureSampleLevel(segment_gradient, volume_sampler, uvw, 0.0).w;
         replace = clamp(r / look.a, 0.0, 1.0);
     }
-    return vec4<f32>(mix(tf.rgb * c, c, replace), tf.a * look.a);
+    return mix(rgb * c, c, replace);
 }
 
 // The opacity at texture coordinates `uvw` (inside the box).
