@@ -42,6 +42,10 @@ override GRADIENT: u32 = 2u;
 // A segmentation's weight has edges (some class hidden, fainter or outlined): shading
 // looks at its gradient (texels::segments::SegmentTexels::edges; without, it is 0).
 override SEGMENT_EDGES: bool = true;
+// Some class's weight is below 1 (hidden, fainter, outlined: SegmentTexels::edges).
+// Without, every weight is 1: a step needs no look for its opacity, only a sample that
+// shows does for its colour.
+override SEGMENT_WEIGHTS: bool = true;
 
 // The AO is read the full offset out wherever the gradient is at least 1/AO_EDGE_GAIN
 // of a full edge: through the whole soft ramp of a CT surface, whose deeper samples
@@ -288,7 +292,7 @@ fn unclipped(pos: vec3<f32>, uvw: vec3<f32>) -> bool {
 // a hidden segment (weight below ½).
 fn visible(pos: vec3<f32>) -> bool {
     let uvw = pos / (2.0 * p.box_half.xyz) + 0.5;
-    if SEGMENTS && segment_look_at(uvw).a < 0.5 {
+    if SEGMENTS && SEGMENT_WEIGHTS && segment_look_at(uvw).a < 0.5 {
         return false;
     }
     return !CLIP || clip.counts.x == 0u || unclipped(pos, uvw);
@@ -572,8 +576,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let norm = value_at(uvw);
                 // The opacity first; the segments' colour only once a sample shows.
                 rgba = classify(norm);
-                look = segment_look_at(uvw);
-                rgba.a = rgba.a * look.a;
+                if SEGMENT_WEIGHTS {
+                    look = segment_look_at(uvw);
+                    rgba.a = rgba.a * look.a;
+                }
                 if rgba.a > 0.0 {
                     found = true;
                     break;
@@ -588,6 +594,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             if !found {
                 continue;
+            }
+            if SEGMENTS && !SEGMENT_WEIGHTS {
+                look = segment_look_at(uvw);
             }
             rgba = vec4<f32>(segment_colour(uvw, rgba.rgb, look), rgba.a);
             if MODULATION {

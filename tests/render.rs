@@ -979,6 +979,7 @@ fn every_variant_draws_the_general_pixels() {
                 segments: on(0) ^ on(5),
                 segment_modes: 2,
                 segment_edges: on(1),
+                segment_weights: on(2),
             };
             // Never chosen: lavapipe crashes on it (see `Variant::of`).
             if variant.shadows && !variant.surfaces {

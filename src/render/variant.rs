@@ -33,6 +33,8 @@ pub struct Variant {
     pub segments: bool,
     pub segment_modes: u32,
     pub segment_edges: bool,
+    /// Some class's weight is below 1 (`SEGMENT_WEIGHTS`).
+    pub segment_weights: bool,
 }
 
 impl Variant {
@@ -72,6 +74,7 @@ impl Variant {
             segments: vol.segments.on,
             segment_modes: vol.segments.modes,
             segment_edges: vol.segments.edges && (phong || ao_volume || live_vao),
+            segment_weights: vol.segments.edges,
         }
     }
 
@@ -92,11 +95,12 @@ impl Variant {
             segments: true,
             segment_modes: 2,
             segment_edges: true,
+            segment_weights: true,
         }
     }
 
     /// The values of the shader's `override` constants.
-    pub(super) fn constants(&self) -> [(&'static str, f64); 15] {
+    pub(super) fn constants(&self) -> [(&'static str, f64); 16] {
         let b = |on: bool| f64::from(u8::from(on));
         // Shading that fetches: worth finding a sample with opacity before shading.
         let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
@@ -116,6 +120,7 @@ impl Variant {
             ("SEGMENTS", b(self.segments)),
             ("SEGMENT_MODES", f64::from(self.segment_modes)),
             ("SEGMENT_EDGES", b(self.segment_edges)),
+            ("SEGMENT_WEIGHTS", b(self.segment_weights)),
         ]
     }
 }
