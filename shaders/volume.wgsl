@@ -27,9 +27,8 @@ override SEGMENT_MODES: u32 = 2u;
 @group(3) @binding(4) var segment_look: texture_3d<f32>;
 // Per voxel: its class (a combination of segments), read nearest.
 @group(3) @binding(5) var segment_classes: texture_3d<u32>;
-// Per class: the clip shapes that carve it (bit s), flags (bit 0: its colour replaces
-// the transfer function's; the shaders read it filtered from segment_gradient.w), packed
-// RGB, unused (texels::segments::ClassLook::gpu).
+// Per class: the clip shapes that carve it (bit s); y, z, w unused
+// (texels::segments::ClassLook::gpu).
 @group(3) @binding(6) var<storage, read> segment_table: array<vec4<u32>>;
 // Per voxel: the weight's differences one voxel either side, w(x + 1) − w(x − 1) per
 // axis (snorm, filtered): its gradient wherever it is sampled, in one fetch; and in w

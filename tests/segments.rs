@@ -21,7 +21,7 @@ use volao::render::{Frame, Image, RenderMode, RenderSettings, Shading, cpu};
 use volao::sample::SegmentSampler;
 use volao::texels::segments::SegmentTexels;
 use volao::tf::{Preset, TransferFunction};
-use volao::volume::{Volume, VoxelData};
+use volao::volume::Volume;
 
 fn out_dir() -> std::path::PathBuf {
     let d = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("segments");
@@ -32,23 +32,7 @@ fn out_dir() -> std::path::PathBuf {
 /// The `size` voxels of `v` from `origin`, placed where they were (the affine moved by
 /// the origin), so that a label map lands on them by the affines.
 fn crop_placed(v: &Volume, origin: [usize; 3], size: [usize; 3]) -> Volume {
-    let [nx, ny, _] = v.dims;
-    let idx = |i: usize| {
-        let (x, y, z) = (
-            i % size[0],
-            (i / size[0]) % size[1],
-            i / (size[0] * size[1]),
-        );
-        origin[0] + x + nx * (origin[1] + y + ny * (origin[2] + z))
-    };
-    let n = size.iter().product::<usize>();
-    let data = match &v.data {
-        VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
-        VoxelData::I32(d) => VoxelData::I32((0..n).map(|i| d[idx(i)]).collect()),
-        other => panic!("crop: {:?} not needed here", other.voxel_type()),
-    };
-    let mut out = Volume::new(size, v.spacing, data).expect("valid crop");
-    out.scaling = v.scaling;
+    let mut out = common::crop(v, origin, size);
     let o = DVec3::new(origin[0] as f64, origin[1] as f64, origin[2] as f64);
     out.orientation = v.orientation;
     out.orientation.offset += v.orientation.linear * o;
@@ -98,6 +82,15 @@ fn slicer() -> Pair {
         [40, 40, 0],
         [48, 48, 34],
     )
+}
+
+/// Default styles with the segments `pattern` names hidden (`--segment PATTERN:hide`).
+fn hiding(p: &Pair, pattern: &str) -> Styles {
+    let mut styles = Styles::default();
+    styles
+        .apply(&p.labels, &format!("{pattern}:hide"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    styles
 }
 
 /// What stays standing inside a cut: bones and vessels.
@@ -728,16 +721,7 @@ fn ao_methods_read_the_segment_weights() {
     let gpu = std::sync::Arc::new(device());
     let p = totalsegmentator();
     let tf = TransferFunction::preset(Preset::CtBone, &p.image.stats());
-    let mut hidden = Styles::default();
-    for k in p.labels.find("vertebrae*") {
-        hidden.set(
-            k,
-            SegmentStyle {
-                visible: false,
-                ..Default::default()
-            },
-        );
-    }
+    let hidden = hiding(&p, "vertebrae*");
     for method in [AoMethod::Lao, AoMethod::Cone, AoMethod::Vao, AoMethod::Cdf] {
         let settings = AoSettings {
             method,
@@ -858,16 +842,7 @@ fn filter_ao_of_opacity_reads_the_segment_weights_on_gpu_and_cpu_alike() {
     let filter = gpu.stage::<FilterGpu>().unwrap_or_else(|e| panic!("{e}"));
     let p = totalsegmentator();
     let tf = TransferFunction::preset(Preset::CtBone, &p.image.stats());
-    let mut hidden = Styles::default();
-    for k in p.labels.find("vertebrae*") {
-        hidden.set(
-            k,
-            SegmentStyle {
-                visible: false,
-                ..Default::default()
-            },
-        );
-    }
+    let hidden = hiding(&p, "vertebrae*");
     let t = common::texels(&p.image);
     let maps = [AmbientMap::Cdf, AmbientMap::Gauss, AmbientMap::Penner];
     let r = [5u32; 3];
@@ -920,16 +895,7 @@ fn positional_ao_reads_the_segment_weights_on_gpu_and_cpu_alike() {
         r_max_mm: 12.0,
         ..Default::default()
     };
-    let mut hidden = Styles::default();
-    for k in p.labels.find("vertebrae*") {
-        hidden.set(
-            k,
-            SegmentStyle {
-                visible: false,
-                ..Default::default()
-            },
-        );
-    }
+    let hidden = hiding(&p, "vertebrae*");
     let t = common::texels(&p.image);
     let mut results = Vec::new();
     for styles in [&Styles::default(), &hidden] {
@@ -1003,16 +969,7 @@ fn rendering_with_a_segmentation_and_lao_on_gpu_and_cpu_alike() {
     let gpu = std::sync::Arc::new(device());
     let p = totalsegmentator();
     let tf = TransferFunction::preset(Preset::CtBone, &p.image.stats());
-    let mut styles = Styles::default();
-    for k in p.labels.find("vertebrae_L3") {
-        styles.set(
-            k,
-            SegmentStyle {
-                visible: false,
-                ..Default::default()
-            },
-        );
-    }
+    let styles = hiding(&p, "vertebrae_L3");
     let segments = texels_of(&p, &styles, &[]);
     let ao = volao::ao::AoSettings {
         method: volao::ao::AoMethod::Lao,

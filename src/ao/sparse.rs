@@ -82,22 +82,42 @@ impl Coverage {
     }
 }
 
-/// `flags` (x fastest over `grid`) or any of their 26 neighbours.
-fn dilate(flags: &[u8], grid: [usize; 3]) -> Vec<u8> {
-    let at = |x: usize, y: usize, z: usize| flags[x + grid[0] * (y + grid[1] * z)];
-    let mut out = vec![0u8; flags.len()];
-    for z in 0..grid[2] {
-        for y in 0..grid[1] {
-            for x in 0..grid[0] {
-                let near = |c: usize, n: usize| c.saturating_sub(1)..=(c + 1).min(n - 1);
-                let any = near(z, grid[2]).any(|zz| {
-                    near(y, grid[1]).any(|yy| near(x, grid[0]).any(|xx| at(xx, yy, zz) != 0))
-                });
-                out[x + grid[0] * (y + grid[1] * z)] = u8::from(any);
+/// `mask` (one flag per cell of `grid`, x fastest) grown by `k[a]` cells along each axis
+/// a: a box, which holds every cell within that distance.
+pub fn dilate(mask: &[bool], grid: [usize; 3], k: [usize; 3]) -> Vec<bool> {
+    let mut out = mask.to_vec();
+    let stride = [1, grid[0], grid[0] * grid[1]];
+    let mut prefix = Vec::new();
+    for a in 0..3 {
+        let src = out.clone();
+        let n = grid[a];
+        // Every line along axis a: a running count, then "any set within ±k".
+        for start in (0..src.len()).filter(|&i| crate::volume::voxel_of(i, grid)[a] == 0) {
+            prefix.clear();
+            prefix.push(0usize);
+            for c in 0..n {
+                let set = usize::from(src[start + c * stride[a]]);
+                prefix.push(prefix[c] + set);
+            }
+            for c in 0..n {
+                let (lo, hi) = (c.saturating_sub(k[a]), (c + k[a]).min(n - 1));
+                out[start + c * stride[a]] = prefix[hi + 1] > prefix[lo];
             }
         }
     }
     out
+}
+
+/// Per brick of a volume of `dims` (x fastest over [`grid_of`]): whether it holds a
+/// voxel `voxels` flags.
+pub fn bricks_holding(voxels: &[bool], dims: [usize; 3]) -> Vec<bool> {
+    let grid = grid_of(dims);
+    let mut bricks = vec![false; grid.iter().product()];
+    for (i, _) in voxels.iter().enumerate().filter(|(_, v)| **v) {
+        let v = crate::volume::voxel_of(i, dims).map(|c| c / BRICK);
+        bricks[v[0] + grid[0] * (v[1] + grid[1] * v[2])] = true;
+    }
+    bricks
 }
 
 /// Brick edge in voxels: a whole number of the ray caster's occupancy blocks, whose
@@ -268,7 +288,15 @@ impl Bricks {
         let readable = match render_lut {
             // The ray caster reads AO up to AO_READ_REACH (< BRICK) voxels off a sample
             // with opacity: into the neighbouring bricks too.
-            Some(lut) => dilate(&ranges.occupancy(texels, lut), ranges.grid),
+            Some(lut) => {
+                let occupied: Vec<bool> = ranges
+                    .occupancy(texels, lut)
+                    .iter()
+                    .map(|&o| o != 0)
+                    .collect();
+                let near = dilate(&occupied, ranges.grid, [1; 3]);
+                near.into_iter().map(u8::from).collect()
+            }
             None => vec![1; ranges.ranges.len()],
         };
         let occupied = ranges.occupancy(texels, lao_lut);
@@ -777,6 +805,20 @@ pub fn empty_run(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn dilation_grows_a_box_per_axis() {
+        let grid = [5, 4, 3];
+        let mut mask = vec![false; 60];
+        mask[2 + 5 + 20] = true; // (2, 1, 1)
+        let d = super::dilate(&mask, grid, [1, 2, 0]);
+        let set: Vec<[usize; 3]> = (0..60)
+            .filter(|&i| d[i])
+            .map(|i| crate::volume::voxel_of(i, grid))
+            .collect();
+        assert_eq!(set.len(), 3 * 4);
+        assert!(set.iter().all(|v| (1..=3).contains(&v[0]) && v[2] == 1));
+    }
+
     use super::*;
 
     #[test]

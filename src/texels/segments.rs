@@ -1,12 +1,12 @@
 //! A segmentation as every stage reads it beside the density (`volume.wgsl` bindings
-//! 4–6, compiled in where a pipeline sets `SEGMENTS`; CPU twin:
+//! 4–7, compiled in where a pipeline sets `SEGMENTS`; CPU twin:
 //! [`crate::sample::VolumeSampler`]'s `segments`).
 //!
 //! Each voxel holds a *class*: one combination of segments, one per layer of the label
 //! map (a voxel of two overlapping segments is a class of its own). A class's
 //! [`ClassLook`] says how it shows (colour, opacity, whether the colour tints or
 //! replaces the transfer function's, outline only) and which clip shapes carve it. The
-//! shaders read three things:
+//! shaders read four things:
 //!
 //! - the *look* volume (RGBA8, filtered): per voxel the class colour premultiplied by its
 //!   opacity weight, and the weight. Sampled trilinearly, it blends neighbouring classes
@@ -14,9 +14,12 @@
 //!   the interpolated weight instead of the voxels' cubes, and the gradient of the weight
 //!   lights a boundary the density does not show (an organ inside tissue of the same HU).
 //!   An outline class keeps its weight only on its boundary voxels.
-//! - the class of each voxel (R16Uint, read nearest): which shapes carve a sample and
-//!   whether its colour replaces the transfer function's;
-//! - the class table: per class, the shapes that carve it and its flags.
+//! - the class of each voxel (R16Uint, read nearest) and the class table: which shapes
+//!   carve a sample;
+//! - per voxel, the weight's differences one voxel either side (its gradient, where
+//!   shading takes a segment's normal) and whether the colour replaces the transfer
+//!   function's × the weight (RGBA8 snorm, filtered: tinted and replacing classes meet
+//!   smoothly).
 
 use crate::gpu::{Gpu, filled_texture_3d, storage_buffer};
 use crate::volume::voxel_of;
@@ -48,16 +51,10 @@ impl ClassLook {
         carved_by: u32::MAX,
     };
 
-    /// The class's entry in the table the shaders read: carved_by, flags (bit 0
-    /// replace), packed colour, unused.
+    /// The class's entry in the table the shaders read: the shapes that carve it (its
+    /// look and mode are in the textures); the rest unused.
     pub fn gpu(&self) -> [u32; 4] {
-        let [r, g, b] = self.color.map(u32::from);
-        [
-            self.carved_by,
-            u32::from(self.replace),
-            r | g << 8 | b << 16,
-            0,
-        ]
+        [self.carved_by, 0, 0, 0]
     }
 }
 
@@ -65,9 +62,6 @@ impl ClassLook {
 pub fn snorm8(x: f32) -> i8 {
     (x.clamp(-1.0, 1.0) * 127.0).round() as i8
 }
-
-/// Flag bit of [`ClassLook::gpu`]: the class colour replaces the transfer function's.
-pub const REPLACE: u32 = 1;
 
 /// A segmentation on the texel grid: classes per voxel, their looks, and the look volume.
 #[derive(Debug, Clone)]

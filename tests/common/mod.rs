@@ -103,7 +103,7 @@ pub fn texels(v: &volao::volume::Volume) -> volao::texels::VolumeTexels {
     )
 }
 
-/// The `size` voxels of `v` starting at `origin` (u8 and i16 volumes), scaling kept.
+/// The `size` voxels of `v` starting at `origin` (u8, i16 and i32 volumes), scaling kept.
 pub fn crop(
     v: &volao::volume::Volume,
     origin: [usize; 3],
@@ -123,6 +123,7 @@ pub fn crop(
     let data = match &v.data {
         VoxelData::U8(d) => VoxelData::U8((0..n).map(|i| d[idx(i)]).collect()),
         VoxelData::I16(d) => VoxelData::I16((0..n).map(|i| d[idx(i)]).collect()),
+        VoxelData::I32(d) => VoxelData::I32((0..n).map(|i| d[idx(i)]).collect()),
         other => panic!("crop: {:?} not needed here", other.voxel_type()),
     };
     let mut out = volao::volume::Volume::new(size, v.spacing, data).expect("valid crop");

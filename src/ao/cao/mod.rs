@@ -45,7 +45,7 @@ use std::time::Instant;
 pub use super::settings::DEFAULT_MSAA;
 pub use cpu::{StepVInputs, clip_volume_cpu, clip_volume_cpu_reading, lao_on_opacity_cpu};
 pub use frame::{CaoFrame, Pose};
-pub use pao::{PaoUpdate, dilate};
+pub use pao::PaoUpdate;
 pub use pipelines::CaoPipelines;
 pub use voxel_list::MAX_LIST_BYTES_PER_VOXEL;
 

@@ -5,7 +5,7 @@
 //! precomputation read, which is why the values are the same bits.
 
 use super::{CaoGpu, CaoMode, Lists, reach_mm};
-use crate::ao::sparse::BRICK;
+use crate::ao::sparse::{BRICK, bricks_holding, dilate};
 use crate::clip::gpu::MapRequest;
 use crate::gpu::{Gpu, GpuError, read_texture_f32, validated};
 use crate::texels::VolumeTexels;
@@ -27,32 +27,6 @@ pub struct PaoUpdate {
     /// Of all bricks.
     pub bricks: usize,
     pub seconds: f64,
-}
-
-/// `mask` (one flag per cell of `grid`, x fastest) grown by `k[a]` cells along each axis
-/// a: a box, which holds every cell within that distance.
-pub fn dilate(mask: &[bool], grid: [usize; 3], k: [usize; 3]) -> Vec<bool> {
-    let mut out = mask.to_vec();
-    let stride = [1, grid[0], grid[0] * grid[1]];
-    let mut prefix = Vec::new();
-    for a in 0..3 {
-        let src = out.clone();
-        let n = grid[a];
-        // Every line along axis a: a running count, then "any set within ±k".
-        for start in (0..src.len()).filter(|&i| crate::volume::voxel_of(i, grid)[a] == 0) {
-            prefix.clear();
-            prefix.push(0usize);
-            for c in 0..n {
-                let set = usize::from(src[start + c * stride[a]]);
-                prefix.push(prefix[c] + set);
-            }
-            for c in 0..n {
-                let (lo, hi) = (c.saturating_sub(k[a]), (c + k[a]).min(n - 1));
-                out[start + c * stride[a]] = prefix[hi + 1] > prefix[lo];
-            }
-        }
-    }
-    out
 }
 
 impl CaoGpu {
@@ -78,11 +52,7 @@ impl CaoGpu {
         let within = texels.spacing.map(|s| (reach / s).floor() as usize);
         let recompute = dilate(changed, dims, within);
         let b = &self.bricks;
-        let mut near = vec![false; b.count()];
-        for (i, _) in recompute.iter().enumerate().filter(|(_, r)| **r) {
-            let v = crate::volume::voxel_of(i, dims).map(|c| c / BRICK);
-            near[v[0] + b.grid[0] * (v[1] + b.grid[1] * v[2])] = true;
-        }
+        let near = bricks_holding(&recompute, dims);
         // What their rays read: the reach again, in whole bricks.
         let k = texels
             .spacing
@@ -223,24 +193,5 @@ fn at(texture: &wgpu::Texture, origin: [u32; 3]) -> wgpu::TexelCopyTextureInfo<'
             z: origin[2],
         },
         aspect: wgpu::TextureAspect::All,
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::dilate;
-
-    #[test]
-    fn dilation_grows_a_box_per_axis() {
-        let grid = [5, 4, 3];
-        let mut mask = vec![false; 60];
-        mask[2 + 5 + 20] = true; // (2, 1, 1)
-        let d = dilate(&mask, grid, [1, 2, 0]);
-        let set: Vec<[usize; 3]> = (0..60)
-            .filter(|&i| d[i])
-            .map(|i| crate::volume::voxel_of(i, grid))
-            .collect();
-        assert_eq!(set.len(), 3 * 4);
-        assert!(set.iter().all(|v| (1..=3).contains(&v[0]) && v[2] == 1));
     }
 }

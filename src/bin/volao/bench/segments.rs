@@ -7,7 +7,7 @@ use std::path::Path;
 use volao::ao::AoSettings;
 use volao::ao::cao::{CaoGpu, CaoSetup, CaoVolume};
 use volao::ao::lao::Rays;
-use volao::ao::sparse::{BRICK, Coverage};
+use volao::ao::sparse::{Coverage, bricks_holding, grid_of};
 use volao::gpu::Gpu;
 use volao::labels::LabelMap;
 use volao::labels::style::{self, Classes, SegmentStyle, Styles};
@@ -98,22 +98,14 @@ pub fn pao_update(
         anyhow::bail!("bench render --labels: the volume holds no segmentation");
     };
     // The bricks a change touches (what "a tenth of the bricks" counts).
-    let grid = current.dims.map(|d| d.div_ceil(BRICK));
-    let bricks_of = |voxels: &[bool]| {
-        let mut bricks = vec![false; grid.iter().product()];
-        for (i, _) in voxels.iter().enumerate().filter(|(_, c)| **c) {
-            let v = volao::volume::voxel_of(i, current.dims).map(|c| c / BRICK);
-            bricks[v[0] + grid[0] * (v[1] + grid[1] * v[2])] = true;
-        }
-        bricks
-    };
+    let bricks_of = |voxels: &[bool]| bricks_holding(voxels, current.dims);
     let changed_by =
         |pattern: &str| bricks_of(&current.voxels_changed_by(&s.hiding(pattern).table));
     let count = |m: &[bool]| m.iter().filter(|&&c| c).count();
     let hide = match hide {
         Some(p) => p.to_owned(),
         None => {
-            let bricks = changed_by("none such").len();
+            let bricks: usize = grid_of(current.dims).iter().product();
             s.labels
                 .segments
                 .iter()
