@@ -82,6 +82,8 @@ pub mod clip;
 
 pub mod render;
 
+pub mod slice;
+
 pub mod app;
 
 pub mod process;

@@ -122,6 +122,74 @@ pub struct ConvertArgs {
     pub load: LoadArgs,
 }
 
+/// `volao slice`.
+#[derive(Args, Debug)]
+pub struct SliceArgs {
+    /// Volume file or scene (.json). Omit for the demo volume.
+    pub input: Option<PathBuf>,
+    /// The plane: axial, coronal or sagittal.
+    #[arg(long, default_value = "axial", value_parser = volao::slice::SliceAxis::parse)]
+    pub axis: volao::slice::SliceAxis,
+    /// Slice number along the axis, from the inferior, posterior resp. left end (default:
+    /// the middle one).
+    #[arg(long, conflicts_with = "at")]
+    pub index: Option<usize>,
+    /// The slice through this point, in RAS millimetres.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true)]
+    pub at: Option<[f64; 3]>,
+    #[command(flatten)]
+    pub labels: LabelArgs,
+    /// How segments show (as `volao render --segment`; hidden segments are not drawn).
+    #[arg(long, value_name = "SPEC")]
+    pub segment: Vec<String>,
+    /// Opacity of the segments' colours over the grey, 0 to 1.
+    #[arg(long, default_value_t = 0.5, value_parser = parse_unit)]
+    pub label_opacity: f32,
+    /// Draw only the segments' outlines.
+    #[arg(long)]
+    pub outline: bool,
+    /// Window/level of the greys in data units (e.g. HU); default: the transfer
+    /// function's (the scene's, or the preset for the data).
+    #[arg(long, value_name = "WINDOW,LEVEL", value_parser = parse_window_level, allow_hyphen_values = true)]
+    pub window_level: Option<(f64, f64)>,
+    /// The patient's left on the image's left (default: radiological, right on the left).
+    #[arg(long)]
+    pub neurological: bool,
+    /// Trilinear sampling instead of the nearest voxel.
+    #[arg(long)]
+    pub linear: bool,
+    /// An oblique acquisition in its own planes instead of resampled onto the patient's axes.
+    #[arg(long)]
+    pub acquisition_plane: bool,
+    /// Orientation letters on the edges and a scale bar.
+    #[arg(long)]
+    pub annotate: bool,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub load: LoadArgs,
+}
+
+/// A point `X,Y,Z` in mm.
+pub fn parse_point(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = numbers(s)?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
+        _ => Err(format!(
+            "{s:?}: expected three numbers X,Y,Z in mm, e.g. 0,-20,35"
+        )),
+    }
+}
+
+/// A number from 0 to 1.
+pub fn parse_unit(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: expected a number from 0 to 1")),
+    }
+}
+
 #[derive(Args, Debug)]
 pub struct RenderArgs {
     /// Volume file or scene (.json). Omit for the demo volume.

@@ -1,5 +1,5 @@
-//! The `volao` command line: `volao` (viewer), `view`, `info`, `convert`, `render`, `ao`,
-//! `gpu`, `bench`. One module per command; the flags are in `args`.
+//! The `volao` command line: `volao` (viewer), `view`, `info`, `convert`, `render`, `slice`,
+//! `ao`, `gpu`, `bench`. One module per command; the flags are in `args`.
 
 mod ao;
 mod args;
@@ -9,6 +9,7 @@ mod gpu;
 mod info;
 mod progress;
 mod render;
+mod slice;
 mod view;
 
 use anyhow::Result;
@@ -37,6 +38,9 @@ enum Command {
     Convert(args::ConvertArgs),
     /// Render a volume or a scene file to PNG, headless.
     Render(Box<args::RenderArgs>),
+    /// One axial, coronal or sagittal slice to PNG, in patient orientation (radiological:
+    /// the patient's right on the image's left), one pixel per voxel.
+    Slice(Box<args::SliceArgs>),
     /// Compute an ambient-occlusion volume in the input's geometry and write it.
     Ao(args::AoArgs),
     /// Show the GPU adapter volao will use and run a compute self-test on it.
@@ -71,6 +75,7 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Gpu) => gpu::run(),
         Some(Command::Render(args)) => render::run(&args),
         Some(Command::Ao(args)) => ao::run(&args),
+        Some(Command::Slice(args)) => slice::run(&args),
         Some(Command::Bench(command)) => bench::run(&command),
     }
 }

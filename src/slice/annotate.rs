@@ -1,0 +1,134 @@
+//! What `--annotate` draws on a figure: orientation letters on a slice's edges and a
+//! scale bar, in a small built-in bitmap font (no font files, the same pixels everywhere).
+
+/// 5×7 glyphs, one row per entry, most significant of five bits on the left.
+fn glyph(c: char) -> Option<[u8; 7]> {
+    Some(match c {
+        'A' => [0x0E, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11],
+        'I' => [0x0E, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E],
+        'L' => [0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1F],
+        'P' => [0x1E, 0x11, 0x11, 0x1E, 0x10, 0x10, 0x10],
+        'R' => [0x1E, 0x11, 0x11, 0x1E, 0x14, 0x12, 0x11],
+        'S' => [0x0F, 0x10, 0x10, 0x0E, 0x01, 0x01, 0x1E],
+        'c' => [0x00, 0x00, 0x0E, 0x10, 0x10, 0x11, 0x0E],
+        'm' => [0x00, 0x00, 0x1A, 0x15, 0x15, 0x11, 0x11],
+        '0' => [0x0E, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0E],
+        '1' => [0x04, 0x0C, 0x04, 0x04, 0x04, 0x04, 0x0E],
+        '2' => [0x0E, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1F],
+        '5' => [0x1F, 0x10, 0x1E, 0x01, 0x01, 0x11, 0x0E],
+        ' ' => [0; 7],
+        _ => return None,
+    })
+}
+
+/// Pixel size of one font dot for an image `width` wide.
+fn dot(width: usize) -> usize {
+    (width / 200).clamp(1, 4)
+}
+
+/// Draws `text` with its top-left corner at (x, y) in RGB pixels `rgb` (`width` wide),
+/// white with a dark outline; dots outside the image are dropped.
+pub fn draw_text(rgb: &mut [u8], width: usize, x: isize, y: isize, text: &str) {
+    let d = dot(width) as isize;
+    let height = (rgb.len() / 3 / width.max(1)) as isize;
+    let mut put = |px: isize, py: isize, v: u8| {
+        if px >= 0 && py >= 0 && px < width as isize && py < height {
+            let i = 3 * (py as usize * width + px as usize);
+            rgb[i..i + 3].fill(v);
+        }
+    };
+    let dots: Vec<(isize, isize)> = text
+        .chars()
+        .enumerate()
+        .filter_map(|(n, c)| glyph(c).map(|g| (n as isize * 6 * d, g)))
+        .flat_map(|(gx, g)| {
+            (0..7isize).flat_map(move |row| {
+                (0..5isize)
+                    .filter(move |col| g[row as usize] >> (4 - col) & 1 != 0)
+                    .map(move |col| (gx + col * d, row * d))
+            })
+        })
+        .collect();
+    // The outline first, then the glyphs over it.
+    for pass in [0u8, 255] {
+        let grow = if pass == 0 { 1 } else { 0 };
+        for &(gx, gy) in &dots {
+            for yy in -grow..d + grow {
+                for xx in -grow..d + grow {
+                    put(x + gx + xx, y + gy + yy, pass);
+                }
+            }
+        }
+    }
+}
+
+/// Size in pixels of `text` drawn for an image `width` wide.
+fn text_size(width: usize, text: &str) -> [isize; 2] {
+    let d = dot(width) as isize;
+    [text.chars().count() as isize * 6 * d - d, 7 * d]
+}
+
+/// Orientation letters at the middle of each edge (left, right, top, bottom) and a scale
+/// bar in the bottom-right corner of RGB pixels `rgb` (`width` wide), whose pixels are
+/// `pixel_mm` apart.
+pub fn annotate(rgb: &mut [u8], width: usize, letters: [char; 4], pixel_mm: f64) {
+    let height = rgb.len() / 3 / width.max(1);
+    let (w, h) = (width as isize, height as isize);
+    let m = 2 * dot(width) as isize;
+    let [lw, lh] = text_size(width, "A");
+    let [left, right, top, bottom] = letters.map(|c| c.to_string());
+    draw_text(rgb, width, m, (h - lh) / 2, &left);
+    draw_text(rgb, width, w - lw - m, (h - lh) / 2, &right);
+    draw_text(rgb, width, (w - lw) / 2, m, &top);
+    draw_text(rgb, width, (w - lw) / 2, h - lh - m, &bottom);
+
+    // The longest 1-2-5 length that fits in a fifth of the width.
+    if pixel_mm.is_nan() || pixel_mm <= 0.0 || width < 40 {
+        return;
+    }
+    let Some(mm) = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]
+        .into_iter()
+        .rev()
+        .find(|&mm| mm / pixel_mm <= w as f64 / 5.0)
+    else {
+        return;
+    };
+    let label = if mm >= 10.0 {
+        format!("{} cm", mm / 10.0)
+    } else {
+        format!("{mm} mm")
+    };
+    let bar = (mm / pixel_mm).round() as isize;
+    let [tw, th] = text_size(width, &label);
+    let x1 = w - m - lw - 2 * m;
+    let y = h - m - th - 2 * m;
+    draw_text(rgb, width, x1 - tw, y - th - m, &label);
+    for yy in y - 1..y + dot(width) as isize + 1 {
+        for xx in x1 - bar - 1..=x1 {
+            if xx >= 0 && yy >= 0 && xx < w && yy < h {
+                let edge = yy == y - 1 || yy == y + dot(width) as isize || xx == x1 - bar - 1;
+                let i = 3 * (yy as usize * width + xx as usize);
+                rgb[i..i + 3].fill(if edge { 0 } else { 255 });
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn letters_and_bar_change_pixels_only_where_drawn() {
+        let (w, h) = (128usize, 96usize);
+        let mut rgb = vec![100u8; w * h * 3];
+        annotate(&mut rgb, w, ['R', 'L', 'A', 'P'], 1.0);
+        let white = rgb.chunks(3).filter(|p| p[0] == 255).count();
+        assert!(white > 40, "letters and bar drawn: {white}");
+        // The centre is left alone.
+        let c = 3 * (h / 2 * w + w / 2);
+        assert_eq!(rgb[c], 100);
+        // A 20 mm bar at 1 mm/pixel fits a fifth of 128 px: "2 cm".
+        assert!(glyph('c').is_some() && glyph('2').is_some());
+    }
+}

@@ -1,0 +1,141 @@
+//! `volao slice`: slices in patient orientation, checked against readers independent of
+//! volao (nibabel, pynrrd, dcm2niix through `tests/slice_reference.py`), and its flags.
+
+mod common;
+
+use common::{data, data_dir};
+use std::process::{Command, Output};
+
+fn volao(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_volao"))
+        .args(args)
+        .output()
+        .expect("volao runs")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+fn path(p: &std::path::Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// Axial, coronal and sagittal slices of NIfTI (RAS, LAS, anisotropic), Analyze, NRRD
+/// (LPS) and DICOM (CT, and the oblique MR both resampled and in its own planes) equal
+/// the same slices cut with numpy from nibabel's `as_closest_canonical`, pynrrd and
+/// dcm2niix, pixel for pixel. Needs python3 with numpy, nibabel, pynrrd and pillow, and
+/// dcm2niix (`.ci/run` installs them); missing, the test fails saying so.
+#[test]
+fn slices_equal_independent_readers() {
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/slice_reference.py");
+    let out = Command::new("python3")
+        .arg(script)
+        .arg(env!("CARGO_BIN_EXE_volao"))
+        .arg(data_dir())
+        .output()
+        .expect("python3 runs (install python3 with numpy, nibabel, pynrrd, pillow)");
+    let stdout = text(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        text(&out.stderr)
+            .lines()
+            .filter(|l| !l.starts_with("warning:"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    assert!(stdout.contains("78 of 78 slices equal"), "{stdout}");
+}
+
+fn grey_png(p: &std::path::Path) -> image::DynamicImage {
+    image::open(p).expect("PNG written")
+}
+
+#[test]
+fn index_at_and_errors() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("s.png");
+    let file = data("nifti/avg152T1_LR_nifti.nii");
+    // avg152 (LAS, 2 mm): the axial slice through z = 0 mm is index 36 (origin −72 mm).
+    let o = volao(&["slice", path(&file), "--at", "0,0,0", "-o", path(&out)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stdout).contains("axial slice 36 of 91"),
+        "{}",
+        text(&o.stdout)
+    );
+    let img = grey_png(&out);
+    assert_eq!((img.width(), img.height()), (91, 109));
+
+    let o = volao(&["slice", path(&file), "--index", "91", "-o", path(&out)]);
+    assert!(!o.status.success());
+    let err = text(&o.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("numbered 0 to 90"), "{err}");
+
+    let o = volao(&["slice", path(&file), "--axis", "oblique", "-o", path(&out)]);
+    assert!(!o.status.success());
+    assert!(text(&o.stderr).contains("expected axial, coronal or sagittal"));
+}
+
+#[test]
+fn labels_overlay_and_annotations() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ct = data("labels/totalsegmentator/example_ct.nii.gz");
+    let seg = data("labels/totalsegmentator/example_seg_fast_force_split.nii.gz");
+    let plain = dir.path().join("plain.png");
+    let labelled = dir.path().join("labelled.png");
+    let outlined = dir.path().join("outlined.png");
+    let annotated = dir.path().join("annotated.png");
+    let wl = ["--window-level", "400,40", "--axis", "coronal"];
+    for (out, extra) in [
+        (&plain, vec![]),
+        // Every segment red, so any pixel the overlay touches shows it.
+        (
+            &labelled,
+            vec!["--labels", path(&seg), "--segment", "*:color=#ff0000"],
+        ),
+        (&outlined, vec!["--labels", path(&seg), "--outline"]),
+        (&annotated, vec!["--annotate"]),
+    ] {
+        let mut args = vec!["slice", path(&ct), "-o", path(out)];
+        args.extend(wl);
+        args.extend(extra);
+        let o = volao(&args);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+    }
+    let plain = grey_png(&plain).to_rgb8();
+    let labelled = grey_png(&labelled).to_rgb8();
+    let outlined = grey_png(&outlined).to_rgb8();
+    let coloured = |img: &image::RgbImage| {
+        img.pixels()
+            .filter(|p| p[0] != p[1] || p[1] != p[2])
+            .count()
+    };
+    assert_eq!(coloured(&plain), 0);
+    let (filled, edges) = (coloured(&labelled), coloured(&outlined));
+    assert!(filled > 1000, "segments coloured: {filled}");
+    assert!(
+        edges > 100 && edges < filled,
+        "outlines {edges} of {filled}"
+    );
+    // The overlay changes exactly the pixels it colours; the others keep their grey.
+    let changed = plain
+        .pixels()
+        .zip(labelled.pixels())
+        .filter(|(a, b)| a != b)
+        .count();
+    assert_eq!(changed, filled);
+    assert!(labelled.pixels().all(|p| p[0] >= p[1] && p[1] == p[2]));
+    let annotated = grey_png(&annotated).to_luma8();
+    let changed = plain
+        .pixels()
+        .zip(annotated.pixels())
+        .filter(|(a, b)| a[0] != b[0])
+        .count();
+    assert!(
+        changed > 50,
+        "letters and scale bar drawn: {changed} pixels"
+    );
+}
