@@ -88,6 +88,8 @@ fn harness_edited(
         recent_file: Some(screenshot_dir.join("recent.json")),
         screenshot_dir: screenshot_dir.to_owned(),
         clip_resolution: Some(CLIP_MAPS),
+        // The tests choose their AO (one test checks what a file opens with).
+        ao_on_open: false,
         ..Default::default()
     };
     edit(&mut options);
@@ -185,6 +187,11 @@ fn choose(h: &mut Harness<'static, Viewer>, combo: &str, option: &str) {
 
 /// The viewport's pixels from a rendering of the whole window.
 fn viewport_pixels(h: &mut Harness<'static, Viewer>) -> Image {
+    // The view alone: no outlines, crosshair or orientation marker over it.
+    if h.state().show_outlines {
+        h.state_mut().show_outlines = false;
+        h.run_steps(2);
+    }
     let rect = h.state().viewport_rect();
     let (w, ht) = h.state().viewport_size();
     let full = h.render().unwrap_or_else(|e| panic!("render: {e}"));
@@ -232,7 +239,14 @@ const SNAPSHOT: Tolerance = Tolerance {
 /// A snapshot of the controls: the window left of the viewport (the viewport itself is
 /// compared with `volao render` exactly).
 fn snapshot(h: &mut Harness<'static, Viewer>, name: &str) {
-    let left = h.state().viewport_rect().min.x.round() as u32;
+    let left = h
+        .state()
+        .slices()
+        .panes()
+        .iter()
+        .map(|(_, r)| r.min.x)
+        .fold(h.state().viewport_rect().min.x, f32::min)
+        .round() as u32;
     let full = h.render().unwrap_or_else(|e| panic!("render: {e}"));
     let (w, ht) = (full.width(), full.height());
     let actual = rgba_image(&image::imageops::crop_imm(&full, 0, 0, left.min(w), ht).to_image());
@@ -921,13 +935,7 @@ fn add_a_clip_shape_drag_it_and_cao_follows() {
     )
     .unwrap_or_else(|e| panic!("{e}"));
     let mut clip = ClipMaps::new(&twin).unwrap_or_else(|e| panic!("{e}"));
-    let reach = volao::ao::cao::reach_mm(doc.ao.samples, vol.texels.spacing);
-    let request = volao::clip::gpu::MapRequest {
-        shapes: &doc.clip_shapes,
-        volume_radius: doc.radius,
-        reach_mm: reach,
-        resolution: CLIP_MAPS,
-    };
+    let request = volao::clip::gpu::MapRequest::clipping(&doc.clip_shapes, doc.radius, CLIP_MAPS);
     clip.update(&twin, request)
         .unwrap_or_else(|e| panic!("{e}"));
     let expected = RayCaster::new(&twin.device)
@@ -969,7 +977,7 @@ fn the_demo_opens_carved_with_ambient_occlusion_the_adapter_affords() {
     let cpu_adapter = gpu.info.device_type == wgpu::DeviceType::Cpu;
     let mut job = volao::app::jobs::Job::spawn("demo", || {}, {
         let gpu = std::sync::Arc::clone(&gpu);
-        move |p| volao::app::load_document(&gpu, &OpenRequest::Demo, p)
+        move |p| volao::app::load_document(&gpu, &OpenRequest::Demo, true, p)
     });
     let loaded = job
         .wait(Duration::from_secs(180))
@@ -1417,4 +1425,194 @@ fn hiding_a_segment_under_cao_updates_v_pao_and_matches_volao_render() {
     h.run_steps(2);
     let scene = dir.path().join("hidden.json");
     viewport_is_volao_render(&mut h, &scene, "viewport_hidden_cao_vs_render");
+}
+
+// ----- slice panes -----------------------------------------------------------------------
+
+/// A 40³ volume of 1 mm voxels (RAS) holding a ball of radius 12 mm (value 100) in air
+/// (0), written as NIfTI: its surface points are known without volao.
+fn ball_file(dir: &Path) -> PathBuf {
+    use volao::volume::{Volume, voxels::VoxelData};
+    let n = 40usize;
+    let data: Vec<f32> = (0..n * n * n)
+        .map(|i| {
+            let [x, y, z] = volao::volume::voxel_of(i, [n; 3]);
+            let d = glam::Vec3::new(x as f32, y as f32, z as f32) + 0.5 - n as f32 / 2.0;
+            if d.length() <= 12.0 { 100.0 } else { 0.0 }
+        })
+        .collect();
+    let v = Volume::new([n; 3], [1.0; 3], VoxelData::from(data)).expect("volume");
+    let path = dir.join("ball.nii");
+    volao::volume::format::save(&v, &path).expect("ball written");
+    path
+}
+
+fn open_ball(dir: &Path) -> Harness<'static, Viewer> {
+    let mut h = harness(
+        OpenRequest::Volume {
+            path: ball_file(dir),
+            options: LoadOptions::default(),
+            labels: None,
+        },
+        dir,
+    );
+    settle(&mut h);
+    // A step at 50: the surface is where the trilinear value crosses it.
+    let doc = h.state_mut().document_mut().expect("doc");
+    doc.tf = TransferFunction {
+        name: "step".into(),
+        opacity: volao::tf::OpacityPoint::list(&[(40.0, 0.0), (60.0, 1.0)]),
+        color: volao::tf::ColorStop::list(&[(0.0, [1.0, 0.9, 0.8])]),
+    };
+    doc.ao.method = volao::ao::AoMethod::None;
+    settle(&mut h);
+    h
+}
+
+fn pane(h: &Harness<'static, Viewer>, pane: volao::app::slices::Pane) -> egui::Rect {
+    h.state()
+        .slices()
+        .panes()
+        .iter()
+        .find(|(p, _)| *p == pane)
+        .map(|(_, r)| *r)
+        .unwrap_or_else(|| panic!("{pane:?} is not shown"))
+}
+
+/// A file opens in the 2×2 layout; a click in the axial slice moves the crosshair
+/// within that plane (and so the coronal and sagittal slices), the wheel pages the
+/// sagittal slice one voxel, and a shift-click on the ball in the 3-D view puts the
+/// crosshair on its surface, within one voxel of where it is.
+#[test]
+fn slice_panes_move_the_crosshair_and_picking_finds_the_surface() {
+    use volao::app::slices::{Layout, Pane};
+    use volao::slice::SliceAxis;
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = open_ball(dir.path());
+    assert_eq!(h.state().slices().layout, Layout::Quad);
+    let start = h
+        .state()
+        .slices()
+        .crosshair
+        .expect("crosshair at the centre");
+
+    // A click right of the axial pane's centre: towards the patient's left (radiological),
+    // same height (S) as before.
+    let axial = pane(&h, Pane::Slice(SliceAxis::Axial));
+    let at = axial.center() + egui::vec2(40.0, 0.0);
+    h.drag_at(at);
+    h.step();
+    h.drop_at(at);
+    h.run_steps(2);
+    let c = h.state().slices().crosshair.expect("crosshair");
+    assert!(c.x < start.x - 2.0, "moved towards L: {start} → {c}");
+    assert!(
+        (c.z - start.z).abs() < 1e-9 && (c.y - start.y).abs() < 1.0,
+        "{start} → {c}"
+    );
+
+    // One wheel notch over the sagittal pane: the next slice to the right, 1 mm.
+    let sagittal = pane(&h, Pane::Slice(SliceAxis::Sagittal));
+    h.hover_at(sagittal.center());
+    h.event(egui::Event::MouseWheel {
+        unit: egui::MouseWheelUnit::Line,
+        delta: egui::vec2(0.0, 1.0),
+        phase: egui::TouchPhase::Move,
+        source: egui::MouseWheelSource::Wheel,
+        modifiers: egui::Modifiers::NONE,
+    });
+    h.run_steps(2);
+    let d = h.state().slices().crosshair.expect("crosshair");
+    assert!((d.x - c.x - 1.0).abs() < 0.51, "{c} → {d}");
+
+    // Shift-click the middle of the 3-D view (looking from anterior): the front of the
+    // ball, (0, 12, 0) mm from the volume's centre, where the voxel centres have world
+    // coordinates 0..39 mm, so (19.5, 31.5, 19.5) in world mm.
+    let view = pane(&h, Pane::ThreeD);
+    h.event_modifiers(
+        egui::Event::PointerButton {
+            pos: view.center(),
+            button: egui::PointerButton::Primary,
+            pressed: true,
+            modifiers: egui::Modifiers::SHIFT,
+        },
+        egui::Modifiers::SHIFT,
+    );
+    h.event_modifiers(
+        egui::Event::PointerButton {
+            pos: view.center(),
+            button: egui::PointerButton::Primary,
+            pressed: false,
+            modifiers: egui::Modifiers::SHIFT,
+        },
+        egui::Modifiers::SHIFT,
+    );
+    h.run_steps(2);
+    let p = h.state().slices().crosshair.expect("crosshair");
+    let expected = glam::DVec3::new(19.5, 31.5, 19.5);
+    assert!(
+        (p - expected).length() <= 1.0,
+        "picked {p}, the surface is at {expected}"
+    );
+}
+
+/// Dragging a sphere's cross-section in the axial slice moves the shape; the 3-D view
+/// then equals `volao render` of the saved scene.
+#[test]
+fn dragging_a_shape_in_a_slice_moves_it_and_the_view_follows() {
+    use volao::app::slices::Pane;
+    use volao::slice::SliceAxis;
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = open_ball(dir.path());
+    h.state_mut()
+        .document_mut()
+        .expect("doc")
+        .clip_shapes
+        .push(volao::clip::ClipShape::new(
+            volao::clip::Shape::Sphere,
+            glam::Vec3::ZERO,
+            8.0,
+        ));
+    settle(&mut h);
+    let axial = pane(&h, Pane::Slice(SliceAxis::Axial));
+    // The crosshair (the centre) is inside the sphere: drag from it 30 points right.
+    let from = axial.center();
+    h.drag_at(from);
+    h.step();
+    for i in 1..=6 {
+        h.hover_at(from + egui::vec2(5.0 * i as f32, 0.0));
+        h.step();
+    }
+    h.drop_at(from + egui::vec2(30.0, 0.0));
+    h.run_steps(2);
+    let t = h.state().document().expect("doc").clip_shapes[0].translation;
+    // Right on a radiological axial slice is the patient's left: −x.
+    assert!(
+        t[0] < -3.0 && t[1].abs() < 1.0 && t[2] == 0.0,
+        "moved to {t:?}"
+    );
+    settle(&mut h);
+    viewport_is_volao_render(&mut h, &dir.path().join("dragged.json"), "slice_drag");
+}
+
+/// A file opens with the best AO the adapter affords (measured) and says which; the demo
+/// keeps its 3-D-only first screen, a file opens on the 2×2 layout.
+#[test]
+fn a_file_opens_with_the_ao_the_adapter_affords_on_the_slices() {
+    use volao::app::slices::Layout;
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = harness_with(bucky(), dir.path(), |o| o.ao_on_open = true);
+    settle(&mut h);
+    let doc = h.state().document().expect("doc");
+    assert_ne!(doc.ao.method, volao::ao::AoMethod::None);
+    let note = doc.note.clone().unwrap_or_default();
+    assert!(note.contains("opened with"), "{note}");
+    assert!(h.state().ao_ready(), "AO error: {:?}", h.state().ao_error());
+    assert_eq!(h.state().slices().layout, Layout::Quad);
+    h.state_mut().open(OpenRequest::Demo);
+    settle(&mut h);
+    assert_eq!(h.state().slices().layout, Layout::ThreeD);
 }

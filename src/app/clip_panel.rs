@@ -142,7 +142,12 @@ pub fn new_shape(shape: Shape, radius: f32) -> ClipShape {
 }
 
 /// World (volume mm) → points inside `rect`, or `None` behind the eye.
-fn project(camera: &Camera, radius: f32, rect: egui::Rect, p: Vec3) -> Option<egui::Pos2> {
+pub(super) fn project(
+    camera: &Camera,
+    radius: f32,
+    rect: egui::Rect,
+    p: Vec3,
+) -> Option<egui::Pos2> {
     let vp = camera.view_proj(radius, rect.width() / rect.height().max(1.0));
     let clip = vp * p.extend(1.0);
     if clip.w <= 1e-6 && !camera.orthographic {

@@ -134,6 +134,51 @@ fn probe(gpu: &Gpu, tf: &TransferFunction) -> Option<(Duration, usize)> {
     Some((best, small.dims.iter().product()))
 }
 
+/// The AO a file opens with (not a scene, which says its own): Local AO with the most
+/// rays whose precomputation on `voxels` voxels the probe's rate puts within
+/// [`PRECOMPUTE_BUDGET`], else the fast ambient map; and a note saying so.
+pub fn file_ao(gpu: &Gpu, voxels: usize, tf: &TransferFunction) -> (AoSettings, String) {
+    let measured = probe(gpu, tf);
+    choose_lao(measured, voxels)
+}
+
+/// [`file_ao`]'s choice from the probe's time (6-ray LAO on `probe_voxels` voxels).
+pub fn choose_lao(probe: Option<(Duration, usize)>, voxels: usize) -> (AoSettings, String) {
+    let mut ao = AoSettings::default();
+    let Some((t, probe_voxels)) = probe else {
+        ao.method = AoMethod::Gauss;
+        return (ao, "(the AO probe failed, so the fast ambient map)".into());
+    };
+    for rays in [
+        RaySet::FiftyFour,
+        RaySet::TwentySix,
+        RaySet::Fourteen,
+        RaySet::Six,
+    ] {
+        let k = rays.directions().len();
+        let pre = estimate(t, probe_voxels, voxels, k);
+        if pre <= PRECOMPUTE_BUDGET.as_secs_f64() {
+            ao.method = AoMethod::Lao;
+            ao.rays = rays;
+            return (
+                ao,
+                format!(
+                    "(opened with {k}-ray Local AO, the most this adapter affords: ≈ {pre:.1} s)"
+                ),
+            );
+        }
+    }
+    ao.method = AoMethod::Gauss;
+    let pre = estimate(t, probe_voxels, voxels, 6);
+    (
+        ao,
+        format!(
+            "(opened with the fast ambient map: {} would take ≈ {pre:.1} s here; choose it in the AO panel)",
+            AoMethod::Lao.label()
+        ),
+    )
+}
+
 /// The demo's start on `gpu` for the demo `volume` shown with `tf`.
 pub fn start(gpu: &Gpu, volume: &Volume, tf: &TransferFunction) -> DemoStart {
     let voxels = volume.dims.iter().product();
@@ -175,6 +220,14 @@ mod tests {
         // 10 ms: 14 rays ≈ 0.18 s a frame; 6 rays 0.64 s to precompute, 77 ms a frame.
         let (ao, _) = choose(Duration::from_millis(10), p, n);
         assert_eq!((ao.method, ao.rays), (AoMethod::Cao, RaySet::Six));
+        // A file: LAO with the most rays within the budget.
+        let (ao, _) = choose_lao(Some((Duration::from_millis(1), p)), n);
+        assert_eq!((ao.method, ao.rays), (AoMethod::Lao, RaySet::FiftyFour));
+        let (ao, _) = choose_lao(Some((Duration::from_millis(20), p)), n);
+        assert_eq!((ao.method, ao.rays), (AoMethod::Lao, RaySet::Six));
+        let (ao, note) = choose_lao(Some((Duration::from_millis(40), p)), n);
+        assert_eq!(ao.method, AoMethod::Gauss);
+        assert!(note.contains("ambient map"), "{note}");
         // Lavapipe's 17–45 ms: not even 6 rays.
         let (ao, note) = choose(Duration::from_millis(32), p, n);
         assert_eq!(ao.method, AoMethod::Gauss);

@@ -89,6 +89,12 @@ pub struct ViewerOptions {
     /// Interactive quality while the view moves, as the viewer starts (`--target-rate`;
     /// the Rendering panel changes it).
     pub interactive: super::viewport::Interactive,
+    /// The layout every opened volume starts in (`--layout`); `None`: 2×2 for a file,
+    /// the 3-D view alone for the demo.
+    pub layout: Option<super::slices::Layout>,
+    /// A volume file opens with the best AO the adapter affords within the demo's budget
+    /// (off: without AO, as the tests of other things want).
+    pub ao_on_open: bool,
 }
 
 impl Default for ViewerOptions {
@@ -104,6 +110,8 @@ impl Default for ViewerOptions {
             bench_clip_drag: None,
             no_skipping: false,
             interactive: Default::default(),
+            layout: None,
+            ao_on_open: true,
         }
     }
 }
@@ -239,6 +247,7 @@ pub(super) struct Opened {
 pub fn load_document(
     gpu: &Gpu,
     request: &OpenRequest,
+    ao_on_open: bool,
     progress: &Progress,
 ) -> Result<LoadedDocument, String> {
     let (scene, scene_path) = match request {
@@ -347,6 +356,9 @@ pub fn load_document(
     }
     // The demo opens carved and with AO, the AO chosen from the adapter's measured rate.
     let demo = matches!(request, OpenRequest::Demo).then(|| super::demo::start(gpu, &volume, &tf));
+    // A file opens with the best AO the adapter affords within the same budget.
+    let file_ao = (ao_on_open && matches!(request, OpenRequest::Volume { .. }))
+        .then(|| super::demo::file_ao(gpu, volume.dims.iter().product(), &tf));
     let title = match &path {
         Some(p) => file_name(p),
         None => "demo head phantom".into(),
@@ -367,10 +379,11 @@ pub fn load_document(
             (None, None) => Camera::default(),
         },
         render,
-        ao: match (&scene, &demo) {
-            (Some(s), _) => s.ambient_occlusion,
-            (None, Some(d)) => d.ao,
-            (None, None) => AoSettings::default(),
+        ao: match (&scene, &demo, &file_ao) {
+            (Some(s), _, _) => s.ambient_occlusion,
+            (None, Some(d), _) => d.ao,
+            (None, None, Some((ao, _))) => *ao,
+            (None, None, None) => AoSettings::default(),
         },
         ao_only: false,
         clip_shapes: match &demo {
@@ -381,7 +394,7 @@ pub fn load_document(
         meshes,
         radius,
         downsampled,
-        note: demo.map(|d| d.note),
+        note: demo.map(|d| d.note).or(file_ao.map(|(_, note)| note)),
         segmentation,
     };
     Ok(LoadedDocument {

@@ -38,6 +38,7 @@ pub mod screenshot;
 mod scripted;
 pub mod segments;
 mod shots;
+pub mod slices;
 mod sync;
 pub mod tf_editor;
 mod tiles;
@@ -115,7 +116,8 @@ pub struct Viewer {
     chrome: Chrome,
     shots: Screenshots,
     scripted: Scripted,
-    /// Draw the clip shapes' outlines over the viewport.
+    /// Draw over the 3-D view: the clip shapes' outlines, the crosshair, the orientation
+    /// marker.
     pub show_outlines: bool,
     /// GPU errors reported outside any error scope.
     gpu_errors: Arc<Mutex<Vec<String>>>,
@@ -130,6 +132,8 @@ struct Chrome {
     tf_editor: tf_editor::TfEditor,
     clip_editor: clip_panel::ClipEditor,
     segments_panel: segments::SegmentsPanel,
+    /// The slice panes, the layout and the crosshair.
+    slices: slices::SliceViews,
     /// The hover line: the segment under the pointer.
     hover: hover::Hover,
     toasts: Vec<Toast>,
@@ -324,6 +328,15 @@ impl Viewer {
     }
 
     /// The document, for edits through the API (marks the transfer function as changed).
+    /// The slice panes: layout, crosshair, where each pane is.
+    pub fn slices(&self) -> &slices::SliceViews {
+        &self.chrome.slices
+    }
+
+    pub fn slices_mut(&mut self) -> &mut slices::SliceViews {
+        &mut self.chrome.slices
+    }
+
     pub fn document_mut(&mut self) -> Option<&mut Document> {
         self.derived.tf_changed_at = Instant::now();
         self.opened.doc.as_mut()
@@ -501,8 +514,9 @@ impl Viewer {
         }
         let gpu = Arc::clone(&self.gpu);
         let label = format!("Loading {}", request.label());
+        let ao_on_open = self.options.ao_on_open;
         self.opened.load_job = Some(Job::spawn(label, self.repaint_fn(), move |p| {
-            load_document(&gpu, &request, p)
+            load_document(&gpu, &request, ao_on_open, p)
         }));
     }
 
@@ -550,6 +564,17 @@ impl Viewer {
                 self.derived.shown = AoShown::Nothing;
                 self.scripted.ready_frames = 0;
                 self.chrome.tf_editor = Default::default();
+                // Files open on the slices and the 3-D view; the demo on its 3-D view
+                // (carved, with AO: what volao is for), unless a layout was asked for.
+                let demo = doc_is_demo(self.opened.doc.as_ref());
+                let slices = &mut self.chrome.slices;
+                slices.reset();
+                slices.layout = self.options.layout.unwrap_or(if demo {
+                    slices::Layout::ThreeD
+                } else {
+                    slices::Layout::Quad
+                });
+                slices.maximised = None;
             }
             Err(JobError::Cancelled) => {}
             Err(JobError::Failed(e)) => {
@@ -655,13 +680,34 @@ impl Viewer {
     /// The viewport in the central panel: laid out, then (after the panels: the camera
     /// and shapes as this frame's input left them) its GPU work pumped and painted.
     fn central_viewport(&mut self, ui: &mut egui::Ui) {
+        let bench = self.options.bench_clip_drag.is_some();
         let slot = egui::CentralPanel::no_frame()
-            .show(ui, |ui| self.viewport(ui))
+            .show(ui, |ui| {
+                let rect = ui.available_rect_before_wrap();
+                let open = self.opened.doc.is_some() && !bench;
+                let mut slot = None;
+                for (pane, r) in self.chrome.slices.pane_rects(rect, open) {
+                    match pane {
+                        slices::Pane::ThreeD => slot = self.viewport(ui, r),
+                        slices::Pane::Slice(axis) => {
+                            if let Some(doc) = &mut self.opened.doc {
+                                self.chrome.slices.show(ui, doc, axis, r);
+                            }
+                        }
+                    }
+                }
+                slot
+            })
             .inner;
         self.update_hover(ui);
         self.pump_viewport();
         self.paint_viewport(slot);
     }
+}
+
+/// Whether the document is the built-in demo volume.
+fn doc_is_demo(doc: Option<&Document>) -> bool {
+    doc.is_some_and(|d| d.source.path.is_none())
 }
 
 fn load_recent(file: &Path) -> Vec<PathBuf> {

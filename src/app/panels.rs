@@ -45,6 +45,7 @@ impl Viewer {
         if save {
             self.save_dialog(false);
         }
+        self.chrome.slices.handle_keys(&ctx);
         if shot {
             let path = self.next_screenshot_path();
             self.request_screenshot(path, self.shots.size);
@@ -159,6 +160,15 @@ impl Viewer {
                 }
             });
             ui.menu_button("View", |ui| {
+                for layout in super::slices::Layout::ALL {
+                    let on = self.chrome.slices.layout == layout;
+                    if ui.radio(on, layout.name()).clicked() {
+                        self.chrome.slices.layout = layout;
+                        self.chrome.slices.maximised = None;
+                    }
+                }
+                ui.weak("Ctrl+L: next layout · Ctrl+M: maximise the pane under the pointer");
+                ui.separator();
                 let Some(doc) = &mut self.opened.doc else {
                     ui.weak("(no volume)");
                     return;
@@ -197,6 +207,11 @@ impl Viewer {
         ui.heading(&doc.title);
         ui.weak(&doc.info);
         ui.separator();
+        egui::CollapsingHeader::new("Layout and slices")
+            .default_open(false)
+            .show(ui, |ui| {
+                self.chrome.slices.panel(ui, doc.segmentation.is_some())
+            });
         egui::CollapsingHeader::new("Camera")
             .default_open(true)
             .show(ui, |ui| {
@@ -411,6 +426,12 @@ impl Viewer {
                 ui.label(text);
             }
             self.view_status(ui);
+            if self.chrome.slices.layout != super::slices::Layout::ThreeD
+                && let Some(doc) = &self.opened.doc
+                && let Some(text) = super::slices::readout(&self.chrome.slices, doc)
+            {
+                ui.label(format!("Crosshair: {text}"));
+            }
             if let Some(text) = &self.chrome.hover.text {
                 ui.label(format!("Under the pointer: {text}"));
             }
@@ -472,8 +493,7 @@ impl Viewer {
 
     /// The viewport: its input, a place for its image under the clip outlines (filled by
     /// [`Self::paint_viewport`] once the frame's pump has run), the outlines.
-    pub(super) fn viewport(&mut self, ui: &mut egui::Ui) -> Option<ViewportSlot> {
-        let rect = ui.available_rect_before_wrap();
+    pub(super) fn viewport(&mut self, ui: &mut egui::Ui, rect: egui::Rect) -> Option<ViewportSlot> {
         self.viewport.rect = rect;
         let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
         response
@@ -497,7 +517,14 @@ impl Viewer {
             doc.radius,
             &mut doc.clip_shapes,
         );
-        if !used {
+        // Shift-click or double-click: the crosshair to the surface under the pointer.
+        let pick =
+            response.double_clicked() || (response.clicked() && ui.input(|i| i.modifiers.shift));
+        if pick && let Some(p) = response.interact_pointer_pos() {
+            if let Some(world) = pick_surface(doc, rect, p) {
+                self.chrome.slices.set_crosshair(world);
+            }
+        } else if !used {
             camera_input::handle(ui, &response, &mut doc.camera, doc.radius);
         }
         let slot = ViewportSlot {
@@ -512,6 +539,16 @@ impl Viewer {
                 &doc.camera,
                 doc.radius,
                 &doc.clip_shapes,
+            );
+        }
+        if self.show_outlines
+            && let Some(doc) = &self.opened.doc
+        {
+            super::slices::paint_3d(
+                &ui.painter().with_clip_rect(rect),
+                rect,
+                &self.chrome.slices,
+                doc,
             );
         }
         if hovering_files {
@@ -825,4 +862,40 @@ fn mode_controls(ui: &mut egui::Ui, mode: &mut RenderMode, tf_iso: f64) {
             }
         });
     }
+}
+
+/// The first visible surface under point `p` of the 3-D view in `rect`, in patient mm
+/// ([`crate::slice::pick`]: the transfer function, clip shapes and segments as drawn).
+fn pick_surface(doc: &Document, rect: egui::Rect, p: egui::Pos2) -> Option<glam::DVec3> {
+    use crate::slice::pick::{PickScene, SURFACE_OPACITY, first_surface};
+    let looks = doc
+        .segmentation
+        .as_ref()
+        .map(|s| crate::labels::style::looks(&s.labels, &s.classes, &s.styles, &doc.clip_shapes));
+    let segments = doc
+        .segmentation
+        .as_ref()
+        .zip(looks.as_deref())
+        .map(|(s, l)| (&s.classes.of_voxel[..], l));
+    let tf = doc.view_tf();
+    let scene = PickScene {
+        volume: &doc.volume,
+        tf: &tf,
+        shapes: &doc.clip_shapes,
+        segments,
+    };
+    let ndc = [
+        (p.x - rect.left()) / rect.width() * 2.0 - 1.0,
+        1.0 - (p.y - rect.top()) / rect.height() * 2.0,
+    ];
+    let aspect = rect.width() / rect.height().max(1.0);
+    let hit = first_surface(
+        &scene,
+        &doc.camera,
+        doc.radius,
+        aspect,
+        ndc,
+        SURFACE_OPACITY,
+    )?;
+    Some(crate::slice::volume_to_world(&doc.volume, hit))
 }

@@ -587,7 +587,6 @@ impl Viewer {
             clip: doc.clip_shapes.clone(),
             setup: ClipSetup {
                 radius: doc.radius,
-                samples: doc.ao.samples,
                 resolution: doc.ao.clip_resolution,
                 cao_mode,
             },

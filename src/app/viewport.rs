@@ -368,8 +368,6 @@ fn first_pixel_rate(gpu: &Gpu) -> f64 {
 pub(super) struct ClipSetup {
     /// The volume's bounding radius (mm; sizes planes).
     pub radius: f32,
-    /// LAO samples per ray (the clip maps' reach without CAO).
-    pub samples: u32,
     /// Depth-map edge in pixels.
     pub resolution: u32,
     pub cao_mode: CaoMode,

@@ -220,11 +220,15 @@ impl<'a> MapRequest<'a> {
         MapRequest {
             shapes,
             volume_radius,
-            reach_mm: 1.0,
+            reach_mm: CLIPPING_REACH_MM,
             resolution,
         }
     }
 }
+
+/// The dilation of maps that only clip (no AO reads them): [`MapRequest::clipping`]'s,
+/// which the viewer uses too, so that both cut alike.
+pub const CLIPPING_REACH_MM: f32 = 1.0;
 
 /// The usable part of `request`.
 fn usable<'a>(gpu: &Gpu, request: MapRequest<'a>) -> Usable<'a> {

@@ -151,6 +151,25 @@ impl ClipShape {
         Mat4::from_rotation_translation(self.rotation(), Vec3::from(self.translation))
     }
 
+    /// Whether point `p` (volume-centred mm) lies inside the shape; `None` for a mesh
+    /// (its inside is only known to the depth maps).
+    pub fn contains(&self, p: Vec3) -> Option<bool> {
+        let local = self.rotation().inverse() * (p - Vec3::from(self.translation));
+        let s = Vec3::from(self.scale).max(Vec3::splat(1e-6));
+        let q = local / s;
+        Some(match &self.shape {
+            Shape::Plane => local.z >= 0.0,
+            Shape::Sphere => q.length_squared() <= 1.0,
+            Shape::Box => q.abs().max_element() <= 1.0,
+            Shape::Cylinder => q.x * q.x + q.y * q.y <= 1.0 && q.z.abs() <= 1.0,
+            Shape::Torus { tube } => {
+                let ring = (q.x * q.x + q.z * q.z).sqrt() - 1.0;
+                ring * ring + q.y * q.y <= tube * tube
+            }
+            Shape::Mesh { .. } => return None,
+        })
+    }
+
     /// Checks the pose; `index` names the shape in errors.
     pub fn check(&self, index: usize) -> Result<(), ClipError> {
         let invalid = |message: String| ClipError::Invalid { index, message };

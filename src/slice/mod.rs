@@ -21,6 +21,7 @@
 //! voxel index `t = A⁻¹(p − o)`, and outside the volume it has no value.
 
 mod annotate;
+pub mod pick;
 
 pub use annotate::{annotate, draw_text};
 
@@ -347,6 +348,27 @@ impl SliceGeometry {
     }
 }
 
+/// The 3-D view's space (mm from the volume's centre along its voxel axes, as the ray
+/// caster and clip shapes use it) → the patient's world (RAS mm, by the affine).
+pub fn volume_to_world(volume: &Volume, p: glam::Vec3) -> DVec3 {
+    let o = &volume.orientation;
+    let ijk = DVec3::from_array(std::array::from_fn(|i| {
+        let s = f64::from(volume.spacing[i]);
+        (f64::from(p[i]) + volume.dims[i] as f64 * s / 2.0) / s - 0.5
+    }));
+    o.linear * ijk + o.offset
+}
+
+/// The inverse of [`volume_to_world`].
+pub fn world_to_volume(volume: &Volume, w: DVec3) -> glam::Vec3 {
+    let o = &volume.orientation;
+    let ijk = o.linear.inverse() * (w - o.offset);
+    glam::Vec3::from_array(std::array::from_fn(|i| {
+        let s = f64::from(volume.spacing[i]);
+        ((ijk[i] + 0.5) * s - volume.dims[i] as f64 * s / 2.0) as f32
+    }))
+}
+
 /// One slice's pixels, row by row from the top.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Slice {
@@ -479,7 +501,7 @@ fn acquisition_affine(volume: &Volume) -> (DMat3, DVec3) {
 }
 
 /// Trilinear interpolation at continuous voxel index `t` (edges clamped).
-fn trilinear(volume: &Volume, t: DVec3) -> Option<f64> {
+pub(crate) fn trilinear(volume: &Volume, t: DVec3) -> Option<f64> {
     let d = volume.dims;
     let clamp = |v: f64, n: usize| v.clamp(0.0, (n - 1) as f64);
     let t = DVec3::new(clamp(t.x, d[0]), clamp(t.y, d[1]), clamp(t.z, d[2]));

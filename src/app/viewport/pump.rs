@@ -441,8 +441,8 @@ impl ViewportGpu {
                 if self.clip.is_none() {
                     self.clip = Some(ClipMaps::new(gpu).map_err(|e| e.to_string())?);
                 }
-                let reach = crate::ao::cao::reach_mm(setup.samples, vol.texels.spacing);
-                (self.clip.as_mut(), reach)
+                // No AO depends on the clipping: the maps `volao render` makes.
+                (self.clip.as_mut(), crate::clip::gpu::CLIPPING_REACH_MM)
             };
             if let Some(maps) = maps {
                 let report = maps

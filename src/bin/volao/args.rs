@@ -68,6 +68,10 @@ pub struct ViewArgs {
     /// `volao render --help`).
     #[arg(long)]
     pub no_skipping: bool,
+    /// The panes: 2x2 (axial, 3-D, coronal, sagittal), 3d (the 3-D view alone) or 1+3;
+    /// default: 2x2 for a file, 3d for the demo.
+    #[arg(long, value_parser = parse_layout)]
+    pub layout: Option<volao::app::slices::Layout>,
     #[command(flatten)]
     pub load: LoadArgs,
     /// A segmentation to show with the volume (the Segments panel styles it).
@@ -169,6 +173,16 @@ pub struct SliceArgs {
     pub output: PathBuf,
     #[command(flatten)]
     pub load: LoadArgs,
+}
+
+pub fn parse_layout(s: &str) -> Result<volao::app::slices::Layout, String> {
+    use volao::app::slices::Layout;
+    match s.to_ascii_lowercase().as_str() {
+        "2x2" | "quad" => Ok(Layout::Quad),
+        "3d" => Ok(Layout::ThreeD),
+        "1+3" => Ok(Layout::OnePlusThree),
+        _ => Err(format!("{s:?}: expected 2x2, 3d or 1+3")),
+    }
 }
 
 /// A point `X,Y,Z` in mm.

@@ -52,6 +52,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         exit_after_frames: args.exit_after_frames,
         bench_clip_drag: args.bench_clip_drag,
         no_skipping: args.no_skipping,
+        layout: args.layout,
         ..Default::default()
     };
     match args.target_rate {
