@@ -139,3 +139,63 @@ fn labels_overlay_and_annotations() {
         "letters and scale bar drawn: {changed} pixels"
     );
 }
+
+/// `volao render --layout 2x2`: the 3-D pane is `volao render` at that pane's size, pixel
+/// for pixel, and the axial pane is `volao slice`'s image scaled to fit.
+#[test]
+fn render_layout_holds_the_3d_view_and_the_slices() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = data("pvm/Bucky.pvm");
+    let quad = dir.path().join("quad.png");
+    let o = volao(&[
+        "render",
+        path(&file),
+        "--layout",
+        "2x2",
+        "--width",
+        "200",
+        "--height",
+        "160",
+        "-o",
+        path(&quad),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    // The top-right pane: x from 101 to 200, y from 0 to 79 (a 2-pixel gap in the middle).
+    let (x0, w, h) = (101u32, 99u32, 79u32);
+    let alone = dir.path().join("alone.png");
+    let o = volao(&[
+        "render",
+        path(&file),
+        "--width",
+        &w.to_string(),
+        "--height",
+        &h.to_string(),
+        "-o",
+        path(&alone),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let quad = grey_png(&quad).to_rgba8();
+    let alone = grey_png(&alone).to_rgba8();
+    for y in 0..h {
+        for x in 0..w {
+            assert_eq!(
+                quad.get_pixel(x0 + x, y),
+                alone.get_pixel(x, y),
+                "3-D pane at {x},{y}"
+            );
+        }
+    }
+    // The axial pane (0..99 × 0..79) shows the axial slice, 32×32 scaled ×2.47, centred.
+    let slice = dir.path().join("axial.png");
+    let o = volao(&["slice", path(&file), "-o", path(&slice)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let slice = grey_png(&slice).to_luma8();
+    let scale = (99.0f32 / 32.0).min(79.0 / 32.0);
+    let left = (99.0 - 32.0 * scale) / 2.0;
+    for (u, v) in [(5u32, 5u32), (16, 16), (20, 9), (31, 31)] {
+        let (x, y) = (left + (u as f32 + 0.5) * scale, (v as f32 + 0.5) * scale);
+        let p = quad.get_pixel(x as u32, y as u32);
+        let g = slice.get_pixel(u, v)[0];
+        assert_eq!([p[0], p[1], p[2]], [g, g, g], "axial pixel {u},{v}");
+    }
+}

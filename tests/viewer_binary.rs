@@ -147,6 +147,24 @@ fn a_bad_file_exits_with_one_error_line() {
     );
 }
 
+/// Under a working X server but without a usable Vulkan driver, the viewer says what
+/// `volao gpu` says (which driver to install), not that the display is missing.
+#[test]
+fn without_an_adapter_the_viewer_names_the_driver_to_install() {
+    let mut cmd = xvfb_run();
+    cmd.env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+        .arg(env!("CARGO_BIN_EXE_volao"))
+        .args(["view", "--exit-after-frames", "1"]);
+    let (ok, output) = run_bounded(cmd, Duration::from_secs(60));
+    assert!(!ok, "{output}");
+    assert!(
+        output.contains("no usable GPU adapter") && output.contains("mesa-vulkan-drivers"),
+        "{output}"
+    );
+    assert!(!output.contains("needs a display"), "{output}");
+}
+
 /// The scripted clip drag of docs/benchmarks.md (`--bench-clip-drag`, the Engine with
 /// 14-ray CAO) always finishes: without interactive quality (`--target-rate off`: the
 /// images of a moving view at full size), at the default target rate and at one a

@@ -232,7 +232,14 @@ pub fn run(options: ViewerOptions) -> Result<(), AppError> {
             Ok(Box::new(viewer))
         }),
     )
-    .map_err(|e| AppError::Window(e.to_string()))?;
+    .map_err(|e| {
+        // Without a usable adapter eframe fails making the window's surface: say what
+        // `volao gpu` says (which driver to install), not that the display is missing.
+        match crate::gpu::request_device() {
+            Err(gpu) => AppError::Gpu(gpu),
+            Ok(_) => AppError::Window(e.to_string()),
+        }
+    })?;
     let failure = exit_error.lock().ok().and_then(|mut e| e.take());
     match failure {
         Some(message) => Err(AppError::Screenshot(message)),

@@ -20,44 +20,7 @@ use crate::texels::segments::ClassLook;
 use egui::{Color32, Pos2, Rect, Stroke, Vec2, pos2};
 use glam::{DVec3, Vec3};
 
-/// How the central area is divided.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Layout {
-    /// Axial and 3-D above, coronal and sagittal below.
-    #[default]
-    Quad,
-    /// The 3-D view alone.
-    ThreeD,
-    /// The 3-D view large, the three slices stacked beside it.
-    OnePlusThree,
-}
-
-impl Layout {
-    pub const ALL: [Layout; 3] = [Layout::Quad, Layout::ThreeD, Layout::OnePlusThree];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Layout::Quad => "2×2: axial, 3-D, coronal, sagittal",
-            Layout::ThreeD => "3-D only",
-            Layout::OnePlusThree => "1 + 3: 3-D and three slices",
-        }
-    }
-
-    fn next(self) -> Layout {
-        match self {
-            Layout::Quad => Layout::ThreeD,
-            Layout::ThreeD => Layout::OnePlusThree,
-            Layout::OnePlusThree => Layout::Quad,
-        }
-    }
-}
-
-/// One pane of the layout.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Pane {
-    ThreeD,
-    Slice(SliceAxis),
-}
+pub use crate::slice::{Layout, Pane};
 
 /// The colour of each plane (its crosshair line and its pane's name), as Slicer's
 /// red, green and yellow views.
@@ -191,51 +154,17 @@ impl Placed {
 impl SliceViews {
     /// The panes and their rectangles in `rect`.
     pub fn pane_rects(&mut self, rect: Rect, volume_open: bool) -> Vec<(Pane, Rect)> {
-        let gap = 2.0;
-        let rects = if !volume_open || self.layout == Layout::ThreeD {
+        let rects = if !volume_open {
             vec![(Pane::ThreeD, rect)]
-        } else if let Some(p) = self.maximised {
+        } else if let Some(p) = self.maximised.filter(|_| self.layout != Layout::ThreeD) {
             vec![(p, rect)]
         } else {
-            let split = |r: Rect, f: f32, vertical: bool| -> (Rect, Rect) {
-                if vertical {
-                    let x = r.left() + r.width() * f;
-                    (
-                        Rect::from_min_max(r.min, pos2(x - gap / 2.0, r.bottom())),
-                        Rect::from_min_max(pos2(x + gap / 2.0, r.top()), r.max),
-                    )
-                } else {
-                    let y = r.top() + r.height() * f;
-                    (
-                        Rect::from_min_max(r.min, pos2(r.right(), y - gap / 2.0)),
-                        Rect::from_min_max(pos2(r.left(), y + gap / 2.0), r.max),
-                    )
-                }
-            };
-            match self.layout {
-                Layout::Quad => {
-                    let (top, bottom) = split(rect, 0.5, false);
-                    let (tl, tr) = split(top, 0.5, true);
-                    let (bl, br) = split(bottom, 0.5, true);
-                    vec![
-                        (Pane::Slice(SliceAxis::Axial), tl),
-                        (Pane::ThreeD, tr),
-                        (Pane::Slice(SliceAxis::Coronal), bl),
-                        (Pane::Slice(SliceAxis::Sagittal), br),
-                    ]
-                }
-                _ => {
-                    let (big, side) = split(rect, 0.7, true);
-                    let (a, rest) = split(side, 1.0 / 3.0, false);
-                    let (c, s) = split(rest, 0.5, false);
-                    vec![
-                        (Pane::ThreeD, big),
-                        (Pane::Slice(SliceAxis::Axial), a),
-                        (Pane::Slice(SliceAxis::Coronal), c),
-                        (Pane::Slice(SliceAxis::Sagittal), s),
-                    ]
-                }
-            }
+            let r = [rect.left(), rect.top(), rect.right(), rect.bottom()];
+            self.layout
+                .panes(r)
+                .into_iter()
+                .map(|(p, [l, t, rr, b])| (p, Rect::from_min_max(pos2(l, t), pos2(rr, b))))
+                .collect()
         };
         self.last_rects = rects.clone();
         rects
@@ -402,12 +331,12 @@ impl SliceViews {
         );
         let painter = ui.painter_at(rect);
         painter.rect_filled(rect, 0.0, Color32::BLACK);
-        let scale = (rect.width() / w as f32)
-            .min(rect.height() / h as f32)
-            .max(1e-3);
-        let size = Vec2::new(w as f32, h as f32) * scale;
+        let ([l, t, r, b], scale) = crate::slice::fit(
+            [w, h],
+            [rect.left(), rect.top(), rect.right(), rect.bottom()],
+        );
         let placed = Placed {
-            rect: Rect::from_center_size(rect.center(), size),
+            rect: Rect::from_min_max(pos2(l, t), pos2(r, b)),
             scale,
         };
         if let Some((_, texture)) = &self.images[slot] {

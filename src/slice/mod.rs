@@ -83,6 +83,176 @@ impl SliceAxis {
     }
 }
 
+/// How the central area is divided.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Layout {
+    /// Axial and 3-D above, coronal and sagittal below.
+    #[default]
+    Quad,
+    /// The 3-D view alone.
+    ThreeD,
+    /// The 3-D view large, the three slices stacked beside it.
+    OnePlusThree,
+}
+
+impl Layout {
+    pub const ALL: [Layout; 3] = [Layout::Quad, Layout::ThreeD, Layout::OnePlusThree];
+
+    /// Parses `2x2`, `3d` or `1+3`.
+    pub fn parse(s: &str) -> Result<Layout, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "2x2" | "quad" => Ok(Layout::Quad),
+            "3d" => Ok(Layout::ThreeD),
+            "1+3" => Ok(Layout::OnePlusThree),
+            _ => Err(format!("{s:?}: expected 2x2, 3d or 1+3")),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Layout::Quad => "2×2: axial, 3-D, coronal, sagittal",
+            Layout::ThreeD => "3-D only",
+            Layout::OnePlusThree => "1 + 3: 3-D and three slices",
+        }
+    }
+
+    /// The next layout (the viewer's Ctrl+L).
+    pub fn next(self) -> Layout {
+        match self {
+            Layout::Quad => Layout::ThreeD,
+            Layout::ThreeD => Layout::OnePlusThree,
+            Layout::OnePlusThree => Layout::Quad,
+        }
+    }
+}
+
+/// One pane of a layout.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pane {
+    ThreeD,
+    Slice(SliceAxis),
+}
+
+/// Gap between panes (points or pixels).
+pub const PANE_GAP: f32 = 2.0;
+
+impl Layout {
+    /// The panes of a `[left, top, right, bottom]` rectangle and theirs.
+    pub fn panes(self, r: [f32; 4]) -> Vec<(Pane, [f32; 4])> {
+        let g = PANE_GAP / 2.0;
+        let columns = |r: [f32; 4], f: f32| {
+            let x = r[0] + (r[2] - r[0]) * f;
+            ([r[0], r[1], x - g, r[3]], [x + g, r[1], r[2], r[3]])
+        };
+        let rows = |r: [f32; 4], f: f32| {
+            let y = r[1] + (r[3] - r[1]) * f;
+            ([r[0], r[1], r[2], y - g], [r[0], y + g, r[2], r[3]])
+        };
+        match self {
+            Layout::ThreeD => vec![(Pane::ThreeD, r)],
+            Layout::Quad => {
+                let (top, bottom) = rows(r, 0.5);
+                let (tl, tr) = columns(top, 0.5);
+                let (bl, br) = columns(bottom, 0.5);
+                vec![
+                    (Pane::Slice(SliceAxis::Axial), tl),
+                    (Pane::ThreeD, tr),
+                    (Pane::Slice(SliceAxis::Coronal), bl),
+                    (Pane::Slice(SliceAxis::Sagittal), br),
+                ]
+            }
+            Layout::OnePlusThree => {
+                let (big, side) = columns(r, 0.7);
+                let (a, rest) = rows(side, 1.0 / 3.0);
+                let (c, s) = rows(rest, 0.5);
+                vec![
+                    (Pane::ThreeD, big),
+                    (Pane::Slice(SliceAxis::Axial), a),
+                    (Pane::Slice(SliceAxis::Coronal), c),
+                    (Pane::Slice(SliceAxis::Sagittal), s),
+                ]
+            }
+        }
+    }
+}
+
+/// Where a slice image of `size` pixels sits in a pane `[left, top, right, bottom]`:
+/// scaled to fit (square pixels) and centred; returns its rectangle and the scale.
+pub fn fit(size: [usize; 2], pane: [f32; 4]) -> ([f32; 4], f32) {
+    let (w, h) = (pane[2] - pane[0], pane[3] - pane[1]);
+    let scale = (w / size[0] as f32).min(h / size[1] as f32).max(1e-3);
+    let (iw, ih) = (size[0] as f32 * scale, size[1] as f32 * scale);
+    let (x, y) = (pane[0] + (w - iw) / 2.0, pane[1] + (h - ih) / 2.0);
+    ([x, y, x + iw, y + ih], scale)
+}
+
+/// The panes of `layout` in one `width`×`height` image, as the viewer lays them out:
+/// `three_d` (rendered at its pane's size, [`Layout::three_d_size`]) and the slices
+/// (`(axis, [w, h], rgb)`) scaled to fit their panes with the nearest pixel, on black.
+pub fn compose(
+    layout: Layout,
+    width: u32,
+    height: u32,
+    three_d: &crate::render::Image,
+    slices: &[(SliceAxis, [usize; 2], Vec<u8>)],
+) -> crate::render::Image {
+    let mut out = crate::render::Image {
+        width,
+        height,
+        pixels: vec![[0, 0, 0, 255]; (width * height) as usize],
+    };
+    for (pane, r) in layout.panes([0.0, 0.0, width as f32, height as f32]) {
+        let [x0, y0, x1, y1] = pixel_rect(r);
+        match pane {
+            Pane::ThreeD => {
+                for y in y0..y1.min(y0 + three_d.height) {
+                    for x in x0..x1.min(x0 + three_d.width) {
+                        out.pixels[(y * width + x) as usize] =
+                            three_d.pixels[((y - y0) * three_d.width + (x - x0)) as usize];
+                    }
+                }
+            }
+            Pane::Slice(axis) => {
+                let Some((_, size, rgb)) = slices.iter().find(|(a, _, _)| *a == axis) else {
+                    continue;
+                };
+                let (img, scale) = fit(*size, [x0 as f32, y0 as f32, x1 as f32, y1 as f32]);
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        let u = ((x as f32 + 0.5 - img[0]) / scale).floor();
+                        let v = ((y as f32 + 0.5 - img[1]) / scale).floor();
+                        if u < 0.0 || v < 0.0 || u >= size[0] as f32 || v >= size[1] as f32 {
+                            continue;
+                        }
+                        let i = 3 * (v as usize * size[0] + u as usize);
+                        out.pixels[(y * width + x) as usize] =
+                            [rgb[i], rgb[i + 1], rgb[i + 2], 255];
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A pane's whole pixels: `[x0, y0, x1, y1)`.
+fn pixel_rect(r: [f32; 4]) -> [u32; 4] {
+    r.map(|v| v.round().max(0.0) as u32)
+}
+
+impl Layout {
+    /// The 3-D pane's size in whole pixels in a `width`×`height` image.
+    pub fn three_d_size(self, width: u32, height: u32) -> (u32, u32) {
+        self.panes([0.0, 0.0, width as f32, height as f32])
+            .into_iter()
+            .find(|(p, _)| *p == Pane::ThreeD)
+            .map_or((width, height), |(_, r)| {
+                let [x0, y0, x1, y1] = pixel_rect(r);
+                ((x1 - x0).max(1), (y1 - y0).max(1))
+            })
+    }
+}
+
 /// Which side of the patient is on the image's left.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

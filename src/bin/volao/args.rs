@@ -70,8 +70,8 @@ pub struct ViewArgs {
     pub no_skipping: bool,
     /// The panes: 2x2 (axial, 3-D, coronal, sagittal), 3d (the 3-D view alone) or 1+3;
     /// default: 2x2 for a file, 3d for the demo.
-    #[arg(long, value_parser = parse_layout)]
-    pub layout: Option<volao::app::slices::Layout>,
+    #[arg(long, value_parser = volao::slice::Layout::parse)]
+    pub layout: Option<volao::slice::Layout>,
     #[command(flatten)]
     pub load: LoadArgs,
     /// A segmentation to show with the volume (the Segments panel styles it).
@@ -175,16 +175,6 @@ pub struct SliceArgs {
     pub load: LoadArgs,
 }
 
-pub fn parse_layout(s: &str) -> Result<volao::app::slices::Layout, String> {
-    use volao::app::slices::Layout;
-    match s.to_ascii_lowercase().as_str() {
-        "2x2" | "quad" => Ok(Layout::Quad),
-        "3d" => Ok(Layout::ThreeD),
-        "1+3" => Ok(Layout::OnePlusThree),
-        _ => Err(format!("{s:?}: expected 2x2, 3d or 1+3")),
-    }
-}
-
 /// A point `X,Y,Z` in mm.
 pub fn parse_point(s: &str) -> Result<[f64; 3], String> {
     let v: Vec<f64> = numbers(s)?;
@@ -219,6 +209,14 @@ pub struct RenderArgs {
     /// Output PNG.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// The viewer's panes in one image: 2x2 (axial, 3-D, coronal, sagittal) or 1+3, the
+    /// slices through the volume's centre (or --at) with the transfer function's
+    /// window; 3d (the default) is the 3-D view alone.
+    #[arg(long, value_parser = volao::slice::Layout::parse)]
+    pub layout: Option<volao::slice::Layout>,
+    /// With --layout: the slices through this point, in RAS millimetres.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true, requires = "layout")]
+    pub at: Option<[f64; 3]>,
     #[arg(long)]
     pub width: Option<u32>,
     #[arg(long)]

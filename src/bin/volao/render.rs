@@ -41,7 +41,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .collect::<Result<Vec<_>, _>>()?;
 
     let start = std::time::Instant::now();
-    let out = render_scene(&scene, &volume, &meshes, segments.as_ref(), !args.cpu)?;
+    let layout = args.layout.unwrap_or(volao::slice::Layout::ThreeD);
+    let (full_w, full_h) = (scene.width, scene.height);
+    let mut pane = scene.clone();
+    (pane.width, pane.height) = layout.three_d_size(full_w, full_h);
+    let mut out = render_scene(&pane, &volume, &meshes, segments.as_ref(), !args.cpu)?;
+    if layout != volao::slice::Layout::ThreeD {
+        out.image = with_slices(layout, &scene, &volume, args.at, &out.image);
+    }
     for e in &out.clip_errors {
         eprintln!("warning: {e} (rendered without it)");
     }
@@ -73,6 +80,37 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         println!("scene: {}", path.display());
     }
     Ok(())
+}
+
+/// `image` (the 3-D view) with the three slices through `at` (default: the volume's
+/// centre) in `layout`'s panes of the scene's size, greys in the transfer function's
+/// window.
+fn with_slices(
+    layout: volao::slice::Layout,
+    scene: &Scene,
+    volume: &Volume,
+    at: Option<[f64; 3]>,
+    image: &volao::render::Image,
+) -> volao::render::Image {
+    use volao::slice::{Convention, Plane, Sampling, SliceAxis, SliceGeometry};
+    let geometry = SliceGeometry::new(volume, Plane::Patient);
+    let at = at.map_or_else(|| geometry.centre(), glam::DVec3::from_array);
+    let (window, level) = scene.transfer_function.window_level();
+    let slices: Vec<_> = SliceAxis::ALL
+        .into_iter()
+        .map(|axis| {
+            let index = geometry.index_at(axis, at);
+            let s = geometry.cut(
+                volume,
+                axis,
+                Convention::Radiological,
+                index,
+                Sampling::Nearest,
+            );
+            (axis, [s.width, s.height], s.rgb(window, level, None))
+        })
+        .collect();
+    volao::slice::compose(layout, scene.width, scene.height, image, &slices)
 }
 
 /// The scene of a plain volume file (its volume is set by the caller): the TF preset for
