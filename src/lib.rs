@@ -48,6 +48,10 @@
 //!    (one fetch per gradient instead of six); [`render::offscreen`] does one frame for the CLI and tests on the
 //!    device it is given. [`render::reuse`] says where clip shapes that moved can change
 //!    an image, so a frame of the same view casts only the rays that pass there.
+//!    [`slice`] cuts axial, coronal and sagittal slices of the volume in patient
+//!    orientation (a grid on the RAS axes over any affine, radiological by default) for
+//!    the viewer's slice panes, `volao slice` and `volao render --layout`, and picks the
+//!    first visible surface under a point of the 3-D view.
 //! 7. [`app`] is the eframe viewer: the same texels, stages and ray caster behind a UI
 //!    (the viewer owns its viewport's GPU work; egui's callback resources hold only the
 //!    draw pipelines, and each frame's paint callback carries the image to show)
@@ -59,7 +63,8 @@
 //!    dragged shape's images read CAO's `V_PAO` while its `V_AO` is updated (never a
 //!    `V_AO` of another pose), each starting as a copy of the last image of its view and
 //!    casting only the rays near what changed, at most at the interactive target rate
-//!    while the update runs, and at rest the image waits for the exact one.
+//!    while the update runs, and at rest the image waits for the exact one. Files open
+//!    on the 2×2 layout (`app::slices`: axial, 3-D, coronal, sagittal, one crosshair).
 //!
 //! The command-line interface and the benchmarks live in the binary (`src/bin/volao`);
 //! [`process`] holds the few process-wide settings it makes at start.

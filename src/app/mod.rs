@@ -691,7 +691,8 @@ impl Viewer {
         let slot = egui::CentralPanel::no_frame()
             .show(ui, |ui| {
                 let rect = ui.available_rect_before_wrap();
-                let open = self.opened.doc.is_some() && !bench;
+                // The benchmark shows the 3-D view alone unless a layout was asked for.
+                let open = self.opened.doc.is_some() && (!bench || self.options.layout.is_some());
                 let mut slot = None;
                 for (pane, r) in self.chrome.slices.pane_rects(rect, open) {
                     match pane {

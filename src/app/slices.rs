@@ -59,7 +59,7 @@ pub struct SliceViews {
     pub show_markers: bool,
     geometry: Option<(usize, Plane, SliceGeometry)>,
     images: [Option<(Key, egui::TextureHandle)>; 3],
-    sections: [Option<(Key, Vec<[Pos2; 2]>)>; 3],
+    sections: [Option<(SectionKey, Vec<[Pos2; 2]>)>; 3],
     drag: Option<Drag>,
     /// Scroll not yet turned into pages.
     wheel: f32,
@@ -113,6 +113,15 @@ struct Key {
     plane: Plane,
     window: (f64, f64),
     labels: Option<(Vec<ClassLook>, bool, u32)>,
+}
+
+/// What a slice's shape outlines depend on: they are traced again when this changes.
+#[derive(Debug, Clone, PartialEq)]
+struct SectionKey {
+    volume: usize,
+    index: usize,
+    convention: Convention,
+    plane: Plane,
     shapes: Vec<ClipShape>,
 }
 
@@ -279,6 +288,12 @@ impl SliceViews {
             labels: looks
                 .clone()
                 .map(|l| (l, self.outline, self.label_opacity.to_bits())),
+        };
+        let section_key = SectionKey {
+            volume: key.volume,
+            index,
+            convention: self.convention,
+            plane: self.plane,
             shapes: doc.clip_shapes.clone(),
         };
         let [w, h] = geometry.image_size(axis);
@@ -312,7 +327,10 @@ impl SliceViews {
             self.images[slot] = Some((key.clone(), texture));
         }
         // The shapes' cross-sections, traced again when the slice or a shape changes.
-        if self.sections[slot].as_ref().is_none_or(|(k, _)| *k != key) {
+        if self.sections[slot]
+            .as_ref()
+            .is_none_or(|(k, _)| *k != section_key)
+        {
             let segments = cross_sections(
                 &geometry,
                 &doc.volume,
@@ -321,7 +339,7 @@ impl SliceViews {
                 index,
                 &doc.clip_shapes,
             );
-            self.sections[slot] = Some((key, segments));
+            self.sections[slot] = Some((section_key, segments));
         }
 
         let response = ui.interact(
