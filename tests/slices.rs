@@ -199,3 +199,39 @@ fn render_layout_holds_the_3d_view_and_the_slices() {
         assert_eq!([p[0], p[1], p[2]], [g, g, g], "axial pixel {u},{v}");
     }
 }
+
+/// `volao render --annotate` draws the orientation marker in the bottom-left corner and
+/// leaves the rest of the image as without it.
+#[test]
+fn render_annotate_draws_only_the_orientation_marker() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = data("pvm/Bucky.pvm");
+    let (plain, marked) = (dir.path().join("plain.png"), dir.path().join("marked.png"));
+    for (out, extra) in [(&plain, None), (&marked, Some("--annotate"))] {
+        let mut args = vec![
+            "render",
+            path(&file),
+            "--width",
+            "160",
+            "--height",
+            "120",
+            "-o",
+            path(out),
+        ];
+        args.extend(extra);
+        let o = volao(&args);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+    }
+    let (plain, marked) = (grey_png(&plain).to_rgba8(), grey_png(&marked).to_rgba8());
+    let mut changed = 0;
+    for (x, y, p) in marked.enumerate_pixels() {
+        if p != plain.get_pixel(x, y) {
+            changed += 1;
+            assert!(
+                x < 60 && y > 60,
+                "changed pixel at {x},{y} outside the corner"
+            );
+        }
+    }
+    assert!(changed > 30, "marker drawn: {changed} pixels");
+}

@@ -77,14 +77,7 @@ pub fn reset(camera: &mut Camera) {
 
 /// Screen right and up as world directions (the camera's view-matrix rows).
 pub fn screen_axes(camera: &Camera) -> (Vec3, Vec3) {
-    let back = camera.backward();
-    let up0 = if back.z.abs() > 0.999 {
-        Vec3::Y
-    } else {
-        Vec3::Z
-    };
-    let right = up0.cross(back).normalize();
-    (right, back.cross(right))
+    camera.screen_axes()
 }
 
 /// Orbits by a mouse movement of `delta` points (x right, y down): the volume turns with

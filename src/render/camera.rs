@@ -50,6 +50,18 @@ impl Camera {
         Vec3::new(az.sin() * el.cos(), az.cos() * el.cos(), el.sin())
     }
 
+    /// Screen right and up as world directions (the view matrix's rows).
+    pub fn screen_axes(&self) -> (Vec3, Vec3) {
+        let back = self.backward();
+        let up0 = if back.z.abs() > 0.999 {
+            Vec3::Y
+        } else {
+            Vec3::Z
+        };
+        let right = up0.cross(back).normalize();
+        (right, back.cross(right))
+    }
+
     /// Eye position for a volume whose bounding sphere has `radius` mm.
     pub fn eye(&self, radius: f32) -> Vec3 {
         Vec3::from(self.target) + self.backward() * self.distance * radius

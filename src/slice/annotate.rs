@@ -114,6 +114,49 @@ pub fn annotate(rgb: &mut [u8], width: usize, letters: [char; 4], pixel_mm: f64)
     }
 }
 
+/// The orientation marker of a 3-D figure: the R, A and S axes as `camera` sees them,
+/// labelled, in the bottom-left corner of RGB pixels `rgb` (`width` wide).
+pub fn orientation_marker(rgb: &mut [u8], width: usize, camera: &crate::render::Camera) {
+    let height = rgb.len() / 3 / width.max(1);
+    let d = dot(width) as f32;
+    let len = (width as f32 * 0.05).max(16.0);
+    let origin = (6.0 * d + len, height as f32 - 6.0 * d - len);
+    let (right, up) = camera.screen_axes();
+    let back = camera.backward();
+    let mut axes = [
+        (glam::Vec3::X, 'R', [230u8, 90, 80]),
+        (glam::Vec3::Y, 'A', [110, 210, 100]),
+        (glam::Vec3::Z, 'S', [100, 150, 255]),
+    ];
+    // Far axes first, so near ones draw over them.
+    axes.sort_by(|a, b| a.0.dot(back).total_cmp(&b.0.dot(back)));
+    for (axis, letter, color) in axes {
+        let (dx, dy) = (axis.dot(right) * len, -axis.dot(up) * len);
+        let steps = (dx.abs().max(dy.abs()) as usize).max(1);
+        for k in 0..=steps {
+            let t = k as f32 / steps as f32;
+            let (x, y) = (origin.0 + dx * t, origin.1 + dy * t);
+            for oy in 0..d as usize + 1 {
+                for ox in 0..d as usize + 1 {
+                    let (px, py) = (x as usize + ox, y as usize + oy);
+                    if px < width && py < height {
+                        let i = 3 * (py * width + px);
+                        rgb[i..i + 3].copy_from_slice(&color);
+                    }
+                }
+            }
+        }
+        let [tw, th] = text_size(width, "A");
+        draw_text(
+            rgb,
+            width,
+            (origin.0 + dx * 1.45) as isize - tw / 2,
+            (origin.1 + dy * 1.45) as isize - th / 2,
+            &letter.to_string(),
+        );
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -23,7 +23,7 @@
 mod annotate;
 pub mod pick;
 
-pub use annotate::{annotate, draw_text};
+pub use annotate::{annotate, draw_text, orientation_marker};
 
 use crate::texels::segments::ClassLook;
 use crate::volume::Volume;

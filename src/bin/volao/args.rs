@@ -214,6 +214,11 @@ pub struct RenderArgs {
     /// window; 3d (the default) is the 3-D view alone.
     #[arg(long, value_parser = volao::slice::Layout::parse)]
     pub layout: Option<volao::slice::Layout>,
+    /// An orientation marker (R, A, S axes) in the 3-D view's corner, and with --layout
+    /// orientation letters and scale bars on the slices (off by default: pixels stay
+    /// comparable).
+    #[arg(long)]
+    pub annotate: bool,
     /// With --layout: the slices through this point, in RAS millimetres.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true, requires = "layout")]
     pub at: Option<[f64; 3]>,

@@ -46,8 +46,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let mut pane = scene.clone();
     (pane.width, pane.height) = layout.three_d_size(full_w, full_h);
     let mut out = render_scene(&pane, &volume, &meshes, segments.as_ref(), !args.cpu)?;
+    if args.annotate {
+        annotate_3d(&mut out.image, &scene.camera);
+    }
     if layout != volao::slice::Layout::ThreeD {
-        out.image = with_slices(layout, &scene, &volume, args.at, &out.image);
+        out.image = with_slices(layout, &scene, &volume, args.at, args.annotate, &out.image);
     }
     for e in &out.clip_errors {
         eprintln!("warning: {e} (rendered without it)");
@@ -90,6 +93,7 @@ fn with_slices(
     scene: &Scene,
     volume: &Volume,
     at: Option<[f64; 3]>,
+    annotate: bool,
     image: &volao::render::Image,
 ) -> volao::render::Image {
     use volao::slice::{Convention, Plane, Sampling, SliceAxis, SliceGeometry};
@@ -107,10 +111,33 @@ fn with_slices(
                 index,
                 Sampling::Nearest,
             );
-            (axis, [s.width, s.height], s.rgb(window, level, None))
+            let mut rgb = s.rgb(window, level, None);
+            if annotate {
+                let letters = geometry.edge_letters(axis, Convention::Radiological);
+                volao::slice::annotate(&mut rgb, s.width, letters, geometry.pixel_mm(axis));
+            }
+            (axis, [s.width, s.height], rgb)
         })
         .collect();
     volao::slice::compose(layout, scene.width, scene.height, image, &slices)
+}
+
+/// Draws the orientation marker of `camera` into the 3-D view `image` (opaque where
+/// drawn, so it shows on a transparent background too).
+fn annotate_3d(image: &mut volao::render::Image, camera: &volao::render::Camera) {
+    let before: Vec<u8> = image
+        .pixels
+        .iter()
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let mut rgb = before.clone();
+    volao::slice::orientation_marker(&mut rgb, image.width as usize, camera);
+    for (i, p) in image.pixels.iter_mut().enumerate() {
+        let new = &rgb[3 * i..3 * i + 3];
+        if new != &before[3 * i..3 * i + 3] {
+            *p = [new[0], new[1], new[2], 255];
+        }
+    }
 }
 
 /// The scene of a plain volume file (its volume is set by the caller): the TF preset for
