@@ -65,29 +65,48 @@ fn estimate(probe: Duration, probe_voxels: usize, voxels: usize, rays: usize) ->
     probe.as_secs_f64() * (voxels as f64 / probe_voxels as f64) * (rays as f64 / 6.0)
 }
 
+/// The ray sets the first screen may use, most rays first.
+const RAY_SETS: [RaySet; 4] = [
+    RaySet::FiftyFour,
+    RaySet::TwentySix,
+    RaySet::Fourteen,
+    RaySet::Six,
+];
+
+/// The most rays whose estimated precomputation (from the probe's time on
+/// `probe_voxels` voxels, for `voxels`) `fits`, with that estimate.
+fn most_rays(
+    probe: Duration,
+    probe_voxels: usize,
+    voxels: usize,
+    fits: impl Fn(f64) -> bool,
+) -> Option<(RaySet, f64)> {
+    RAY_SETS
+        .into_iter()
+        .map(|rays| {
+            let k = rays.directions().len();
+            (rays, estimate(probe, probe_voxels, voxels, k))
+        })
+        .find(|&(_, pre)| fits(pre))
+}
+
 /// Picks the AO for the demo from the probe's time (6-ray LAO on `probe_voxels` voxels)
 /// for a volume of `voxels` voxels.
 pub fn choose(probe: Duration, probe_voxels: usize, voxels: usize) -> (AoSettings, String) {
     let mut ao = AoSettings::default();
-    for rays in [
-        RaySet::FiftyFour,
-        RaySet::TwentySix,
-        RaySet::Fourteen,
-        RaySet::Six,
-    ] {
-        let k = rays.directions().len();
-        let pre = estimate(probe, probe_voxels, voxels, k);
-        let frame = pre * FRAME_SHARE;
-        if pre <= PRECOMPUTE_BUDGET.as_secs_f64() && frame <= FRAME_BUDGET.as_secs_f64() {
-            ao.method = AoMethod::Cao;
-            ao.rays = rays;
-            let note = format!(
-                "(demo: {k} rays, the most this adapter affords: ≈ {pre:.1} s, then \
-                 ≈ {:.0} ms a dragged frame)",
-                frame * 1e3
-            );
-            return (ao, note);
-        }
+    let budget = |pre: f64| {
+        pre <= PRECOMPUTE_BUDGET.as_secs_f64() && pre * FRAME_SHARE <= FRAME_BUDGET.as_secs_f64()
+    };
+    if let Some((rays, pre)) = most_rays(probe, probe_voxels, voxels, budget) {
+        ao.method = AoMethod::Cao;
+        ao.rays = rays;
+        let note = format!(
+            "(demo: {} rays, the most this adapter affords: ≈ {pre:.1} s, then \
+             ≈ {:.0} ms a dragged frame)",
+            rays.directions().len(),
+            pre * FRAME_SHARE * 1e3
+        );
+        return (ao, note);
     }
     let pre = estimate(probe, probe_voxels, voxels, 6);
     ao.method = AoMethod::Gauss;
@@ -149,24 +168,15 @@ pub fn choose_lao(probe: Option<(Duration, usize)>, voxels: usize) -> (AoSetting
         ao.method = AoMethod::Gauss;
         return (ao, "(the AO probe failed, so the fast ambient map)".into());
     };
-    for rays in [
-        RaySet::FiftyFour,
-        RaySet::TwentySix,
-        RaySet::Fourteen,
-        RaySet::Six,
-    ] {
+    let fits = |pre: f64| pre <= PRECOMPUTE_BUDGET.as_secs_f64();
+    if let Some((rays, pre)) = most_rays(t, probe_voxels, voxels, fits) {
+        ao.method = AoMethod::Lao;
+        ao.rays = rays;
         let k = rays.directions().len();
-        let pre = estimate(t, probe_voxels, voxels, k);
-        if pre <= PRECOMPUTE_BUDGET.as_secs_f64() {
-            ao.method = AoMethod::Lao;
-            ao.rays = rays;
-            return (
-                ao,
-                format!(
-                    "(opened with {k}-ray Local AO, the most this adapter affords: ≈ {pre:.1} s)"
-                ),
-            );
-        }
+        return (
+            ao,
+            format!("(opened with {k}-ray Local AO, the most this adapter affords: ≈ {pre:.1} s)"),
+        );
     }
     ao.method = AoMethod::Gauss;
     let pre = estimate(t, probe_voxels, voxels, 6);
@@ -223,9 +233,11 @@ mod tests {
         // A file: LAO with the most rays within the budget.
         let (ao, _) = choose_lao(Some((Duration::from_millis(1), p)), n);
         assert_eq!((ao.method, ao.rays), (AoMethod::Lao, RaySet::FiftyFour));
-        let (ao, _) = choose_lao(Some((Duration::from_millis(20), p)), n);
+        // 25 ms: 14 rays ≈ 25·64·14/6 ms = 3.7 s, over the budget; 6 rays 1.6 s.
+        let (ao, _) = choose_lao(Some((Duration::from_millis(25), p)), n);
         assert_eq!((ao.method, ao.rays), (AoMethod::Lao, RaySet::Six));
-        let (ao, note) = choose_lao(Some((Duration::from_millis(40), p)), n);
+        // 60 ms: even 6 rays take 60·64 ms = 3.8 s.
+        let (ao, note) = choose_lao(Some((Duration::from_millis(60), p)), n);
         assert_eq!(ao.method, AoMethod::Gauss);
         assert!(note.contains("ambient map"), "{note}");
         // Lavapipe's 17–45 ms: not even 6 rays.

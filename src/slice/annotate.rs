@@ -1,24 +1,26 @@
 //! What `--annotate` draws on a figure: orientation letters on a slice's edges and a
 //! scale bar, in a small built-in bitmap font (no font files, the same pixels everywhere).
 
-/// 5×7 glyphs, one row per entry, most significant of five bits on the left.
+/// The 5×7 font: each glyph's character, then its seven rows as two hex digits each
+/// (five bits, the most significant on the left).
+const FONT: &str = "A0E11111F111111 I0E04040404040E L1010101010101F P1E11111E101010 \
+                    R1E11111E141211 S0F10100E01011E c00000E1010110E m00001A15151111 \
+                    00E11131519110E 1040C040404040E 20E11010204081F 51F101E0101110E";
+
+/// A glyph's seven rows (` ` is blank), or `None` for a character the font lacks.
 fn glyph(c: char) -> Option<[u8; 7]> {
-    Some(match c {
-        'A' => [0x0E, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11],
-        'I' => [0x0E, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E],
-        'L' => [0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1F],
-        'P' => [0x1E, 0x11, 0x11, 0x1E, 0x10, 0x10, 0x10],
-        'R' => [0x1E, 0x11, 0x11, 0x1E, 0x14, 0x12, 0x11],
-        'S' => [0x0F, 0x10, 0x10, 0x0E, 0x01, 0x01, 0x1E],
-        'c' => [0x00, 0x00, 0x0E, 0x10, 0x10, 0x11, 0x0E],
-        'm' => [0x00, 0x00, 0x1A, 0x15, 0x15, 0x11, 0x11],
-        '0' => [0x0E, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0E],
-        '1' => [0x04, 0x0C, 0x04, 0x04, 0x04, 0x04, 0x0E],
-        '2' => [0x0E, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1F],
-        '5' => [0x1F, 0x10, 0x1E, 0x01, 0x01, 0x11, 0x0E],
-        ' ' => [0; 7],
-        _ => return None,
-    })
+    if c == ' ' {
+        return Some([0; 7]);
+    }
+    let rows = FONT
+        .split_whitespace()
+        .find_map(|g| g.strip_prefix(c))
+        .filter(|rows| rows.len() == 14)?;
+    let mut out = [0u8; 7];
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = u8::from_str_radix(&rows[2 * i..2 * i + 2], 16).ok()?;
+    }
+    Some(out)
 }
 
 /// Pixel size of one font dot for an image `width` wide.
@@ -172,6 +174,8 @@ mod tests {
         let c = 3 * (h / 2 * w + w / 2);
         assert_eq!(rgb[c], 100);
         // A 20 mm bar at 1 mm/pixel fits a fifth of 128 px: "2 cm".
-        assert!(glyph('c').is_some() && glyph('2').is_some());
+        assert_eq!(glyph('2'), Some([0x0E, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1F]));
+        assert_eq!(glyph('A'), Some([0x0E, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11]));
+        assert!(glyph('c').is_some() && glyph('Q').is_none());
     }
 }
