@@ -768,3 +768,55 @@ fn bench_cao_prints_one_json_object_per_method_with_no_differing_pixels() {
         assert!(j["mean_frame_ms"].as_f64().is_some_and(|t| t > 0.0), "{j}");
     }
 }
+
+/// The average projection of the cranium CT with its bone window was black (every ray
+/// is mostly air, its mean far below the window): it now gets a window that shows the
+/// data, and says so; MinIP says why it is dark.
+#[test]
+fn projections_choose_a_window_that_shows_the_data() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ct = data("nrrd/cranium-ct.nrrd");
+    let out = dir.path().join("average.png");
+    let o = volao(&[
+        "render",
+        ct.to_str().expect("utf-8 path"),
+        "--mode",
+        "average",
+        "--width",
+        "96",
+        "--height",
+        "96",
+        "-o",
+        out.to_str().expect("utf-8 path"),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("note: average: the transfer function's window"),
+        "{}",
+        text(&o.stderr)
+    );
+    let img = image::open(&out).expect("png").to_luma8();
+    let bright = img.pixels().filter(|p| p[0] > 64).count();
+    assert!(
+        bright > 96 * 96 / 10,
+        "the average shows the head: {bright} bright pixels"
+    );
+    let o = volao(&[
+        "render",
+        ct.to_str().expect("utf-8 path"),
+        "--mode",
+        "minip",
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "-o",
+        out.to_str().expect("utf-8 path"),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("note: MinIP: rays through the surroundings"),
+        "{}",
+        text(&o.stderr)
+    );
+}

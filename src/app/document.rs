@@ -187,6 +187,13 @@ impl Document {
             Light::Directional { direction } => direction,
             Light::Headlight => self.camera.backward().to_array(),
         };
+        // As `volao render` does: a window for the average where the TF's shows nothing.
+        if s.projection_window.is_none()
+            && s.mode == crate::render::RenderMode::Average
+            && let Some((w, _)) = crate::render::readable_window(s.mode, &self.tf, &self.stats)
+        {
+            s.projection_window = Some(w);
+        }
         if self.ao_only {
             // The ambient term alone: C_TF · A_s with A_s = 1 − s·(1 − A).
             s.ambient = 1.0;

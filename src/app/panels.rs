@@ -266,9 +266,13 @@ impl Viewer {
             });
         egui::CollapsingHeader::new("Rendering").show(ui, |ui| {
             let tf_iso = doc.view_tf().half_opacity_value().unwrap_or(0.0);
+            let readable = crate::render::readable_window(doc.render.mode, &doc.tf, &doc.stats);
             let r = &mut doc.render;
             ui.add(ao_panel::slider(&mut r.step_voxels, 0.1..=2.0).text("Step (voxels)"));
             mode_controls(ui, &mut r.mode, tf_iso);
+            if let Some((_, note)) = readable {
+                ui.weak(note);
+            }
             ui.horizontal(|ui| {
                 ui.label("Shading");
                 ui.selectable_value(&mut r.shading, Shading::Phong, "Phong");

@@ -252,6 +252,11 @@ pub struct RenderSettings {
     /// Draw the clip shapes as surfaces of this straight RGBA (A < 1: translucent).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub clip_surface: Option<[f32; 4]>,
+    /// Greys of the projections (MIP, MinIP, average) over this `[lo, hi]` (data units)
+    /// instead of the transfer function's window ([`readable_window`] picks one where
+    /// that window would show nothing).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub projection_window: Option<[f64; 2]>,
 }
 
 impl Default for RenderSettings {
@@ -274,7 +279,49 @@ impl Default for RenderSettings {
             light_direction: DEFAULT_LIGHT,
             opacity_modulation: None,
             clip_surface: None,
+            projection_window: None,
         }
+    }
+}
+
+/// A window for `mode`'s greys where the transfer function's would show nothing, and a
+/// note saying so: the average of the rays lies near the data's mean, so when the
+/// window misses the mean (the cranium's bone window: every ray is mostly air) the greys
+/// span from the minimum to as far above the mean. MinIP keeps the window (every ray
+/// through a whole scan meets its surroundings: look inside a probe shape) and says so.
+pub fn readable_window(
+    mode: RenderMode,
+    tf: &crate::tf::TransferFunction,
+    stats: &crate::volume::Stats,
+) -> Option<([f64; 2], String)> {
+    let (w, l) = tf.window_level();
+    let (lo, hi) = (l - w / 2.0, l + w / 2.0);
+    let fmt = |v: f64| format!("{v:.0}");
+    match mode {
+        RenderMode::Average if !(lo..=hi).contains(&stats.mean) && stats.max > stats.min => {
+            let top = (2.0 * stats.mean - stats.min).min(stats.max);
+            let note = format!(
+                "average: the transfer function's window ({} to {}) misses the data's mean \
+                 ({}), so the greys span {} to {}",
+                fmt(lo),
+                fmt(hi),
+                fmt(stats.mean),
+                fmt(stats.min),
+                fmt(top)
+            );
+            Some(([stats.min, top], note))
+        }
+        RenderMode::Minip if stats.min < lo => {
+            let note = format!(
+                "MinIP: rays through the surroundings meet {}, below the window ({} to {}): \
+                 they are black; probe with a clip shape inside the data to see it",
+                fmt(stats.min),
+                fmt(lo),
+                fmt(hi)
+            );
+            Some(([lo, hi], note))
+        }
+        _ => None,
     }
 }
 
@@ -411,7 +458,7 @@ impl Frame {
             ],
             image: [self.width, self.height, x0, y0],
             grid: [grid[0] as u32, grid[1] as u32, grid[2] as u32, BLOCK as u32],
-            mode: mode_map(s.mode, texels, lut),
+            mode: mode_map(s.mode, texels, lut, s.projection_window),
             ao: [
                 s.ao_strength,
                 f32::from(u8::from(s.ao_ambient_only)),
@@ -428,13 +475,18 @@ impl Frame {
 }
 
 /// [`RaycastParams::mode`]: with `value = norm · scale + offset`, projections get
-/// `u = (value − lo) / (hi − lo)` over the LUT's window, iso `u = value − iso`.
-fn mode_map(mode: RenderMode, texels: &VolumeTexels, lut: &Lut) -> [f32; 4] {
+/// `u = (value − lo) / (hi − lo)` over `window` (default: the LUT's), iso `u = value − iso`.
+fn mode_map(
+    mode: RenderMode,
+    texels: &VolumeTexels,
+    lut: &Lut,
+    window: Option<[f64; 2]>,
+) -> [f32; 4] {
     let (scale, offset) = (texels.value_scale, texels.value_offset);
     let (a, b) = match mode {
         RenderMode::Iso(value) => (scale, offset - value.unwrap_or(lut.iso)),
         _ => {
-            let [lo, hi] = lut.window;
+            let [lo, hi] = window.unwrap_or(lut.window);
             let span = (hi - lo).max(f64::MIN_POSITIVE);
             (scale / span, (offset - lo) / span)
         }

@@ -33,6 +33,16 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let mut scene = file.unwrap_or_else(|| default_scene(&stats));
     scene.volume = source;
     args.apply_to(&mut scene, &stats)?;
+    if scene.render.projection_window.is_none()
+        && let Some((window, note)) =
+            volao::render::readable_window(scene.render.mode, &scene.transfer_function, &stats)
+    {
+        // MinIP keeps the transfer function's window; the note says why it is dark.
+        if scene.render.mode != volao::render::RenderMode::Minip {
+            scene.render.projection_window = Some(window);
+        }
+        eprintln!("note: {note}");
+    }
     let segments = args.segmentation(&mut scene, &volume)?;
     let meshes = scene
         .meshes
