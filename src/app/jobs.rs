@@ -325,6 +325,35 @@ impl<K: Clone + PartialEq, T: Send + 'static> Keyed<K, T> {
     pub fn start(&mut self, key: K, job: Job<T>) {
         self.job = Some((key, job));
     }
+
+    /// Where it stands for `want`, in a few words (for the viewer's watchdog): on the
+    /// GPU, computing (how far, for how long, and whether for `want`), failed or nothing.
+    pub fn describe(&self, want: Option<&K>) -> String {
+        let state = match (&self.job, want) {
+            (Some((key, job)), _) => format!(
+                "\"{}\" {} for {:.1} s{}",
+                job.label,
+                job.fraction()
+                    .map_or("started".to_owned(), |f| format!("{:.0} %", 100.0 * f)),
+                job.elapsed().as_secs_f64(),
+                if Some(key) == want {
+                    ""
+                } else {
+                    " (for other settings)"
+                }
+            ),
+            (None, None) => "none wanted".to_owned(),
+            (None, Some(_)) if self.ready(want) => "ready".to_owned(),
+            (None, Some(_)) => match self.error(want) {
+                Some(e) => format!("failed: {e}"),
+                None => "wanted, not started".to_owned(),
+            },
+        };
+        match self.on_gpu.is_some() && !self.ready(want) {
+            true => format!("{state}, a stale one on the GPU"),
+            false => state,
+        }
+    }
 }
 
 #[cfg(test)]

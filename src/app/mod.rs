@@ -43,6 +43,7 @@ mod sync;
 pub mod tf_editor;
 mod tiles;
 pub mod viewport;
+mod watchdog;
 
 pub use derived::AoShown;
 pub use document::{
@@ -116,6 +117,8 @@ pub struct Viewer {
     chrome: Chrome,
     shots: Screenshots,
     scripted: Scripted,
+    /// Says where everything stands when the viewer stops moving on (`watchdog.rs`).
+    watchdog: watchdog::Watchdog,
     /// Draw over the 3-D view: the clip shapes' outlines, the crosshair, the orientation
     /// marker.
     pub show_outlines: bool,
@@ -161,10 +164,6 @@ struct Scripted {
     images: Vec<(Instant, f64, u32)>,
     /// When each CAO update's counters came back (one per update completed).
     cao_updates: Vec<Instant>,
-    /// The watchdog: images, and CAO updates, completed when it last saw one more, and
-    /// when; whether it has reported the stall.
-    progress: Option<[(usize, Instant); 2]>,
-    stall_reported: bool,
 }
 
 /// GPU time the viewport's work may take in one UI frame.
@@ -302,6 +301,7 @@ impl Viewer {
             },
             shots: Screenshots::default(),
             scripted: Scripted::default(),
+            watchdog: watchdog::Watchdog::from_env(),
             show_outlines: true,
             gpu_errors,
             exit_error: Arc::default(),
@@ -428,6 +428,19 @@ impl Viewer {
     /// of the same view and kept its other pixels ([`crate::render::reuse`]).
     pub fn viewport_images_reused(&self) -> u64 {
         self.viewport.gpu.frames_reused
+    }
+
+    /// Interactive quality while the view moves (the Rendering panel's, set from a
+    /// script or a test).
+    pub fn set_interactive(&mut self, quality: viewport::Interactive) {
+        self.viewport.interactive = quality;
+    }
+
+    /// Images made while CAO's update was on its way and dropped unfinished because the
+    /// next update began: while shapes only move, none is (each has its own copy of the
+    /// clip maps).
+    pub fn viewport_images_dropped_by_cao(&self) -> u64 {
+        self.viewport.gpu.frames_dropped_by_cao
     }
 
     /// Voxels CAO recomputed in its last frame, in percent (`None` without CAO).
@@ -661,6 +674,7 @@ impl Viewer {
         for e in errors {
             self.toast(format!("GPU error: {e}"), true);
         }
+        self.watch();
 
         if self.options.bench_clip_drag.is_some() {
             self.central_viewport(ui);

@@ -5,20 +5,36 @@
 
 use super::Viewer;
 use super::screenshot::ShotSize;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// CAO updates `--bench-clip-drag` waits for while dragging (besides its images), so that
 /// it can say how far apart they came (four intervals: one slow one moves the mean less).
 const MIN_CAO_UPDATES: usize = 5;
 
-/// A scripted run in which no image and no CAO update has completed for this long says
-/// where the viewport's work stands (on stderr), once.
-const STALL_REPORT: Duration = Duration::from_secs(30);
-
-/// ... and ends with an error after this long, rather than running until it is killed.
-const STALL_FAIL: Duration = Duration::from_secs(180);
-
 impl Viewer {
+    /// Starts `--bench-clip-drag n` now, or again once it has ended (tests repeat the
+    /// scripted drag on one viewer without computing its AO again): from the next frame
+    /// the viewport alone fills the window, and the drag begins once it shows a ready
+    /// view.
+    pub fn start_clip_drag(&mut self, n: u64) {
+        self.options.bench_clip_drag = Some(n);
+        self.scripted = Default::default();
+        if let Ok(mut e) = self.exit_error.lock() {
+            *e = None;
+        }
+        self.ctx.request_repaint();
+    }
+
+    /// How the scripted run ended: `None` while it runs (or without one), else `Ok` or
+    /// the error it ended with (the watchdog's, when it stalled).
+    pub fn scripted_outcome(&self) -> Option<Result<(), String>> {
+        if !self.scripted.exit_requested {
+            return None;
+        }
+        let error = self.exit_error.lock().ok().and_then(|e| e.clone());
+        Some(error.map_or(Ok(()), Err))
+    }
+
     /// One frame of `--bench-clip-drag N`: once the view is ready, moves the first clip
     /// shape every UI frame (back and forth by 1 mm, a slow drag) and measures the UI
     /// frames (what the mouse feels) and the viewport's images (each exact for its
@@ -30,9 +46,6 @@ impl Viewer {
         ctx.request_repaint();
         self.fail_on_ao_error();
         if self.close_if_requested(ctx) {
-            return;
-        }
-        if self.watchdog() {
             return;
         }
         let now = Instant::now();
@@ -169,53 +182,6 @@ impl Viewer {
         } else {
             self.fail_exit("--bench-clip-drag needs a scene with a clip shape".into());
         }
-    }
-
-    /// The scripted drag's watchdog: when no image has completed for [`STALL_REPORT`],
-    /// or no CAO update while one is on its way, says what the viewport is waiting for
-    /// (the image being made, CAO's update, the pacer's queue) on stderr; after
-    /// [`STALL_FAIL`] the run ends with that as its error instead of running on (a
-    /// viewer that never settles looks the same to a user whichever of the two stopped).
-    /// True when it ended the run.
-    fn watchdog(&mut self) -> bool {
-        let now = Instant::now();
-        // The background jobs (loading, AO, light) show their own progress.
-        let jobs_done =
-            self.opened.doc.is_some() && self.opened.load_job.is_none() && self.derived_ready();
-        let cao = self.cao_update_in_flight();
-        let seen = [self.scripted.images.len(), self.scripted.cao_updates.len()];
-        let last = self.scripted.progress.get_or_insert([(0, now); 2]);
-        let mut stalled = Vec::new();
-        for (i, what) in ["image", "CAO update"].into_iter().enumerate() {
-            if last[i].0 != seen[i] || !jobs_done || (i == 1 && !cao) {
-                last[i] = (seen[i], now);
-            }
-            let since = now - last[i].1;
-            if since >= STALL_REPORT {
-                stalled.push((since, what));
-            }
-        }
-        let Some(&(since, _)) = stalled.iter().max() else {
-            self.scripted.stall_reported = false;
-            return false;
-        };
-        let what: Vec<&str> = stalled.iter().map(|s| s.1).collect();
-        let state = format!(
-            "no {} for {:.0} s: {}; {}",
-            what.join(" and no "),
-            since.as_secs_f64(),
-            self.viewport.gpu.describe_work(),
-            self.viewport.pacer.describe(),
-        );
-        if since >= STALL_FAIL {
-            self.fail_exit(format!("the viewer stalled: {state}"));
-            return true;
-        }
-        if !self.scripted.stall_reported {
-            self.scripted.stall_reported = true;
-            eprintln!("volao: watchdog: {state}");
-        }
-        false
     }
 
     /// `--exit-after-frames N [--screenshot PNG]`: count frames that show the volume with

@@ -639,6 +639,7 @@ impl Viewer {
         self.viewport.current = !busy && !moving && !tf_waiting;
         if let Some(stats) = pumped.stats {
             self.derived.cao_stats = Some(stats);
+            self.viewport.cao_updates += 1;
             if self.options.bench_clip_drag.is_some() {
                 self.scripted.cao_updates.push(Instant::now());
             }
@@ -661,7 +662,7 @@ impl Viewer {
 
     /// The scale of the interactive image: the smallest (up to 1/4 of the size on each
     /// axis) whose ray cast the measured rate finishes at the target rate.
-    fn interactive_scale(&self, frame: &Frame) -> u32 {
+    pub(super) fn interactive_scale(&self, frame: &Frame) -> u32 {
         let pixels = frame.width as f64 * frame.height as f64;
         interactive_scale(
             pixels,

@@ -54,6 +54,8 @@ pub(super) struct Viewport {
     /// images completed as of the last frame.
     pub(super) frame_ms: Option<f32>,
     pub(super) frames_seen: u64,
+    /// CAO updates whose figures came back so far (the watchdog's progress).
+    pub(super) cao_updates: u64,
 }
 
 impl Viewport {
@@ -71,6 +73,7 @@ impl Viewport {
             rect: egui::Rect::NOTHING,
             frame_ms: None,
             frames_seen: 0,
+            cao_updates: 0,
         }
     }
 }
@@ -137,6 +140,10 @@ pub struct ViewportGpu {
     /// Of those, images that started as a copy of an earlier one and cast only the rays
     /// near a change ([`crate::render::reuse`]).
     pub frames_reused: u64,
+    /// Images made while CAO's update was on its way (reading `V_PAO`) and dropped
+    /// unfinished because the next update began and re-posed the clip maps they clipped
+    /// with: while shapes only move, none is (each has its own copy of the maps).
+    pub frames_dropped_by_cao: u64,
     /// When the last image was started.
     pub(super) last_start: Option<Instant>,
 }
@@ -228,6 +235,7 @@ impl ViewportGpu {
             last_error: None,
             frames_rendered: 0,
             frames_reused: 0,
+            frames_dropped_by_cao: 0,
             last_start: None,
         })
     }

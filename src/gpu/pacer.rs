@@ -341,11 +341,18 @@ impl Pacer {
                 )
             })
             .collect();
+        let mut rates: Vec<String> = self
+            .rates
+            .iter()
+            .map(|(label, rate)| format!("{label} {rate:.3e}/s"))
+            .collect();
+        rates.sort();
         format!(
-            "pacer: {:.1} ms of the slice left, {} pieces queued [{}]",
+            "pacer: {:.1} ms of the slice left, {} pieces queued [{}], rates [{}]",
             self.left * 1e3,
             self.queued.len(),
-            pieces.join("; ")
+            pieces.join("; "),
+            rates.join(", ")
         )
     }
 

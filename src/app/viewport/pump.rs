@@ -102,6 +102,15 @@ impl ViewportGpu {
         self.shown.as_ref().map_or(1, |s| s.key.scale)
     }
 
+    /// The image being made: when it started and how far its submissions have come
+    /// (row times width plus column; it only grows while the same image is made).
+    pub(in crate::app) fn work_progress(&self) -> Option<(Instant, u64)> {
+        self.work.as_ref().map(|w| {
+            let done = u64::from(w.next_row) * u64::from(w.key.frame.width);
+            (w.started, done + u64::from(w.next_column))
+        })
+    }
+
     /// The image and the CAO update being made, in one line (for the scripted runs'
     /// watchdog).
     pub(in crate::app) fn describe_work(&self) -> String {
@@ -212,14 +221,15 @@ impl ViewportGpu {
                 }
                 _ => true,
             };
-            if self.work.as_ref().is_some_and(|w| {
+            let drop = self.work.as_ref().is_some_and(|w| {
                 w.key.ao_exact
                     || match w.clip {
                         None => w.key.clip != key.clip,
                         Some(_) => rebuilds(),
                     }
-            }) {
-                self.work = None;
+            });
+            if drop && let Some(w) = self.work.take() {
+                self.frames_dropped_by_cao += u64::from(!w.key.ao_exact);
             }
             match self.begin_cao(gpu, &key.clip, want.setup) {
                 Ok(errors) => out.clip_errors = errors,
@@ -406,10 +416,17 @@ impl ViewportGpu {
         let mut errors = Vec::new();
         // With CAO, an image of other shapes than CAO's maps are posed for gets its own
         // copy of the maps posed for them: CAO's update keeps its pose (and stays exact),
-        // and its next one does not drop the image.
+        // and its next one does not drop the image. So does an image made while an update
+        // is on its way, even of the shapes CAO's maps are posed for (it starts in the
+        // frame the update began): the next update, which during a drag begins as this
+        // one ends, re-poses those maps. Clipping with CAO's own maps, such an image was
+        // dropped then, and its successor, started in that same frame, clipped with them
+        // again: an image that took longer than an update never came (until 2026-12-07).
         let moved = self.synced_clip.as_ref() != Some(&key.clip);
         let mut own_clip = None;
-        if moved && let (Some(cao), Some(vol)) = (&self.cao, &self.volume) {
+        if (moved || self.cao_work.is_some())
+            && let (Some(cao), Some(vol)) = (&self.cao, &self.volume)
+        {
             let setup = want.setup;
             let reach = cao.reach_mm(&vol.texels);
             own_clip = cao.clip.posed(gpu, setup.maps(&key.clip, reach));
