@@ -91,7 +91,7 @@ pub struct ViewerOptions {
     pub interactive: super::viewport::Interactive,
     /// The layout every opened volume starts in (`--layout`); `None`: 2×2 for a file,
     /// the 3-D view alone for the demo.
-    pub layout: Option<super::slices::Layout>,
+    pub layout: Option<crate::slice::Layout>,
     /// A volume file opens with the best AO the adapter affords within the demo's budget
     /// (off: without AO, as the tests of other things want).
     pub ao_on_open: bool,

@@ -60,7 +60,7 @@ use jobs::{Job, JobError};
 use screenshot::{Screenshots, Shot};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 use viewport::{Viewport, ViewportGpu, ViewportPaint};
 
 /// Entries kept in the recent-files list.
@@ -118,7 +118,7 @@ pub struct Viewer {
     shots: Screenshots,
     scripted: Scripted,
     /// Says where everything stands when the viewer stops moving on (`watchdog.rs`).
-    watchdog: watchdog::Watchdog,
+    watchdog: Watchdog,
     /// Draw over the 3-D view: the clip shapes' outlines, the crosshair, the orientation
     /// marker.
     pub show_outlines: bool,
@@ -164,6 +164,44 @@ struct Scripted {
     images: Vec<(Instant, f64, u32)>,
     /// When each CAO update's counters came back (one per update completed).
     cao_updates: Vec<Instant>,
+}
+
+/// Nothing moved on for this long: the watchdog (`watchdog.rs`) says where everything stands, once.
+const STALL_REPORT: Duration = Duration::from_secs(30);
+
+/// ... and a scripted run ends with that as its error after this long.
+const STALL_FAIL: Duration = Duration::from_secs(180);
+
+/// The watchdog's memory between frames.
+#[derive(Debug, Default)]
+struct Watchdog {
+    /// What the viewer waited for when it last moved on, and when.
+    rest: Option<(String, Instant)>,
+    /// Images completed as of the last frame, and the image being made then: when it
+    /// started and the most of it submitted.
+    image: Option<(u64, Option<(Instant, u64)>)>,
+    /// While the scripted drag runs: images and CAO updates completed when each last
+    /// moved on, and when.
+    drag: Option<[(u64, Instant); 2]>,
+    /// The stall of at least [`STALL_REPORT`] seen at the last frame, with where
+    /// everything stood when it was first reported.
+    stall: Option<String>,
+    /// `VOLAO_TRACE`: the interval, and when the state was last printed.
+    trace: Option<(Duration, Option<Instant>)>,
+}
+
+impl Watchdog {
+    /// A watchdog that traces every `VOLAO_TRACE` seconds, if that is set.
+    fn from_env() -> Self {
+        let trace = std::env::var("VOLAO_TRACE").ok().map(|s| {
+            let seconds = s.trim().parse::<f64>().ok().filter(|s| *s > 0.0);
+            (Duration::from_secs_f64(seconds.unwrap_or(1.0)), None)
+        });
+        Watchdog {
+            trace,
+            ..Default::default()
+        }
+    }
 }
 
 /// GPU time the viewport's work may take in one UI frame.
@@ -301,7 +339,7 @@ impl Viewer {
             },
             shots: Screenshots::default(),
             scripted: Scripted::default(),
-            watchdog: watchdog::Watchdog::from_env(),
+            watchdog: Watchdog::from_env(),
             show_outlines: true,
             gpu_errors,
             exit_error: Arc::default(),

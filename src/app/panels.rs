@@ -525,7 +525,7 @@ impl Viewer {
         let pick =
             response.double_clicked() || (response.clicked() && ui.input(|i| i.modifiers.shift));
         if pick && let Some(p) = response.interact_pointer_pos() {
-            if let Some(world) = pick_surface(doc, rect, p) {
+            if let Some(world) = super::slices::pick_surface(doc, rect, p) {
                 self.chrome.slices.set_crosshair(world);
             }
         } else if !used {
@@ -866,40 +866,4 @@ fn mode_controls(ui: &mut egui::Ui, mode: &mut RenderMode, tf_iso: f64) {
             }
         });
     }
-}
-
-/// The first visible surface under point `p` of the 3-D view in `rect`, in patient mm
-/// ([`crate::slice::pick`]: the transfer function, clip shapes and segments as drawn).
-fn pick_surface(doc: &Document, rect: egui::Rect, p: egui::Pos2) -> Option<glam::DVec3> {
-    use crate::slice::pick::{PickScene, SURFACE_OPACITY, first_surface};
-    let looks = doc
-        .segmentation
-        .as_ref()
-        .map(|s| crate::labels::style::looks(&s.labels, &s.classes, &s.styles, &doc.clip_shapes));
-    let segments = doc
-        .segmentation
-        .as_ref()
-        .zip(looks.as_deref())
-        .map(|(s, l)| (&s.classes.of_voxel[..], l));
-    let tf = doc.view_tf();
-    let scene = PickScene {
-        volume: &doc.volume,
-        tf: &tf,
-        shapes: &doc.clip_shapes,
-        segments,
-    };
-    let ndc = [
-        (p.x - rect.left()) / rect.width() * 2.0 - 1.0,
-        1.0 - (p.y - rect.top()) / rect.height() * 2.0,
-    ];
-    let aspect = rect.width() / rect.height().max(1.0);
-    let hit = first_surface(
-        &scene,
-        &doc.camera,
-        doc.radius,
-        aspect,
-        ndc,
-        SURFACE_OPACITY,
-    )?;
-    Some(crate::slice::volume_to_world(&doc.volume, hit))
 }

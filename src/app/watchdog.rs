@@ -17,46 +17,8 @@
 //! `VOLAO_TRACE=S` prints the same line every S seconds (for a run that hangs in a way
 //! the rules above miss).
 
-use super::Viewer;
+use super::{STALL_FAIL, STALL_REPORT, Viewer};
 use std::time::{Duration, Instant};
-
-/// Nothing moved on for this long: the watchdog says where everything stands, once.
-pub(super) const STALL_REPORT: Duration = Duration::from_secs(30);
-
-/// ... and a scripted run ends with that as its error after this long.
-pub(super) const STALL_FAIL: Duration = Duration::from_secs(180);
-
-/// The watchdog's memory between frames.
-#[derive(Debug, Default)]
-pub(super) struct Watchdog {
-    /// What the viewer waited for when it last moved on, and when.
-    rest: Option<(String, Instant)>,
-    /// Images completed as of the last frame, and the image being made then: when it
-    /// started and the most of it submitted.
-    image: Option<(u64, Option<(Instant, u64)>)>,
-    /// While the scripted drag runs: images and CAO updates completed when each last
-    /// moved on, and when.
-    drag: Option<[(u64, Instant); 2]>,
-    /// The stall of at least [`STALL_REPORT`] seen at the last frame, with where
-    /// everything stood when it was first reported.
-    stall: Option<String>,
-    /// `VOLAO_TRACE`: the interval, and when the state was last printed.
-    trace: Option<(Duration, Option<Instant>)>,
-}
-
-impl Watchdog {
-    /// A watchdog that traces every `VOLAO_TRACE` seconds, if that is set.
-    pub(super) fn from_env() -> Self {
-        let trace = std::env::var("VOLAO_TRACE").ok().map(|s| {
-            let seconds = s.trim().parse::<f64>().ok().filter(|s| *s > 0.0);
-            (Duration::from_secs_f64(seconds.unwrap_or(1.0)), None)
-        });
-        Watchdog {
-            trace,
-            ..Default::default()
-        }
-    }
-}
 
 impl Viewer {
     /// One frame of the watchdog (see the module's documentation): traces, reports a
