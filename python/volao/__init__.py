@@ -29,7 +29,7 @@ from ._volao import (
     ambient_occlusion,
     load,
 )
-from . import _volao
+from . import _volao, cohort
 
 __all__ = [
     "Image",
@@ -37,6 +37,7 @@ __all__ = [
     "Volume",
     "VolaoError",
     "adapter",
+    "cohort",
     "ambient_occlusion",
     "load",
 ]
