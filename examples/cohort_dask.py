@@ -13,7 +13,6 @@ code is 1 if any scene failed. See docs/cohorts.md.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -39,17 +38,14 @@ def render_cohort(client, scenes, out_dir, gpu=False):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("inputs", nargs="+", help="scene files or folders of them")
-    parser.add_argument("--out", required=True, help="folder for NAME.png")
-    parser.add_argument("--scheduler", help="address of a running Dask scheduler")
-    parser.add_argument("--workers", type=int, default=2, help="local worker processes")
-    parser.add_argument("--gpus", action="store_true", help="each task needs GPU=1")
-    args = parser.parse_args(argv)
-
     from dask.distributed import Client, LocalCluster
 
-    from volao.cohort import report, scene_files
+    from volao.cohort import arguments, report, scene_files
+
+    parser = arguments(__doc__.splitlines()[0])
+    parser.add_argument("--scheduler", help="address of a running Dask scheduler")
+    parser.add_argument("--workers", type=int, default=2, help="local worker processes")
+    args = parser.parse_args(argv)
 
     scenes = scene_files(args.inputs)
     if args.scheduler:

@@ -12,7 +12,6 @@ is 1 if any scene failed. See docs/cohorts.md.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -44,15 +43,12 @@ def render_cohort(scenes, out_dir, gpu=False):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("inputs", nargs="+", help="scene files or folders of them")
-    parser.add_argument("--out", required=True, help="folder for NAME.png")
+    from volao.cohort import arguments, report, scene_files
+
+    parser = arguments(__doc__.splitlines()[0])
     parser.add_argument("--address", help="a running Ray cluster (e.g. auto)")
     parser.add_argument("--cpus", type=int, default=2, help="local Ray CPUs")
-    parser.add_argument("--gpus", action="store_true", help="each task needs num_gpus=1")
     args = parser.parse_args(argv)
-
-    from volao.cohort import report, scene_files
 
     scenes = scene_files(args.inputs)
     if args.address:

@@ -52,9 +52,10 @@
 //!    orientation (a grid on the RAS axes over any affine, radiological by default) for
 //!    the viewer's slice panes, `volao slice` and `volao render --layout`, and picks the
 //!    first visible surface under a point of the 3-D view.
-//! 7. `app` (cargo feature `viewer`, on by default) is the eframe viewer: the same texels, stages and ray caster behind a UI
-//!    (the viewer owns its viewport's GPU work; egui's callback resources hold only the
-//!    draw pipelines, and each frame's paint callback carries the image to show)
+//! 7. `app` (cargo feature `viewer`, on by default) is the eframe viewer: the same
+//!    texels, stages and ray caster behind a UI (the viewer owns its viewport's GPU
+//!    work; egui's callback resources hold only the draw pipelines, and each frame's
+//!    paint callback carries the image to show)
 //!    whose background jobs compute AO (shown first as an ambient-map preview),
 //!    modulation and light volumes; the demo opens carved, with AO. Its viewport image
 //!    (the ray cast in strips and tiles costed by what the same part of the picture took

@@ -4,23 +4,11 @@
 
 mod common;
 
-use common::data;
+use common::{data, text, volao_cli as volao};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use volao::ao::AoMethod;
 use volao::ao::rays::RaySet;
 use volao::scene::{Scene, VolumeSource};
-
-fn volao(args: &[&Path]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volao"))
-        .args(args)
-        .output()
-        .expect("volao runs")
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
 
 /// A small scene of a shared file, written to `dir/name.json`.
 fn scene(dir: &Path, name: &str, volume: &str, ao: AoMethod, azimuth: f32) -> PathBuf {
@@ -62,7 +50,8 @@ fn batch_renders_what_volao_render_renders_and_resumes_without_rendering_again()
     let run = volao(&[Path::new("batch"), &scenes, Path::new("--out"), &out]);
     assert!(run.status.success(), "{}", text(&run.stderr));
     assert!(
-        text(&run.stdout).contains("batch: 2 scenes: 2 rendered, 0 skipped (outputs exist), 0 failed"),
+        text(&run.stdout)
+            .contains("batch: 2 scenes: 2 rendered, 0 skipped (outputs exist), 0 failed"),
         "summary: {}",
         text(&run.stdout)
     );
@@ -105,7 +94,13 @@ fn a_failing_scene_is_reported_and_the_others_complete() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("out");
     let good = scene(dir.path(), "a_good", "pvm/Bucky.pvm", AoMethod::None, 0.0);
-    let corrupt = scene(dir.path(), "b_corrupt", "pvm/Bucky.pvm", AoMethod::None, 0.0);
+    let corrupt = scene(
+        dir.path(),
+        "b_corrupt",
+        "pvm/Bucky.pvm",
+        AoMethod::None,
+        0.0,
+    );
     let mut json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&corrupt).expect("read")).expect("json");
     json["volume"]["path"] = data("nifti/not-nifti.nii").display().to_string().into();
@@ -113,7 +108,13 @@ fn a_failing_scene_is_reported_and_the_others_complete() {
     let malformed = dir.path().join("c_malformed.json");
     std::fs::write(&malformed, "{ not json").expect("write");
     let missing = dir.path().join("d_missing.json");
-    let last = scene(dir.path(), "e_good", "pvm/Storm-t11.pvm", AoMethod::None, 90.0);
+    let last = scene(
+        dir.path(),
+        "e_good",
+        "pvm/Storm-t11.pvm",
+        AoMethod::None,
+        90.0,
+    );
     let run = volao(&[
         Path::new("batch"),
         &good,
@@ -144,7 +145,11 @@ fn a_failing_scene_is_reported_and_the_others_complete() {
         );
     }
     assert!(stderr.contains("error: 3 of 5 scenes failed"), "{stderr}");
-    assert_eq!(files_in(&out), ["a_good.png", "e_good.png"], "no partial files");
+    assert_eq!(
+        files_in(&out),
+        ["a_good.png", "e_good.png"],
+        "no partial files"
+    );
 }
 
 #[test]
@@ -152,7 +157,13 @@ fn ao_volumes_equal_volao_ao_of_the_scene() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("out");
     let s = scene(dir.path(), "bucky", "pvm/Bucky.pvm", AoMethod::Lao, 0.0);
-    let none = scene(dir.path(), "plain", "pvm/Storm-t11.pvm", AoMethod::None, 0.0);
+    let none = scene(
+        dir.path(),
+        "plain",
+        "pvm/Storm-t11.pvm",
+        AoMethod::None,
+        0.0,
+    );
     let run = volao(&[
         Path::new("batch"),
         &s,

@@ -10,6 +10,7 @@ that was interrupted resumes like ``volao batch``.
 
 from __future__ import annotations
 
+import argparse
 import os
 import time
 from pathlib import Path
@@ -17,7 +18,17 @@ from typing import Iterable, List, Sequence, Tuple
 
 from ._volao import Scene, VolaoError
 
-__all__ = ["render_scene_file", "report", "scene_files"]
+__all__ = ["arguments", "render_scene_file", "report", "scene_files"]
+
+
+def arguments(description: str) -> argparse.ArgumentParser:
+    """The flags every cohort script takes: scene files or folders, ``--out``, ``--gpus``;
+    an engine adds its own."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("inputs", nargs="+", help="scene files or folders of them")
+    parser.add_argument("--out", required=True, help="folder for NAME.png")
+    parser.add_argument("--gpus", action="store_true", help="each task needs one GPU")
+    return parser
 
 
 def scene_files(inputs: Iterable[str | os.PathLike]) -> List[str]:
