@@ -332,7 +332,11 @@ impl PyScene {
         let mut notes = Vec::new();
         let start = std::time::Instant::now();
         let rendered = py.detach(|| {
-            let prepared = Prepared::new(&mut scene, volume.to_ras(), &[])?;
+            let ras = volume.to_ras();
+            // What `volao render` does to a projection without a window of its own
+            // (with the statistics it takes: of the volume in RAS order).
+            notes.extend(headless::projection_window(&mut scene, &ras.stats()));
+            let prepared = Prepared::new(&mut scene, ras, &[])?;
             notes.extend(prepared.warnings.iter().cloned());
             let device = DEVICE.for_scene(&scene, &mut notes)?;
             gpu_turn(|| {

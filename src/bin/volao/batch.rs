@@ -201,7 +201,11 @@ fn run_task(
         wrote.push(path.display().to_string());
     }
     if png_missing {
-        let prepared = Prepared::new(&mut scene, volume.to_ras(), &[])?;
+        let volume = volume.to_ras();
+        if let Some(note) = headless::projection_window(&mut scene, &volume.stats()) {
+            warn(&note);
+        }
+        let prepared = Prepared::new(&mut scene, volume, &[])?;
         prepared.warnings.iter().for_each(|w| warn(w));
         let mut notes = Vec::new();
         let device = match args.cpu {

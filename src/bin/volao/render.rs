@@ -44,7 +44,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         annotate_3d(&mut out.image, &scene.camera);
     }
     if layout != volao::slice::Layout::ThreeD {
-        out.image = with_slices(layout, &scene, &prepared.volume, args.at, args.annotate, &out.image);
+        out.image = with_slices(
+            layout,
+            &scene,
+            &prepared.volume,
+            args.at,
+            args.annotate,
+            &out.image,
+        );
     }
     for e in &out.clip_errors {
         eprintln!("warning: {e} (rendered without it)");
