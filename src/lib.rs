@@ -52,9 +52,10 @@
 //!    orientation (a grid on the RAS axes over any affine, radiological by default) for
 //!    the viewer's slice panes, `volao slice` and `volao render --layout`, and picks the
 //!    first visible surface under a point of the 3-D view.
-//! 7. [`app`] is the eframe viewer: the same texels, stages and ray caster behind a UI
-//!    (the viewer owns its viewport's GPU work; egui's callback resources hold only the
-//!    draw pipelines, and each frame's paint callback carries the image to show)
+//! 7. `app` (cargo feature `viewer`, on by default) is the eframe viewer: the same
+//!    texels, stages and ray caster behind a UI (the viewer owns its viewport's GPU
+//!    work; egui's callback resources hold only the draw pipelines, and each frame's
+//!    paint callback carries the image to show)
 //!    whose background jobs compute AO (shown first as an ambient-map preview),
 //!    modulation and light volumes; the demo opens carved, with AO. Its viewport image
 //!    (the ray cast in strips and tiles costed by what the same part of the picture took
@@ -65,6 +66,10 @@
 //!    casting only the rays near what changed, at most at the interactive target rate
 //!    while the update runs, and at rest the image waits for the exact one. Files open
 //!    on the 2×2 layout (`app::slices`: axial, 3-D, coronal, sagittal, one crosshair).
+//!
+//! [`headless`] is the one path from a scene file to a PNG or an AO volume without a
+//! window: `volao render`, `volao ao`, `volao batch` and the Python module (`python/`)
+//! all load, render and compute through it, on one device per process.
 //!
 //! The command-line interface and the benchmarks live in the binary (`src/bin/volao`);
 //! [`process`] holds the few process-wide settings it makes at start.
@@ -89,6 +94,9 @@ pub mod render;
 
 pub mod slice;
 
+pub mod headless;
+
+#[cfg(feature = "viewer")]
 pub mod app;
 
 pub mod process;

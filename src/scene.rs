@@ -9,6 +9,12 @@ use crate::tf::TransferFunction;
 use crate::volume::{Endian, LoadOptions, RawOverrides, VoxelType};
 use std::path::{Path, PathBuf};
 
+/// Image side when neither a flag nor a scene gives one.
+pub const DEFAULT_SIZE: u32 = 800;
+
+/// The largest image side volao renders.
+pub const MAX_SIZE: u32 = 32768;
+
 /// The scene format this volao writes and the newest it reads.
 pub const SCENE_VERSION: u32 = 1;
 
@@ -165,6 +171,46 @@ pub struct MeshSource {
 }
 
 impl Scene {
+    /// The scene of a plain volume: the TF preset for the data's range (`stats`), default
+    /// camera, headlight, settings and AO, 800×800.
+    pub fn default_for(volume: VolumeSource, stats: &crate::volume::Stats) -> Scene {
+        use crate::tf::Preset;
+        Scene {
+            version: SCENE_VERSION,
+            volume,
+            transfer_function: TransferFunction::preset(Preset::default_for(stats), stats),
+            camera: Default::default(),
+            light: Light::Headlight,
+            render: RenderSettings::default(),
+            width: DEFAULT_SIZE,
+            height: DEFAULT_SIZE,
+            ambient_occlusion: AoSettings::default(),
+            clip_shapes: Vec::new(),
+            meshes: Vec::new(),
+            segmentation: None,
+        }
+    }
+
+    /// Points the ray caster's light where the scene's light is (a headlight shines from
+    /// the eye) and checks the image size; done before every render.
+    pub fn settle(&mut self) -> Result<(), String> {
+        self.render.light_direction = match self.light {
+            Light::Directional { direction } => direction,
+            // Shadows of a headlight fall behind what casts them, from the eye's direction.
+            Light::Headlight => self.camera.backward().to_array(),
+        };
+        if self.render.shadows {
+            crate::render::shadow::light_direction(self.render.light_direction)?;
+        }
+        let (width, height) = (self.width, self.height);
+        if width == 0 || height == 0 || width > MAX_SIZE || height > MAX_SIZE {
+            return Err(format!(
+                "image size {width}×{height}: each side must be 1 to {MAX_SIZE} pixels"
+            ));
+        }
+        Ok(())
+    }
+
     /// Reads a scene, checking its version before anything else.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
         let text = std::fs::read_to_string(path).map_err(|e| SceneError::Io {
@@ -172,6 +218,15 @@ impl Scene {
             message: e.to_string(),
         })?;
         Self::parse(&text, path)
+    }
+
+    /// Reads a scene file with its paths resolved against it, ready to render (and to be
+    /// saved elsewhere, in this volao's format).
+    pub fn open(path: &Path) -> Result<Scene, SceneError> {
+        let mut scene = Scene::load(path)?;
+        scene.resolve_paths(path);
+        scene.version = SCENE_VERSION;
+        Ok(scene)
     }
 
     /// Parses scene JSON; `path` names the file in errors.

@@ -32,6 +32,25 @@ impl Image {
         })
     }
 
+    /// The PNG file [`Image::save_png`] writes, in memory (Jupyter's `_repr_png_`).
+    pub fn png_bytes(&self) -> Result<Vec<u8>, ImageError> {
+        use image::ImageEncoder;
+        let bytes: Vec<u8> = self.pixels.iter().flatten().copied().collect();
+        let mut png = Vec::new();
+        image::codecs::png::PngEncoder::new(&mut png)
+            .write_image(
+                &bytes,
+                self.width,
+                self.height,
+                image::ExtendedColorType::Rgba8,
+            )
+            .map_err(|e| ImageError::Io {
+                path: PathBuf::from("<memory>"),
+                message: e.to_string(),
+            })?;
+        Ok(png)
+    }
+
     pub fn load_png(path: &Path) -> Result<Image, ImageError> {
         let img = image::open(path).map_err(|e| ImageError::Io {
             path: path.to_owned(),

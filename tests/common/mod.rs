@@ -287,3 +287,16 @@ pub fn oblique_frame(settings: volao::render::RenderSettings, size: u32) -> vola
         height: size,
     }
 }
+
+/// Runs the `volao` binary with `args` and waits for it.
+pub fn volao_cli<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_volao"))
+        .args(args)
+        .output()
+        .expect("volao runs")
+}
+
+/// A child's output as text.
+pub fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}

@@ -691,3 +691,22 @@ impl LoadArgs {
         }
     }
 }
+
+#[derive(Args, Debug)]
+pub struct BatchArgs {
+    /// Scene files (.json), or folders whose .json files are all scenes.
+    #[arg(required = true, value_name = "SCENE|DIR")]
+    pub inputs: Vec<PathBuf>,
+    /// Folder for the images: NAME.png for each scene NAME.json (created if missing).
+    /// Outputs already there are skipped, so an interrupted batch resumes.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write each scene's ambient-occlusion volume, NAME.ao.nii.gz, in its volume
+    /// file's geometry (`volao ao` with the scene's method, parameters and transfer
+    /// function); scenes without AO get none.
+    #[arg(long)]
+    pub ao_volumes: bool,
+    /// Render on the CPU twin instead of the GPU.
+    #[arg(long)]
+    pub cpu: bool,
+}

@@ -1,8 +1,9 @@
 //! The `volao` command line: `volao` (viewer), `view`, `info`, `convert`, `render`, `slice`,
-//! `ao`, `gpu`, `bench`. One module per command; the flags are in `args`.
+//! `ao`, `batch`, `gpu`, `bench`. One module per command; the flags are in `args`.
 
 mod ao;
 mod args;
+mod batch;
 mod bench;
 mod convert;
 mod gpu;
@@ -43,6 +44,9 @@ enum Command {
     Slice(Box<args::SliceArgs>),
     /// Compute an ambient-occlusion volume in the input's geometry and write it.
     Ao(args::AoArgs),
+    /// Render many scenes (and their AO volumes) in one process on one device; skips
+    /// outputs that exist, reports failed scenes and goes on.
+    Batch(args::BatchArgs),
     /// Show the GPU adapter volao will use and run a compute self-test on it.
     Gpu,
     /// Benchmarks (results go to docs/benchmarks.md).
@@ -68,7 +72,7 @@ fn main() {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        None => Ok(volao::app::run(volao::app::ViewerOptions::default())?),
+        None => view::run_demo(),
         Some(Command::View(args)) => view::run(&args),
         Some(Command::Info(args)) => info::run(&args),
         Some(Command::Convert(args)) => convert::run(&args),
@@ -76,6 +80,7 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Render(args)) => render::run(&args),
         Some(Command::Ao(args)) => ao::run(&args),
         Some(Command::Slice(args)) => slice::run(&args),
+        Some(Command::Batch(args)) => batch::run(&args),
         Some(Command::Bench(command)) => bench::run(&command),
     }
 }

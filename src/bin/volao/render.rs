@@ -8,17 +8,12 @@ use crate::args::{RenderArgs, parse_background, set, set_within};
 use crate::progress::{load_with_bar, slice_bar};
 use anyhow::{Result, bail};
 use volao::ao::{AoMethod, AoSettings};
-use volao::labels::{self, style};
-use volao::render::offscreen::{RenderJob, Rendered};
-use volao::render::surface::Surface;
-use volao::render::{Frame, RenderSettings};
-use volao::scene::{Light, MeshSource, SCENE_VERSION, Scene, SegmentationSource, VolumeSource};
-use volao::texels::segments::SegmentTexels;
+use volao::headless::{self, DeviceSlot, Prepared};
+use volao::render::RenderSettings;
+use volao::render::offscreen::Rendered;
+use volao::scene::{Light, MeshSource, Scene, SegmentationSource, VolumeSource};
 use volao::tf::{Preset, TransferFunction};
 use volao::volume::{self, Stats, Volume};
-
-/// Image side when neither a flag nor a scene gives one.
-const DEFAULT_SIZE: u32 = 800;
 
 /// `volao render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
@@ -30,37 +25,33 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     .to_ras();
     let stats = volume.stats();
-    let mut scene = file.unwrap_or_else(|| default_scene(&stats));
+    let mut scene = file.unwrap_or_else(|| Scene::default_for(source.clone(), &stats));
     scene.volume = source;
     args.apply_to(&mut scene, &stats)?;
-    if scene.render.projection_window.is_none()
-        && let Some((window, note)) =
-            volao::render::readable_window(scene.render.mode, &scene.transfer_function, &stats)
-    {
-        // MinIP keeps the transfer function's window; the note says why it is dark.
-        if scene.render.mode != volao::render::RenderMode::Minip {
-            scene.render.projection_window = Some(window);
-        }
+    scene.settle().map_err(anyhow::Error::msg)?;
+    if let Some(note) = headless::projection_window(&mut scene, &stats) {
         eprintln!("note: {note}");
     }
-    let segments = args.segmentation(&mut scene, &volume)?;
-    let meshes = scene
-        .meshes
-        .iter()
-        .map(|m| volao::render::surface::load_obj(&m.path, m.rgba))
-        .collect::<Result<Vec<_>, _>>()?;
+    let prepared = args.prepare(&mut scene, volume)?;
 
     let start = std::time::Instant::now();
     let layout = args.layout.unwrap_or(volao::slice::Layout::ThreeD);
     let (full_w, full_h) = (scene.width, scene.height);
     let mut pane = scene.clone();
     (pane.width, pane.height) = layout.three_d_size(full_w, full_h);
-    let mut out = render_scene(&pane, &volume, &meshes, segments.as_ref(), !args.cpu)?;
+    let mut out = render_scene(&pane, &prepared, !args.cpu)?;
     if args.annotate {
         annotate_3d(&mut out.image, &scene.camera);
     }
     if layout != volao::slice::Layout::ThreeD {
-        out.image = with_slices(layout, &scene, &volume, args.at, args.annotate, &out.image);
+        out.image = with_slices(
+            layout,
+            &scene,
+            &prepared.volume,
+            args.at,
+            args.annotate,
+            &out.image,
+        );
     }
     for e in &out.clip_errors {
         eprintln!("warning: {e} (rendered without it)");
@@ -150,29 +141,6 @@ fn annotate_3d(image: &mut volao::render::Image, camera: &volao::render::Camera)
     }
 }
 
-/// The scene of a plain volume file (its volume is set by the caller): the TF preset for
-/// the data's range, default camera, headlight, settings and AO, 800×800.
-fn default_scene(stats: &Stats) -> Scene {
-    Scene {
-        version: SCENE_VERSION,
-        volume: VolumeSource {
-            path: None,
-            frame: 0,
-            raw: None,
-        },
-        transfer_function: TransferFunction::preset(Preset::default_for(stats), stats),
-        camera: Default::default(),
-        light: Light::Headlight,
-        render: RenderSettings::default(),
-        width: DEFAULT_SIZE,
-        height: DEFAULT_SIZE,
-        ambient_occlusion: AoSettings::default(),
-        clip_shapes: Vec::new(),
-        meshes: Vec::new(),
-        segmentation: None,
-    }
-}
-
 impl RenderArgs {
     /// The scene file the input names (a `.json`), with its paths resolved against it.
     fn scene_file(&self) -> Result<Option<Scene>> {
@@ -182,16 +150,12 @@ impl RenderArgs {
         }) else {
             return Ok(None);
         };
-        let mut scene = Scene::load(path)?;
-        scene.resolve_paths(path);
-        // What is saved is this volao's format.
-        scene.version = SCENE_VERSION;
-        Ok(Some(scene))
+        Ok(Some(Scene::open(path)?))
     }
 
     /// The scene's segmentation (`--labels` replaces it; `--segment` changes its
-    /// styles), loaded onto `volume`'s grid with its looks and the clip shapes' cuts.
-    fn segmentation(&self, scene: &mut Scene, volume: &Volume) -> Result<Option<SegmentTexels>> {
+    /// styles) placed on `volume`'s grid, and its meshes.
+    fn prepare(&self, scene: &mut Scene, volume: Volume) -> Result<Prepared> {
         if let Some(path) = &self.labels.labels {
             let styles = scene
                 .segmentation
@@ -204,31 +168,14 @@ impl RenderArgs {
                 styles,
             });
         }
-        let Some(source) = &mut scene.segmentation else {
-            if !self.segment.is_empty() {
-                bail!("--segment needs a segmentation: give --labels SEG");
-            }
-            return Ok(None);
-        };
-        let loaded = labels::load(&source.path, source.table.as_deref(), volume)?;
-        for w in &loaded.warnings {
+        if scene.segmentation.is_none() && !self.segment.is_empty() {
+            bail!("--segment needs a segmentation: give --labels SEG");
+        }
+        let prepared = Prepared::new(scene, volume, &self.segment)?;
+        for w in &prepared.warnings {
             eprintln!("warning: {w}");
         }
-        let map = loaded.labels;
-        for spec in &self.segment {
-            source
-                .styles
-                .apply(&map, spec)
-                .map_err(anyhow::Error::msg)?;
-        }
-        style::check_cuts(&map, &scene.clip_shapes).map_err(anyhow::Error::msg)?;
-        let classes = style::Classes::of(&map).map_err(anyhow::Error::msg)?;
-        Ok(Some(style::segment_texels(
-            &map,
-            &classes,
-            &source.styles,
-            &scene.clip_shapes,
-        )))
+        Ok(prepared)
     }
 
     /// Which volume, and how to read it: the scene's (a raw layout given by flags
@@ -255,15 +202,6 @@ impl RenderArgs {
         if let Some(direction) = self.light {
             scene.light = Light::Directional { direction };
         }
-        scene.render.light_direction = match scene.light {
-            Light::Directional { direction } => direction,
-            // Shadows of a headlight fall behind what casts them, from the eye's direction.
-            Light::Headlight => scene.camera.backward().to_array(),
-        };
-        if scene.render.shadows {
-            volao::render::shadow::light_direction(scene.render.light_direction)
-                .map_err(anyhow::Error::msg)?;
-        }
         if self.opacity_modulation.is_some() {
             scene.render.opacity_modulation = self.opacity_modulation;
         }
@@ -272,10 +210,6 @@ impl RenderArgs {
         }
         scene.width = self.width.unwrap_or(scene.width);
         scene.height = self.height.unwrap_or(scene.height);
-        let (width, height) = (scene.width, scene.height);
-        if width == 0 || height == 0 || width > 32768 || height > 32768 {
-            bail!("image size {width}×{height}: each side must be 1 to 32768 pixels");
-        }
         self.apply_ao(scene)
     }
 
@@ -369,45 +303,20 @@ impl RenderArgs {
     }
 }
 
-/// Renders `scene` (its volume already loaded, its meshes in `surfaces`), with a progress
-/// bar while the AO is computed.
-fn render_scene(
-    scene: &Scene,
-    volume: &Volume,
-    surfaces: &[Surface],
-    segments: Option<&SegmentTexels>,
-    gpu: bool,
-) -> Result<Rendered> {
-    let frame = Frame {
-        camera: scene.camera,
-        settings: scene.render,
-        width: scene.width,
-        height: scene.height,
-    };
+/// Renders `scene` (its data in `prepared`) on a fresh device, or on the CPU twin, with a
+/// progress bar while the AO is computed.
+fn render_scene(scene: &Scene, prepared: &Prepared, gpu: bool) -> Result<Rendered> {
     let ao = &scene.ambient_occlusion;
     let bar = slice_bar("ambient occlusion", ao.method != AoMethod::None);
-    let needs_gpu = !scene.clip_shapes.is_empty() || ao.method.is_clipped();
+    let mut notes = Vec::new();
     let device = match gpu {
         false => None,
-        true => match volao::gpu::request_device() {
-            Ok(g) => Some(std::sync::Arc::new(g)),
-            Err(e) if needs_gpu => return Err(e.into()),
-            Err(e) => {
-                eprintln!("warning: {e}\nwarning: rendering on the CPU instead (slow)");
-                None
-            }
-        },
+        true => DeviceSlot::default().for_scene(scene, &mut notes)?,
     };
-    let job = RenderJob {
-        volume,
-        tf: &scene.transfer_function,
-        frame: &frame,
-        ao,
-        clip: &scene.clip_shapes,
-        surfaces,
-        segments,
-    };
-    let out = volao::render::offscreen::render(device.as_ref(), &job, &|done, total| {
+    for note in &notes {
+        eprintln!("warning: {note}");
+    }
+    let out = headless::render(scene, prepared, device.as_ref(), &|done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     })?;

@@ -1,12 +1,34 @@
 //! `volao view` (and `volao` alone): the viewer.
 
-use crate::args::{TargetRate, ViewArgs};
-use anyhow::{Result, bail};
-use volao::scene::SegmentationSource;
+use crate::args::ViewArgs;
+use anyhow::Result;
+
+/// What `volao` and `volao view` say when built without the viewer.
+#[cfg(not(feature = "viewer"))]
+const NO_VIEWER: &str = "this volao was built without the viewer (cargo feature `viewer`): \
+     rebuild with default features, or render headless with `volao render`";
+
+/// `volao` alone: the viewer on the built-in demo volume.
+pub fn run_demo() -> Result<()> {
+    #[cfg(feature = "viewer")]
+    return Ok(volao::app::run(volao::app::ViewerOptions::default())?);
+    #[cfg(not(feature = "viewer"))]
+    anyhow::bail!(NO_VIEWER)
+}
 
 /// `volao view`.
+#[cfg(not(feature = "viewer"))]
+pub fn run(_args: &ViewArgs) -> Result<()> {
+    anyhow::bail!(NO_VIEWER)
+}
+
+/// `volao view`.
+#[cfg(feature = "viewer")]
 pub fn run(args: &ViewArgs) -> Result<()> {
+    use crate::args::TargetRate;
+    use anyhow::bail;
     use volao::app::{OpenRequest, ViewerOptions};
+    use volao::scene::SegmentationSource;
     let open = match &args.file {
         None => OpenRequest::Demo,
         Some(p)
