@@ -19,9 +19,7 @@ pub fn run(args: &SliceArgs) -> Result<()> {
             if p.extension()
                 .is_some_and(|e| e.eq_ignore_ascii_case("json")) =>
         {
-            let mut s = Scene::load(p)?;
-            s.resolve_paths(p);
-            Some(s)
+            Some(Scene::open(p)?)
         }
         _ => None,
     };
