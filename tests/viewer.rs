@@ -1706,3 +1706,76 @@ fn a_file_opens_with_the_ao_the_adapter_affords_on_the_slices() {
     settle(&mut h);
     assert_eq!(h.state().slices().layout, Layout::ThreeD);
 }
+
+/// The slice panes' context menu places shapes on the anatomy: a sphere at the
+/// crosshair, and a plane cutting along the axial slice through it; dragging the
+/// sphere's outline in a slice resizes it.
+#[test]
+fn shapes_placed_and_resized_in_the_slices() {
+    use volao::app::slices::Pane;
+    use volao::slice::SliceAxis;
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = open_ball(dir.path());
+    let axial = pane(&h, Pane::Slice(SliceAxis::Axial));
+    let crosshair = h.state().slices().crosshair.expect("crosshair");
+    let secondary_click = |h: &mut Harness<'static, Viewer>, at: egui::Pos2| {
+        for pressed in [true, false] {
+            h.event(egui::Event::PointerButton {
+                pos: at,
+                button: egui::PointerButton::Secondary,
+                pressed,
+                modifiers: egui::Modifiers::NONE,
+            });
+        }
+        h.run_steps(2);
+    };
+    let corner = axial.left_top() + egui::vec2(30.0, 30.0);
+    secondary_click(&mut h, corner);
+    h.get_by_label("Sphere at the crosshair").click();
+    h.run_steps(2);
+    secondary_click(&mut h, corner);
+    h.get_by_label("Cut here (axial plane)").click();
+    h.run_steps(2);
+    let doc = h.state().document().expect("doc");
+    assert_eq!(doc.clip_shapes.len(), 2, "{:?}", doc.clip_shapes);
+    let at = volao::slice::world_to_volume(&doc.volume, crosshair);
+    let sphere = &doc.clip_shapes[0];
+    assert_eq!(sphere.shape, volao::clip::Shape::Sphere);
+    assert!((glam::Vec3::from(sphere.translation) - at).length() < 1e-3);
+    let plane = &doc.clip_shapes[1];
+    assert_eq!(plane.shape, volao::clip::Shape::Plane);
+    // Through the crosshair, removing the superior side: local +z along +S.
+    let normal = plane.rotation() * glam::Vec3::Z;
+    assert!((normal - glam::Vec3::Z).length() < 1e-4, "normal {normal}");
+    assert!((plane.translation[2] - at.z).abs() < 1e-3);
+
+    // Drag the sphere's outline outwards (its right-most point in the axial pane).
+    let scale_before = doc.clip_shapes[0].scale[0];
+    let geometry = h.state().slices().grid().expect("grid").clone();
+    let conv = h.state().slices().convention;
+    let index = geometry.index_at(SliceAxis::Axial, crosshair);
+    let [w, ht] = geometry.image_size(SliceAxis::Axial);
+    let ([l, t, _, _], s) = volao::slice::fit(
+        [w, ht],
+        [axial.left(), axial.top(), axial.right(), axial.bottom()],
+    );
+    let mut edge_world = crosshair;
+    edge_world.x -= f64::from(scale_before); // the patient's left: right on the screen
+    let px = geometry.world_to_pixel(SliceAxis::Axial, conv, edge_world);
+    let _ = index;
+    let edge = egui::pos2(l + (px[0] as f32 + 0.5) * s, t + (px[1] as f32 + 0.5) * s);
+    h.drag_at(edge);
+    h.step();
+    for i in 1..=6 {
+        h.hover_at(edge + egui::vec2(4.0 * i as f32, 0.0));
+        h.step();
+    }
+    h.drop_at(edge + egui::vec2(24.0, 0.0));
+    h.run_steps(2);
+    let after = h.state().document().expect("doc").clip_shapes[0].scale[0];
+    assert!(
+        after > scale_before * 1.1,
+        "resized {scale_before} → {after}"
+    );
+}
