@@ -3,19 +3,8 @@
 
 mod common;
 
-use common::{data, data_dir};
-use std::process::{Command, Output};
-
-fn volao(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volao"))
-        .args(args)
-        .output()
-        .expect("volao runs")
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
+use common::{data, data_dir, text, volao_cli as volao};
+use std::process::Command;
 
 fn path(p: &std::path::Path) -> &str {
     p.to_str().expect("utf-8 path")

@@ -70,6 +70,24 @@ fn text_size(width: usize, text: &str) -> [isize; 2] {
     [text.chars().count() as isize * 6 * d - d, 7 * d]
 }
 
+/// A scale bar for a figure `width` units wide whose units are `mm_per_unit` apart: the
+/// longest 1-2-5 length (mm) that fits in a fifth of the width, and its label ("2 cm").
+pub fn scale_bar_length(mm_per_unit: f64, width: f64) -> Option<(f64, String)> {
+    if mm_per_unit.is_nan() || mm_per_unit <= 0.0 {
+        return None;
+    }
+    let mm = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]
+        .into_iter()
+        .rev()
+        .find(|&mm| mm / mm_per_unit <= width / 5.0)?;
+    let label = if mm >= 10.0 {
+        format!("{} cm", mm / 10.0)
+    } else {
+        format!("{mm} mm")
+    };
+    Some((mm, label))
+}
+
 /// Orientation letters at the middle of each edge (left, right, top, bottom) and a scale
 /// bar in the bottom-right corner of RGB pixels `rgb` (`width` wide), whose pixels are
 /// `pixel_mm` apart.
@@ -84,21 +102,11 @@ pub fn annotate(rgb: &mut [u8], width: usize, letters: [char; 4], pixel_mm: f64)
     draw_text(rgb, width, (w - lw) / 2, m, &top);
     draw_text(rgb, width, (w - lw) / 2, h - lh - m, &bottom);
 
-    // The longest 1-2-5 length that fits in a fifth of the width.
-    if pixel_mm.is_nan() || pixel_mm <= 0.0 || width < 40 {
+    if width < 40 {
         return;
     }
-    let Some(mm) = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]
-        .into_iter()
-        .rev()
-        .find(|&mm| mm / pixel_mm <= w as f64 / 5.0)
-    else {
+    let Some((mm, label)) = scale_bar_length(pixel_mm, w as f64) else {
         return;
-    };
-    let label = if mm >= 10.0 {
-        format!("{} cm", mm / 10.0)
-    } else {
-        format!("{mm} mm")
     };
     let bar = (mm / pixel_mm).round() as isize;
     let [tw, th] = text_size(width, &label);

@@ -23,7 +23,7 @@
 mod annotate;
 pub mod pick;
 
-pub use annotate::{annotate, draw_text, orientation_marker};
+pub use annotate::{annotate, draw_text, orientation_marker, scale_bar_length};
 
 use crate::texels::segments::ClassLook;
 use crate::volume::Volume;

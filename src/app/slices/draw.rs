@@ -78,17 +78,12 @@ pub(super) fn cross_sections(
 
 /// A scale bar in the bottom-right corner of `rect` for `mm_per_point`.
 pub(super) fn scale_bar(painter: &egui::Painter, rect: Rect, mm_per_point: f32) {
-    if mm_per_point.is_nan() || mm_per_point <= 0.0 {
-        return;
-    }
-    let Some(mm) = [1.0f32, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]
-        .into_iter()
-        .rev()
-        .find(|mm| mm / mm_per_point <= rect.width() / 5.0)
+    let Some((mm, label)) =
+        crate::slice::scale_bar_length(f64::from(mm_per_point), f64::from(rect.width()))
     else {
         return;
     };
-    let len = mm / mm_per_point;
+    let len = mm as f32 / mm_per_point;
     let right = rect.right() - 28.0;
     let y = rect.bottom() - 26.0;
     let stroke = Stroke::new(2.0, Color32::from_gray(230));
@@ -96,11 +91,6 @@ pub(super) fn scale_bar(painter: &egui::Painter, rect: Rect, mm_per_point: f32) 
     for x in [right - len, right] {
         painter.line_segment([pos2(x, y - 4.0), pos2(x, y)], stroke);
     }
-    let label = if mm >= 10.0 {
-        format!("{} cm", mm / 10.0)
-    } else {
-        format!("{mm} mm")
-    };
     painter.text(
         pos2(right - len / 2.0, y - 5.0),
         egui::Align2::CENTER_BOTTOM,
