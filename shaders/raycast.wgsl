@@ -46,6 +46,9 @@ override SEGMENT_EDGES: bool = true;
 // Without, every weight is 1: a step needs no look for its opacity, only a sample that
 // shows does for its colour.
 override SEGMENT_WEIGHTS: bool = true;
+// The visibility pass of view-dependent AO (ao::view): every AO read marks the voxels
+// its trilinear footprint weighs in `ao_marks` (the image itself is not used).
+override MARK_AO: bool = false;
 
 // The AO is read the full offset out wherever the gradient is at least 1/AO_EDGE_GAIN
 // of a full edge: through the whole soft ramp of a CT surface, whose deeper samples
@@ -83,12 +86,44 @@ const MODE_ISO: u32 = 4u;
 struct Extras {
     flags: vec4<u32>,  // live positional AO on, shadows on
     light: vec4<f32>,  // unit direction towards the light (volume space), w = guard (voxels)
+    marks: vec4<u32>,  // MARK_AO: x the footprint (ao::view::Footprint::code)
 }
 
 @group(2) @binding(5) var<uniform> extras: Extras;
 @group(2) @binding(6) var light_volume: texture_3d<f32>;
 @group(2) @binding(7) var surface_position: texture_2d<f32>;  // nearest surface, w = covered
 @group(2) @binding(8) var surface_color: texture_2d<f32>;     // its shaded straight RGBA
+// One bit per voxel of the AO volume (x fastest): what MARK_AO pipelines mark.
+@group(2) @binding(10) var<storage, read_write> ao_marks: array<atomic<u32>>;
+
+// Any texel a sampler's fixed-point weights may weigh (CPU twin: sample::FOOTPRINT_SLACK).
+const FOOTPRINT_SLACK: f32 = 1.0 / 64.0;
+
+// Marks the voxels an AO read at `at` (for the sample at `uvw`) weighs: its trilinear
+// footprint, widened by FOOTPRINT_SLACK (CPU twin: ao::view::ViewMarks::mark).
+fn mark_ao(uvw: vec3<f32>, at: vec3<f32>) {
+    let dims = vec3<i32>(volume_dims());
+    var read = at;
+    if extras.marks.x == 2u {
+        read = uvw;  // tests: the AO read offset ignored
+    }
+    let c = read * vec3<f32>(dims) - 0.5;
+    var lo = clamp(vec3<i32>(floor(c - FOOTPRINT_SLACK)), vec3<i32>(0), dims - 1);
+    var hi = clamp(vec3<i32>(floor(c + FOOTPRINT_SLACK)) + 1, vec3<i32>(0), dims - 1);
+    if extras.marks.x == 1u {
+        // tests: the nearest texel only
+        lo = clamp(vec3<i32>(floor(read * vec3<f32>(dims))), vec3<i32>(0), dims - 1);
+        hi = lo;
+    }
+    for (var z = lo.z; z <= hi.z; z++) {
+        for (var y = lo.y; y <= hi.y; y++) {
+            for (var x = lo.x; x <= hi.x; x++) {
+                let i = u32(x + dims.x * (y + dims.y * z));
+                atomicOr(&ao_marks[i >> 5u], 1u << (i & 31u));
+            }
+        }
+    }
+}
 
 // Front-to-back "over" of straight colour `c` with opacity `a` behind `acc`.
 fn over(acc: vec4<f32>, rgb: vec3<f32>, a: f32) -> vec4<f32> {
@@ -260,6 +295,9 @@ fn shade(rgb: vec3<f32>, uvw: vec3<f32>, view: vec3<f32>, cut: bool) -> vec3<f32
     cos_theta = select(cos_theta, 1.0, cut);
     ao_at = select(ao_at, uvw + view * (p.ao.z * p.voxel_uvw.w) / (2.0 * p.box_half.xyz), cut);
     var ao = 1.0;
+    if MARK_AO {
+        mark_ao(uvw, ao_at);
+    }
     if AO_VOLUME {
         ao = textureSampleLevel(ambient_occlusion, linear_clamp, ao_at, 0.0).r;
     }

@@ -259,6 +259,7 @@ pub fn ao_volume(
         settings: &precomputed,
         clip: Some(clip),
         coverage,
+        view: None,
     };
     let computed = engine.compute(AoInput::Texels(&texels), &request, progress)?;
     let values = match computed.ambient {

@@ -19,6 +19,25 @@ use rayon::prelude::*;
 /// `render` and `ao` read it from here.
 pub const AO_READ_REACH: usize = 2;
 
+/// How far, in texels, a trilinear read's footprint is widened either side: a sampler
+/// computes its weights in fixed point (8 fractional bits on common hardware), so a read
+/// within 1/256 of a texel centre may weigh the neighbour an exact computation gives
+/// weight 0. A generous margin costs a few voxels of AO, never exactness.
+pub const FOOTPRINT_SLACK: f32 = 1.0 / 64.0;
+
+/// The texels a trilinear read at `uvw` of a volume of `dims` may weigh, per axis the
+/// first and last index (clamped like the sampler): [`trilinear`]'s two per axis,
+/// widened by [`FOOTPRINT_SLACK`] (`mark_ao` in `shaders/raycast.wgsl`).
+pub fn trilinear_footprint(dims: [usize; 3], uvw: Vec3) -> [[usize; 2]; 3] {
+    let c = uvw * Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) - Vec3::splat(0.5);
+    [0, 1, 2].map(|a| {
+        let last = dims[a] as i64 - 1;
+        let lo = ((c[a] - FOOTPRINT_SLACK).floor() as i64).clamp(0, last);
+        let hi = ((c[a] + FOOTPRINT_SLACK).floor() as i64 + 1).clamp(0, last);
+        [lo as usize, hi as usize]
+    })
+}
+
 /// Trilinear interpolation of `values` (x fastest) at texture coordinates `uvw` in
 /// [0, 1]³, texel centres at (i + ½)/n, clamped at the edges like a GPU sampler.
 pub fn trilinear(values: &[f32], dims: [usize; 3], uvw: Vec3) -> f32 {

@@ -980,6 +980,7 @@ fn every_variant_draws_the_general_pixels() {
                 segment_modes: 2,
                 segment_edges: on(1),
                 segment_weights: on(2),
+                mark_ao: false,
             };
             // Never chosen: lavapipe crashes on it (see `Variant::of`).
             if variant.shadows && !variant.surfaces {

@@ -735,6 +735,7 @@ fn ao_methods_read_the_segment_weights() {
             settings: &settings,
             clip: None,
             coverage: Coverage::Dense,
+            view: None,
         };
         let ambient = |styles: &Styles| {
             let mut vol = RenderVolume::from_texels(&gpu, common::texels(&p.image), &tf, 1.0)

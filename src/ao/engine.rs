@@ -11,8 +11,9 @@ use super::cone::{ConeGpu, MipPyramid, cone_cpu, opacity};
 use super::fast::{box_radius, cone_reach, map_of, statistics_device, twin_is_faster};
 use super::filter::{FilterGpu, Source};
 use super::lao::{LaoGpu, LaoSetup, Rays, lao_cpu_reading, lao_lut};
-use super::sparse::Coverage;
+use super::sparse::{Bricks, Coverage};
 use super::vao::{PositionalAo, VaoGpu, VaoInputs, vao_cpu};
+use super::view::ViewMask;
 use super::{AoMethod, AoSettings};
 use crate::clip::ClipShape;
 use crate::gpu::{Gpu, GpuError, GpuUse};
@@ -33,6 +34,20 @@ pub struct AoRequest<'a> {
     pub clip: Option<&'a [ClipShape]>,
     /// Which voxels LAO, CAO and lao-full compute (the other methods compute all).
     pub coverage: Coverage,
+    /// Of those, only the voxels one image reads the AO of (a visibility pass's,
+    /// [`super::view`]); `None`: all.
+    pub view: Option<&'a Arc<ViewMask>>,
+}
+
+impl AoRequest<'_> {
+    /// The bricks (and voxels) LAO, CAO and lao-full compute for this request.
+    fn bricks(&self, texels: &VolumeTexels, ranges: &BlockRanges) -> Bricks {
+        let bricks = self.coverage.bricks(texels, ranges, self.tf);
+        match self.view {
+            Some(view) => bricks.within(Arc::clone(view)),
+            None => bricks,
+        }
+    }
 }
 
 /// The volume AO is computed for: texels (uploaded here if a GPU stage runs), the same
@@ -204,7 +219,7 @@ impl AoEngine {
             AoMethod::Lao => {
                 let rays = Rays::uniform(s.rays.directions());
                 let lut = lao_lut(tf, texels);
-                let bricks = request.coverage.bricks(texels, vol.ranges(), tf);
+                let bricks = request.bricks(texels, vol.ranges());
                 g.stage::<LaoGpu>()?.compute(
                     g,
                     vol,
@@ -263,7 +278,7 @@ impl AoEngine {
             AoMethod::Lao => {
                 let rays = Rays::uniform(s.rays.directions());
                 let ranges = BlockRanges::new(texels);
-                let bricks = request.coverage.bricks(texels, &ranges, tf);
+                let bricks = request.bricks(texels, &ranges);
                 let lut = lao_lut(tf, texels);
                 let setup = LaoSetup {
                     lut: &lut,
@@ -326,7 +341,7 @@ impl AoEngine {
         let mut uploaded = None;
         let vol = on_device(g, input, request.tf, &mut uploaded)?;
         let rays = Rays::uniform(s.rays.directions());
-        let bricks = request.coverage.bricks(texels, vol.ranges(), request.tf);
+        let bricks = request.bricks(texels, vol.ranges());
         let setup = CaoSetup {
             tf: request.tf,
             rays: &rays,

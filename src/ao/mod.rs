@@ -27,6 +27,7 @@ pub mod rays;
 pub mod settings;
 pub mod sparse;
 pub mod vao;
+pub mod view;
 
 pub use engine::{Ambient, AoComputed, AoEngine, AoInput, AoRequest};
 pub use settings::{

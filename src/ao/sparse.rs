@@ -26,6 +26,7 @@
 //! With skipping off ([`Bricks::dense`], `--no-skipping`) every list holds every brick
 //! and no ray skips: the paper's dense CAO.
 
+use super::view::ViewMask;
 use crate::clip::camera::{ClipCamera, bound_in_volume, carved_ball};
 use crate::clip::gpu::ClipUniforms;
 use crate::gpu::shaders::Constants;
@@ -147,6 +148,8 @@ pub struct Bricks {
     pub skipping: bool,
     /// Within readable bricks, the per-voxel test (`None`: every voxel of them).
     pub voxels: Option<VoxelTest>,
+    /// The voxels one image reads the AO of ([`Bricks::within`]; `None`: any view).
+    pub view: Option<std::sync::Arc<ViewMask>>,
 }
 
 /// Edge of the cells an LAO ray steps over, in voxels: finer than a brick, so a ray
@@ -260,7 +263,20 @@ impl Bricks {
             rays: RayCells::all(dims),
             skipping: false,
             voxels: None,
+            view: None,
         }
+    }
+
+    /// These bricks restricted to the voxels `view` marks (issue #46): a brick stays
+    /// readable only if it holds a marked voxel, and the per-voxel lists
+    /// ([`Self::readable_mask`], [`Self::voxel_list`]) keep only marked voxels. What the
+    /// rays skip is unchanged, so every value computed is the one without the view.
+    pub fn within(mut self, view: std::sync::Arc<ViewMask>) -> Self {
+        for (r, seen) in self.readable.iter_mut().zip(view.bricks(BRICK)) {
+            *r &= u8::from(seen);
+        }
+        self.view = Some(view);
+        self
     }
 
     /// Bricks for `ranges` of `texels` (blocks of any edge dividing [`BRICK`]):
@@ -307,6 +323,7 @@ impl Bricks {
             rays: RayCells::of(texels, lao_lut),
             skipping: true,
             voxels: render_lut.map(|lut| VoxelTest::new(texels, lut)),
+            view: None,
         }
     }
 
@@ -324,11 +341,23 @@ impl Bricks {
     /// `shaders/readable.wgsl`, whose margin is one LUT entry wider: every voxel readable
     /// here is computed there).
     pub fn readable_mask(&self, texels: &VolumeTexels) -> Vec<bool> {
-        self.mask_by_range(texels, |t, lo, hi| {
+        let mut mask = self.mask_by_range(texels, |t, lo, hi| {
             let [s, o] = t.value_map;
             let (a, b) = (lo as f64 * s + o, hi as f64 * s + o);
             !t.lut.is_transparent_over(a.min(b), a.max(b))
-        })
+        });
+        self.keep_in_view(&mut mask);
+        mask
+    }
+
+    /// Clears `mask`'s voxels outside the view, if there is one.
+    fn keep_in_view(&self, mask: &mut [bool]) {
+        use rayon::prelude::*;
+        if let Some(view) = &self.view {
+            mask.par_iter_mut()
+                .enumerate()
+                .for_each(|(i, m)| *m = *m && view.contains(i));
+        }
     }
 
     /// The voxels the GPU's LAO computes, as linear indices (x fastest) in brick order
@@ -341,7 +370,7 @@ impl Bricks {
             dims.iter().product::<usize>() <= u32::MAX as usize,
             "voxel indices beyond u32"
         );
-        let mask = self.mask_by_range(texels, |t, lo, hi| {
+        let mut mask = self.mask_by_range(texels, |t, lo, hi| {
             let last = t.map[2];
             let a = lo * t.map[0] + t.map[1];
             let b = hi * t.map[0] + t.map[1];
@@ -349,6 +378,7 @@ impl Bricks {
             let end = (a.max(b).floor() + 3.0).clamp(0.0, last) as usize;
             t.prefix[end + 1] > t.prefix[first]
         });
+        self.keep_in_view(&mut mask);
         let mut list = Vec::new();
         for b in self.list(|i| self.readable[i] != 0) {
             list.extend(

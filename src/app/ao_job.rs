@@ -130,6 +130,7 @@ pub fn compute_ao(input: AoInput, progress: &Progress) -> Result<AoResult, Strin
         settings: &settings,
         clip: None,
         coverage,
+        view: None,
     };
     let computed = engine
         .compute(input, &request, &report)

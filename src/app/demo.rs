@@ -141,6 +141,7 @@ fn probe(gpu: &Gpu, tf: &TransferFunction) -> Option<(Duration, usize)> {
         clip: None,
         // What the viewer computes in compositing.
         coverage: crate::ao::sparse::Coverage::Readable,
+        view: None,
     };
     let run = || engine.compute(AoInput::Texels(&texels), &request, &|_, _| {});
     run().ok()?;

@@ -51,6 +51,7 @@ pub fn compute_preview(
         settings: &s,
         clip: None,
         coverage: crate::ao::sparse::Coverage::Every,
+        view: None,
     };
     let computed = AoEngine::on(None)
         .compute(AoInput::Texels(texels), &request, &|_, _| {})

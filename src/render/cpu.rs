@@ -2,6 +2,7 @@
 //! rayon. Tests compare it with the GPU; it is also the fallback without an adapter.
 
 use super::{Frame, Image, OPAQUE, RaycastParams, jitter};
+use crate::ao::view::{Footprint, ViewMarks, ViewMask};
 use crate::sample::{SegmentSampler, VolumeSampler, trilinear};
 use crate::texels::{BlockRanges, VolumeTexels};
 use crate::tf::Lut;
@@ -32,6 +33,8 @@ pub struct CpuVolume {
     pub block_ranges: Option<BlockRanges>,
     /// A segmentation read beside the density (`SEGMENTS`).
     pub segments: Option<SegmentSampler>,
+    /// A visibility pass ([`mark_view`]): AO reads mark voxels here (`MARK_AO`).
+    pub marks: Option<ViewMarks>,
 }
 
 /// Surfaces for the CPU twin: the meshes, and the frame and texels that place the camera.
@@ -76,6 +79,7 @@ impl CpuVolume {
             clip: None,
             block_ranges: None,
             segments: None,
+            marks: None,
         }
     }
 }
@@ -112,7 +116,8 @@ fn shade(
     // Where the AO is read: p.ao[2] voxels out of the material along the normal
     // (raycast.wgsl's `ao_at`).
     let mut ao_at = uvw;
-    if phong || ((vol.ao.is_some() || vol.live_vao.is_some()) && p.ao[2] > 0.0) {
+    let reads_ao = vol.ao.is_some() || vol.marks.is_some() || vol.live_vao.is_some();
+    if phong || (reads_ao && p.ao[2] > 0.0) {
         let d = Vec3::new(p.voxel_uvw[0], p.voxel_uvw[1], p.voxel_uvw[2]);
         let differences = |s: &dyn Fn(Vec3) -> f32| {
             Vec3::new(
@@ -160,6 +165,9 @@ fn shade(
         let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
         (diffuse, specular, lit) = (1.0, 0.0, None);
         ao_at = uvw + view * (p.ao[2] * p.voxel_uvw[3]) / (2.0 * half);
+    }
+    if let Some(marks) = &vol.marks {
+        marks.mark(uvw, ao_at);
     }
     let mut ao = vol
         .ao
@@ -606,6 +614,26 @@ pub fn render_reusing(
         height: h,
         pixels,
     }
+}
+
+/// The twin of [`super::gpu::RayCaster::mark_view`]: ray casts `frame` of `vol` as
+/// [`render`] would once its AO is set, and returns the voxels its AO reads weigh (under
+/// `footprint`). `vol.ao` may be anything meanwhile: AO never changes a sample's opacity.
+pub fn mark_view(
+    texels: &VolumeTexels,
+    vol: &mut CpuVolume,
+    lut: &Lut,
+    occupancy: &[u8],
+    frame: &Frame,
+    footprint: Footprint,
+) -> ViewMask {
+    if !frame.settings.mode.uses_ao() {
+        return ViewMask::empty(texels.dims);
+    }
+    vol.marks = Some(ViewMarks::new(texels.dims, footprint));
+    render(texels, vol, lut, occupancy, frame);
+    let marks = vol.marks.take().expect("set above");
+    marks.into_mask()
 }
 
 pub fn prepare(texels: &VolumeTexels, lut: &Lut) -> (CpuVolume, Vec<u8>) {

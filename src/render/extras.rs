@@ -34,9 +34,11 @@ pub struct ExtrasParams {
     /// Unit direction towards the light; w: the shadow lookup's guard limit in voxels
     /// ([`crate::render::shadow::GUARD_VOXELS`]).
     pub light: [f32; 4],
+    /// A visibility pass's footprint ([`crate::ao::view::Footprint::code`]); yzw unused.
+    pub marks: [u32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<ExtrasParams>() == 32);
+const _: () = assert!(std::mem::size_of::<ExtrasParams>() == 48);
 
 impl RayExtras {
     pub fn params(&self) -> ExtrasParams {
@@ -49,6 +51,7 @@ impl RayExtras {
                 0,
             ],
             light: [d.x, d.y, d.z, crate::render::shadow::GUARD_VOXELS],
+            marks: [0; 4],
         }
     }
 }
@@ -61,6 +64,9 @@ pub struct Placeholders {
     /// gradient volume's in group 0).
     pub(super) texture: wgpu::TextureView,
     storage: wgpu::Buffer,
+    /// Where a pipeline that is not a visibility pass "marks" (it never does): its own
+    /// buffer, as it is bound read-write beside `storage` read-only.
+    marks: wgpu::Buffer,
     layer: wgpu::TextureView,
 }
 
@@ -103,6 +109,11 @@ impl Placeholders {
                 16,
                 wgpu::BufferUsages::STORAGE,
             ),
+            marks: buffer(
+                "RayCaster::placeholder_marks",
+                16,
+                wgpu::BufferUsages::STORAGE,
+            ),
             layer: texel(
                 "RayCaster::placeholder_2d",
                 wgpu::TextureDimension::D2,
@@ -115,7 +126,7 @@ impl Placeholders {
 
 /// Layout entries of the ray caster's group 1: positional AO (0–4), extras uniform (5),
 /// light volume (6), surface position and colour (7, 8), positional AO's segmentation
-/// look (9).
+/// look (9), a visibility pass's marks (10, [`crate::ao::view`]).
 pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     use crate::gpu::entry;
     use wgpu::TextureViewDimension::{D2, D3};
@@ -126,17 +137,21 @@ pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     entries.push(entry::texture(7, c, D2, Some(false)));
     entries.push(entry::texture(8, c, D2, Some(false)));
     entries.push(entry::texture(9, c, D3, Some(true)));
+    entries.push(entry::storage(10, c, false));
     entries
 }
 
 /// The ray caster's bind group 1 for `extras` (placeholders where a feature is off);
-/// `layer` is this frame's rasterised surfaces.
+/// `layer` is this frame's rasterised surfaces, `marks` a visibility pass's bits.
 pub fn bind_group_2(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     extras: &RayExtras,
     uniforms: &wgpu::Buffer,
-    layer: Option<&crate::render::surface::SurfaceLayer>,
+    (layer, marks): (
+        Option<&crate::render::surface::SurfaceLayer>,
+        Option<&wgpu::Buffer>,
+    ),
     placeholders: &Placeholders,
     sampler: &wgpu::Sampler,
 ) -> wgpu::BindGroup {
@@ -169,5 +184,6 @@ pub fn bind_group_2(
             .as_ref()
             .map_or(&placeholders.texture, |v| v.segment_weight()),
     ));
+    resources.push(marks.unwrap_or(&placeholders.marks).as_entire_binding());
     bind_group(device, "RayCaster::bind_group_2", layout, &resources)
 }

@@ -6,6 +6,7 @@ pub use super::gpu_volume::RenderVolume;
 use super::reuse::Ball;
 pub use super::variant::Variant;
 use super::{Frame, Image, RaycastParams, TileAt};
+use crate::ao::view::{Footprint, ViewMask};
 use crate::gpu::{
     Gpu, GpuError, bind_group, copy_texture_out, read_buffer, shaders, texture_readback,
     uniform_buffer, unpad, validated,
@@ -50,6 +51,15 @@ struct FrameDraw<'a> {
     /// An image of the same view and the balls outside which this frame's inputs are
     /// the same ([`RayCaster::render_reusing`]).
     previous: Option<(&'a Image, &'a [Ball])>,
+    /// A visibility pass ([`RayCaster::mark_view`]): where its AO reads mark voxels.
+    marks: Option<Marks<'a>>,
+}
+
+/// Where a visibility pass marks the voxels its AO reads weigh, and how.
+#[derive(Debug, Clone, Copy)]
+struct Marks<'a> {
+    buffer: &'a wgpu::Buffer,
+    footprint: Footprint,
 }
 
 /// One tile of one frame to ray cast ([`RayCaster::encode_tile`]).
@@ -146,7 +156,7 @@ impl RayCaster {
             )?),
         };
         let variant = Variant::of(vol, tile.frame, tile.clip, layer.is_some());
-        self.encode(gpu, tile, variant, layer.as_ref(), encoder)
+        self.encode(gpu, tile, variant, (layer.as_ref(), None), encoder)
     }
 
     /// The pipeline of `variant`, built on first use (shader compilation: ~30 ms on
@@ -211,7 +221,7 @@ impl RayCaster {
         gpu: &Gpu,
         tile: TileDraw<'_>,
         variant: Variant,
-        layer: Option<&super::surface::SurfaceLayer>,
+        (layer, marks): (Option<&super::surface::SurfaceLayer>, Option<Marks<'_>>),
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
         let device = &gpu.device;
@@ -227,7 +237,7 @@ impl RayCaster {
         let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
         let (tw, th) = (tile.target.width(), tile.target.height());
         validated(device, "RayCaster::encode_tile", || {
-            let [group, group_2, group_3] = self.bind_groups(gpu, &tile, &params, layer);
+            let [group, group_2, group_3] = self.bind_groups(gpu, &tile, &params, (layer, marks));
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("RayCaster::encode_tile"),
                 timestamp_writes: None,
@@ -249,17 +259,16 @@ impl RayCaster {
         gpu: &Gpu,
         tile: &TileDraw<'_>,
         params: &RaycastParams,
-        layer: Option<&super::surface::SurfaceLayer>,
+        (layer, marks): (Option<&super::surface::SurfaceLayer>, Option<Marks<'_>>),
     ) -> [wgpu::BindGroup; 3] {
         let (device, queue) = (&gpu.device, &gpu.queue);
         let vol = tile.volume;
         let lut = vol.lut_buffer_for(tile.frame.settings.step_voxels);
         let uniform = |label, bytes: &[u8]| uniform_buffer(device, queue, label, bytes);
         let params = uniform("RayCaster::params", bytemuck::bytes_of(params));
-        let extras = uniform(
-            "RayCaster::extras",
-            bytemuck::bytes_of(&vol.extras.params()),
-        );
+        let mut extras = vol.extras.params();
+        extras.marks[0] = marks.map_or(0, |m| m.footprint.code());
+        let extras = uniform("RayCaster::extras", bytemuck::bytes_of(&extras));
         let target_view = tile.target.create_view(&Default::default());
         let group = bind_group(
             device,
@@ -284,7 +293,7 @@ impl RayCaster {
             &self.layout_2,
             &vol.extras,
             &extras,
-            layer,
+            (layer, marks.map(|m| m.buffer)),
             &self.placeholders,
             &self.sampler,
         );
@@ -324,8 +333,60 @@ impl RayCaster {
             clip,
             variant,
             previous: None,
+            marks: None,
         };
         self.render_tiles(gpu, draw)
+    }
+
+    /// The visibility pass of view-dependent AO ([`crate::ao::view`]): ray casts `frame`
+    /// as [`Self::render`] would once `vol`'s AO is bound, and returns the voxels whose
+    /// AO its reads weigh (under `footprint`; only [`Footprint::Trilinear`] is exact).
+    /// Nothing is marked for a mode that reads no AO.
+    pub fn mark_view(
+        &self,
+        gpu: &Gpu,
+        vol: &RenderVolume,
+        frame: &Frame,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        footprint: Footprint,
+    ) -> Result<ViewMask, GpuError> {
+        let dims = vol.texels.dims;
+        if !frame.settings.mode.uses_ao() {
+            return Ok(ViewMask::empty(dims));
+        }
+        let device = &gpu.device;
+        let bytes = 4 * crate::ao::view::words_for(dims) as u64;
+        let (buffer, readback) = validated(device, "RayCaster::marks", || {
+            let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+            let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("RayCaster::marks"),
+                size: bytes,
+                usage,
+                mapped_at_creation: false,
+            });
+            let readback = crate::gpu::readback_buffer(device, "RayCaster::marks_readback", bytes);
+            (buffer, readback)
+        })?;
+        let draw = FrameDraw {
+            volume: vol,
+            frame,
+            clip,
+            variant: None,
+            previous: None,
+            marks: Some(Marks {
+                buffer: &buffer,
+                footprint,
+            }),
+        };
+        self.render_tiles(gpu, draw)?;
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&buffer, 0, &readback, 0, bytes);
+        gpu.queue.submit([encoder.finish()]);
+        let words = read_buffer(device, &readback, "RayCaster::marks")?;
+        Ok(ViewMask::from_words(
+            dims,
+            bytemuck::pod_collect_to_vec(&words),
+        ))
     }
 
     /// [`Self::render`] over `previous`, an image of the same view (camera, size,
@@ -349,6 +410,7 @@ impl RayCaster {
             clip,
             variant: None,
             previous: Some((previous, changed)),
+            marks: None,
         };
         self.render_tiles(gpu, draw)
     }
@@ -360,6 +422,7 @@ impl RayCaster {
             clip,
             variant,
             previous,
+            marks,
         } = draw;
         let device = &gpu.device;
         let (w, h) = (frame.width.max(1), frame.height.max(1));
@@ -417,8 +480,10 @@ impl RayCaster {
                 let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("RayCaster::tile"),
                 });
-                let variant =
-                    variant.unwrap_or_else(|| Variant::of(vol, frame, clip, layer.is_some()));
+                let variant = variant.unwrap_or_else(|| match marks {
+                    Some(_) => Variant::marking(vol, frame, clip, layer.is_some()),
+                    None => Variant::of(vol, frame, clip, layer.is_some()),
+                });
                 let tile = TileDraw {
                     volume: vol,
                     frame,
@@ -427,7 +492,7 @@ impl RayCaster {
                     origin: (x0, y0),
                     changed,
                 };
-                self.encode(gpu, tile, variant, layer.as_ref(), &mut encoder)?;
+                self.encode(gpu, tile, variant, (layer.as_ref(), marks), &mut encoder)?;
                 copy_texture_out(&mut encoder, &target, &readback, row, [tw, th, 1]);
                 gpu.queue.submit([encoder.finish()]);
                 let bytes = read_buffer(device, &readback, "RayCaster::readback")?;

@@ -257,6 +257,15 @@ pub struct RenderSettings {
     /// that window would show nothing).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub projection_window: Option<[f64; 2]>,
+    /// Compute LAO and CAO only for the voxels this image reads (issue #46,
+    /// [`crate::ao::view`]): a visibility pass first, the same pixels. False
+    /// (`--no-view-culling`): every voxel the transfer function can make visible.
+    #[serde(skip_serializing_if = "is_true")]
+    pub view_culling: bool,
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
 }
 
 impl Default for RenderSettings {
@@ -280,6 +289,7 @@ impl Default for RenderSettings {
             opacity_modulation: None,
             clip_surface: None,
             projection_window: None,
+            view_culling: true,
         }
     }
 }

@@ -8,6 +8,7 @@ use super::shadow::{LightGpu, LightVolume, Lit, light_cpu_reading, light_directi
 use super::{Frame, Image, RenderSettings};
 use crate::ao::cao::CaoStats;
 use crate::ao::vao::PositionalAo;
+use crate::ao::view::{Footprint, ViewMask};
 use crate::ao::{Ambient, AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
 use crate::clip::ClipShape;
 use crate::clip::gpu::{ClipMaps, MapRequest};
@@ -37,6 +38,27 @@ pub struct Rendered {
     pub clip_errors: Vec<String>,
     /// How the AO was computed, where that needs saying (see [`crate::ao::AoComputed`]).
     pub notes: Vec<String>,
+    /// With view culling ([`crate::ao::view`]): how many voxels the image needed.
+    pub view: Option<ViewFigures>,
+}
+
+/// What a visibility pass found ([`crate::ao::view`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ViewFigures {
+    /// Voxels whose AO the image reads.
+    pub marked: usize,
+    /// Voxels the transfer function can make visible (what is computed without view
+    /// culling).
+    pub readable: usize,
+    /// Readable voxels the image reads: what was computed.
+    pub needed: usize,
+}
+
+impl ViewFigures {
+    /// The fraction of the readable voxels this view needed.
+    pub fn fraction(&self) -> f64 {
+        self.needed as f64 / self.readable.max(1) as f64
+    }
 }
 
 /// One frame to render: the volume (already in RAS order) and everything drawn with it.
@@ -200,32 +222,46 @@ fn render_gpu(
     let mut vol = RenderVolume::new(g, volume, tf, frame.settings.step_voxels)?;
     vol.set_segments(g, job.segments.cloned());
     vol.extras.surfaces = surfaces.to_vec();
+    // Opacity modulation changes which samples show: set before the visibility pass.
+    if let Some(m) = &frame.settings.opacity_modulation {
+        let f = crate::ao::fast::modulation(g, &vol, tf, m)?;
+        vol.set_opacity_modulation(g, &f);
+    }
     let start = std::time::Instant::now();
+    let mut clip_errors = Vec::new();
+    // Without CAO, maps that only clip the picture; with it, CAO's own (posed below).
+    let mut maps = None;
+    if !ao.method.is_clipped() && !clip.is_empty() {
+        let mut m = ClipMaps::new(g)?;
+        let radius = glam::Vec3::from(vol.texels.extent()).length() * 0.5;
+        let update = m.update(g, MapRequest::clipping(clip, radius, ao.clip_resolution))?;
+        clip_errors = update.errors.iter().map(|e| e.to_string()).collect();
+        maps = Some(m);
+    }
+    let view = match culls_view(frame, ao) {
+        true => Some(Arc::new(view_gpu(
+            g,
+            &rc,
+            &vol,
+            frame,
+            ao,
+            clip,
+            maps.as_ref(),
+        )?)),
+        false => None,
+    };
     let engine = AoEngine::on(Some(Arc::clone(g)));
     let request = AoRequest {
         tf,
         settings: ao,
         clip: Some(clip),
         coverage: crate::ao::sparse::Coverage::for_render(&frame.settings),
+        view: view.as_ref(),
     };
     let computed = engine.compute(AoInput::Uploaded(&vol), &request, progress)?;
-    let mut clip_errors = Vec::new();
     let cao_state = show_ambient(g, &mut vol, tf, ao, computed.ambient)?;
     if let Some(stats) = &computed.cao {
         clip_errors = stats.clip_errors.clone();
-    }
-    if let Some(m) = &frame.settings.opacity_modulation {
-        let f = crate::ao::fast::modulation(g, &vol, tf, m)?;
-        vol.set_opacity_modulation(g, &f);
-    }
-    let mut maps = None;
-    if cao_state.is_none() && !clip.is_empty() {
-        let mut m = ClipMaps::new(g)?;
-        let radius = glam::Vec3::from(vol.texels.extent()).length() * 0.5;
-        // No AO depends on the clipping here: the dilation margin is unused.
-        let update = m.update(g, MapRequest::clipping(clip, radius, ao.clip_resolution))?;
-        clip_errors = update.errors.iter().map(|e| e.to_string()).collect();
-        maps = Some(m);
     }
     let clip_maps = cao_state.as_ref().map(|c| &c.clip).or(maps.as_ref());
     let ao_seconds = start.elapsed().as_secs_f64();
@@ -256,7 +292,72 @@ fn render_gpu(
         cao: computed.cao,
         clip_errors,
         notes: computed.notes,
+        view: view.map(|v| view_figures(&v, &vol.texels, tf, frame)),
     })
+}
+
+/// Whether `frame` computes its AO only where it reads it ([`crate::ao::view`]): LAO,
+/// CAO and lao-full in a mode that reads AO, unless `--no-view-culling`.
+pub fn culls_view(frame: &Frame, ao: &AoSettings) -> bool {
+    frame.settings.view_culling
+        && frame.settings.mode.uses_ao()
+        && matches!(ao.method, AoMethod::Lao | AoMethod::Cao | AoMethod::LaoFull)
+}
+
+/// The visibility pass on the GPU: the voxels `frame` of `vol` reads the AO of, clipped
+/// by `maps`, or for CAO and lao-full by maps posed as CAO poses its own for `clip`
+/// (the same request, so the same maps the image then clips with).
+fn view_gpu(
+    g: &Gpu,
+    rc: &RayCaster,
+    vol: &RenderVolume,
+    frame: &Frame,
+    ao: &AoSettings,
+    clip: &[ClipShape],
+    maps: Option<&ClipMaps>,
+) -> Result<ViewMask, GpuError> {
+    let posed;
+    let maps = match (ao.method.is_clipped(), maps) {
+        (true, _) => {
+            let mut m = ClipMaps::new(g)?;
+            let request = MapRequest {
+                shapes: clip,
+                volume_radius: glam::Vec3::from(vol.texels.extent()).length() * 0.5,
+                reach_mm: crate::ao::cao::reach_mm(ao.samples, vol.texels.spacing),
+                resolution: ao.clip_resolution,
+            };
+            m.update(g, request)?;
+            posed = m;
+            Some(&posed)
+        }
+        (false, maps) => maps,
+    };
+    rc.mark_view(g, vol, frame, maps, Footprint::Trilinear)
+}
+
+/// What a visibility pass found: the voxels marked against those the transfer function
+/// can make visible.
+fn view_figures(
+    view: &ViewMask,
+    texels: &VolumeTexels,
+    tf: &TransferFunction,
+    frame: &Frame,
+) -> ViewFigures {
+    let ranges = crate::texels::BlockRanges::new(texels);
+    let readable = crate::ao::sparse::Coverage::for_render(&frame.settings)
+        .bricks(texels, &ranges, tf)
+        .readable_mask(texels);
+    let readable_count = readable.iter().filter(|r| **r).count();
+    let needed = readable
+        .iter()
+        .enumerate()
+        .filter(|(i, r)| **r && view.contains(*i))
+        .count();
+    ViewFigures {
+        marked: view.count(),
+        readable: readable_count,
+        needed,
+    }
 }
 
 fn render_cpu(
@@ -278,12 +379,26 @@ fn render_cpu(
             texels: texels.clone(),
         });
     }
+    if let Some(m) = &frame.settings.opacity_modulation {
+        cv.modulation = Some(quantise16(&crate::ao::fast::modulation_cpu(&texels, tf, m)));
+    }
     let start = std::time::Instant::now();
+    let view = culls_view(frame, ao).then(|| {
+        Arc::new(cpu::mark_view(
+            &texels,
+            &mut cv,
+            &lut,
+            &occ,
+            frame,
+            Footprint::Trilinear,
+        ))
+    });
     let request = AoRequest {
         tf,
         settings: ao,
         clip: None,
         coverage: crate::ao::sparse::Coverage::for_render(&frame.settings),
+        view: view.as_ref(),
     };
     // The GPU keeps AO volumes as f32 (R32Float), so the twin uses them as computed.
     let input = match job.segments {
@@ -298,9 +413,6 @@ fn render_cpu(
             cv.live_vao = Some(twin);
         }
         Ambient::One | Ambient::Cao(_) => {}
-    }
-    if let Some(m) = &frame.settings.opacity_modulation {
-        cv.modulation = Some(quantise16(&crate::ao::fast::modulation_cpu(&texels, tf, m)));
     }
     let ao_seconds = start.elapsed().as_secs_f64();
     let light_start = std::time::Instant::now();
@@ -323,6 +435,7 @@ fn render_cpu(
         cao: None,
         clip_errors: Vec::new(),
         notes: computed.notes,
+        view: view.map(|v| view_figures(&v, &texels, tf, frame)),
     })
 }
 

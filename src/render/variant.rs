@@ -35,6 +35,8 @@ pub struct Variant {
     pub segment_edges: bool,
     /// Some class's weight is below 1 (`SEGMENT_WEIGHTS`).
     pub segment_weights: bool,
+    /// A visibility pass (`MARK_AO`, [`crate::ao::view`]): AO reads mark voxels.
+    pub mark_ao: bool,
 }
 
 impl Variant {
@@ -75,6 +77,29 @@ impl Variant {
             segment_modes: vol.segments.modes,
             segment_edges: vol.segments.edges && (phong || ao_volume || live_vao),
             segment_weights: vol.segments.edges,
+            mark_ao: false,
+        }
+    }
+
+    /// The visibility pass of `frame`: the pipeline that draws it once its AO volume is
+    /// bound (every sample, read offset and termination the same), marking the voxels its
+    /// AO reads weigh instead of using the image.
+    pub fn marking(
+        vol: &RenderVolume,
+        frame: &Frame,
+        clip: Option<&crate::clip::gpu::ClipMaps>,
+        surfaces: bool,
+    ) -> Variant {
+        let v = Variant::of(vol, frame, clip, surfaces);
+        let lit = frame.settings.mode.uses_ao();
+        let phong = v.phong;
+        let gradient = Some(vol.gradient_volume().is_some() && lit);
+        Variant {
+            ao_volume: lit,
+            gradient: if lit { gradient } else { v.gradient },
+            segment_edges: vol.segments.edges && (phong || lit || v.live_vao),
+            mark_ao: lit,
+            ..v
         }
     }
 
@@ -96,11 +121,12 @@ impl Variant {
             segment_modes: 2,
             segment_edges: true,
             segment_weights: true,
+            mark_ao: false,
         }
     }
 
     /// The values of the shader's `override` constants.
-    pub(super) fn constants(&self) -> [(&'static str, f64); 16] {
+    pub(super) fn constants(&self) -> [(&'static str, f64); 17] {
         let b = |on: bool| f64::from(u8::from(on));
         // Shading that fetches: worth finding a sample with opacity before shading.
         let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
@@ -121,6 +147,7 @@ impl Variant {
             ("SEGMENT_MODES", f64::from(self.segment_modes)),
             ("SEGMENT_EDGES", b(self.segment_edges)),
             ("SEGMENT_WEIGHTS", b(self.segment_weights)),
+            ("MARK_AO", b(self.mark_ao)),
         ]
     }
 }

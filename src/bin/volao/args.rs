@@ -290,6 +290,10 @@ pub struct RenderArgs {
     /// which the skips never change.
     #[arg(long)]
     pub no_skipping: bool,
+    /// Compute LAO and CAO for every voxel the transfer function can make visible, not
+    /// only for those this image reads (a visibility pass first; the same pixels).
+    #[arg(long)]
+    pub no_view_culling: bool,
     /// Directional light: the direction towards the light in volume space (RAS: x to the
     /// patient's left, y anterior, z superior), e.g. -0.5,0.6,0.62.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_light, allow_hyphen_values = true)]

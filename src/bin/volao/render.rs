@@ -76,6 +76,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if let Some(stats) = &out.cao {
         crate::ao::print_cao(stats);
     }
+    if let Some(v) = &out.view {
+        println!(
+            "view culling: AO computed for the {} voxels this image reads, {:.1} % of the {} the transfer function can show (--no-view-culling: all)",
+            v.needed,
+            100.0 * v.fraction(),
+            v.readable
+        );
+    }
     if scene.render.shadows {
         eprintln!("{}", light_note(&scene.render, &out));
     }
@@ -271,6 +279,9 @@ impl RenderArgs {
         settings.shadows |= self.shadows;
         if self.no_skipping {
             settings.empty_space_skipping = false;
+        }
+        if self.no_view_culling {
+            settings.view_culling = false;
         }
         Ok(())
     }

@@ -187,6 +187,7 @@ fn render_files(args: &RenderBenchArgs) -> Result<()> {
             } else {
                 volao::ao::sparse::Coverage::Every
             },
+            view: None,
         };
         let computed = AoEngine::on(Some(Arc::clone(&gpu))).compute(
             AoInput::Uploaded(&vols[0].1),
