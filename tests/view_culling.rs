@@ -161,7 +161,7 @@ fn lao_image(
     let (bricks, marked) = match footprint {
         Some(footprint) => {
             let view = rc
-                .mark_view(gpu, vol, frame, None, footprint)
+                .mark_view(gpu, vol, frame, None, footprint, None)
                 .unwrap_or_else(|e| panic!("{e}"));
             let marked = view.count();
             let bricks = Coverage::Readable.bricks(&vol.texels, vol.ranges(), tf);
@@ -231,7 +231,7 @@ fn the_cpu_twin_marks_what_the_gpu_marks_and_stays_exact() {
     let (mut cv, occ) = volao::render::cpu::prepare(&texels, &lut);
     for frame in orbit(settings).into_iter().step_by(3) {
         let on_gpu = rc
-            .mark_view(&gpu, &vol, &frame, None, Footprint::Trilinear)
+            .mark_view(&gpu, &vol, &frame, None, Footprint::Trilinear, None)
             .unwrap_or_else(|e| panic!("{e}"));
         let twin = volao::render::cpu::mark_view(
             &texels,

@@ -342,6 +342,11 @@ impl RayCaster {
     /// as [`Self::render`] would once `vol`'s AO is bound, and returns the voxels whose
     /// AO its reads weigh (under `footprint`; only [`Footprint::Trilinear`] is exact).
     /// Nothing is marked for a mode that reads no AO.
+    ///
+    /// With `previous` (the pass of an image of the same view, that image, and the balls
+    /// holding every change since, as [`Self::render_reusing`] takes them), only the rays
+    /// that meet a change are cast and their marks added to the previous pass's: the
+    /// other rays read what they read then. A superset of the image's voxels, so exact.
     pub fn mark_view(
         &self,
         gpu: &Gpu,
@@ -349,6 +354,7 @@ impl RayCaster {
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
         footprint: Footprint,
+        previous: Option<(&ViewMask, &Image, &[Ball])>,
     ) -> Result<ViewMask, GpuError> {
         let dims = vol.texels.dims;
         if !frame.settings.mode.uses_ao() {
@@ -357,7 +363,9 @@ impl RayCaster {
         let device = &gpu.device;
         let bytes = 4 * crate::ao::view::words_for(dims) as u64;
         let (buffer, readback) = validated(device, "RayCaster::marks", || {
-            let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+            let usage = wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST;
             let buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("RayCaster::marks"),
                 size: bytes,
@@ -367,12 +375,18 @@ impl RayCaster {
             let readback = crate::gpu::readback_buffer(device, "RayCaster::marks_readback", bytes);
             (buffer, readback)
         })?;
+        if let Some((view, _, _)) = previous.filter(|(v, _, _)| v.dims == dims) {
+            gpu.queue
+                .write_buffer(&buffer, 0, bytemuck::cast_slice(&view.words));
+        }
         let draw = FrameDraw {
             volume: vol,
             frame,
             clip,
             variant: None,
-            previous: None,
+            previous: previous
+                .filter(|(v, _, _)| v.dims == dims)
+                .map(|(_, image, changed)| (image, changed)),
             marks: Some(Marks {
                 buffer: &buffer,
                 footprint,

@@ -332,7 +332,7 @@ fn view_gpu(
         }
         (false, maps) => maps,
     };
-    rc.mark_view(g, vol, frame, maps, Footprint::Trilinear)
+    rc.mark_view(g, vol, frame, maps, Footprint::Trilinear, None)
 }
 
 /// What a visibility pass found: the voxels marked against those the transfer function

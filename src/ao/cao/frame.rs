@@ -291,11 +291,10 @@ impl CaoGpu {
         let b = &self.bricks;
         let cameras = self.clip.cameras();
         let near = b.near(texels.dims, texels.spacing, &self.clip.uniforms, &cameras);
-        let touched: Vec<bool> = near
-            .iter()
-            .zip(&self.was_near)
-            .map(|(a, b)| *a || *b)
+        let touched: Vec<bool> = (0..b.count())
+            .map(|i| near[i] || self.was_near[i] || self.stale[i])
             .collect();
+        let seen = |i: usize| self.view.as_ref().is_none_or(|v| v[i]);
         // Step IV marks voxels for step V only in bricks a change can reach; elsewhere
         // it copies V_PAO (and writes 1 where it clips), so step V skips them.
         let reached = match mode {
@@ -308,15 +307,20 @@ impl CaoGpu {
             ),
             CaoMode::Full => vec![true; b.count()],
         };
+        // Step V's bricks before the view: a view leaves some out (stale until seen).
+        let needs_v = |i: usize| match mode {
+            CaoMode::Selective => touched[i] && reached[i] && b.readable[i] != 0,
+            CaoMode::Full => b.readable[i] != 0,
+        };
         let lists = Lists {
             clip: b.list_flagged(|i| touched[i] && b.used(i), |i| reached[i]),
             lao: match mode {
-                CaoMode::Selective => {
-                    b.list_flagged(|i| touched[i] && reached[i] && b.readable[i] != 0, |_| true)
-                }
-                CaoMode::Full => b.list_flagged(|i| b.readable[i] != 0, |i| touched[i]),
+                CaoMode::Selective => b.list_flagged(|i| needs_v(i) && seen(i), |_| true),
+                CaoMode::Full => b.list_flagged(|i| needs_v(i) && seen(i), |i| touched[i]),
             },
         };
+        let stale: Vec<bool> = (0..b.count()).map(|i| needs_v(i) && !seen(i)).collect();
+        self.stale = stale;
         self.was_near = near;
         self.cut_balls = match mode {
             CaoMode::Selective => {

@@ -260,6 +260,11 @@ pub struct CaoGpu {
     /// Bricks near a shape in the previous frame: their `V_o` and `V_AO` must be brought
     /// back this frame if no shape is near them now.
     was_near: Vec<bool>,
+    /// Per brick, whether the image reads it ([`Self::set_view`]; `None`: every brick).
+    view: Option<Vec<bool>>,
+    /// Bricks whose step V a view left out while a change reached them: their `V_AO` is
+    /// not this pose's until a frame that sees them runs it.
+    stale: Vec<bool>,
     /// The last frame's lists and mode (to read its mask back).
     last: (Lists, CaoMode),
     /// Seconds spent on `V_PAO`.
@@ -482,6 +487,8 @@ impl CaoGpu {
                 samples: samples.max(1),
                 msaa,
                 was_near: vec![false; bricks.count()],
+                view: None,
+                stale: vec![false; bricks.count()],
                 last: (Lists::default(), CaoMode::Selective),
                 bricks,
                 precompute_seconds: 0.0,
@@ -526,6 +533,31 @@ impl CaoGpu {
     /// The bricks this CAO processes.
     pub fn bricks(&self) -> &Bricks {
         &self.bricks
+    }
+
+    /// From the next frame on, step V runs only in the bricks holding a voxel `view`
+    /// marks (a visibility pass of the image to draw, [`crate::ao::view`]); `None`: in
+    /// every brick. `V_AO` stays exact on every marked voxel; a brick left out while a
+    /// change reached it is recomputed by the first frame that sees it.
+    pub fn set_view(&mut self, view: Option<&crate::ao::view::ViewMask>) {
+        self.view = view.map(|v| v.bricks(super::sparse::BRICK));
+    }
+
+    /// Poses the clip maps for `pose` without starting a frame: a visibility pass can
+    /// then clip with the maps the frame will (its [`Self::update`] finds them posed).
+    pub fn pose_maps(
+        &mut self,
+        gpu: &Gpu,
+        texels: &VolumeTexels,
+        pose: &Pose<'_>,
+    ) -> Result<(), GpuError> {
+        let request = MapRequest {
+            shapes: pose.shapes,
+            volume_radius: Vec3::from(texels.extent()).length() * 0.5,
+            reach_mm: pose.reach_mm,
+            resolution: pose.resolution,
+        };
+        self.clip.update(gpu, request).map(|_| ())
     }
 
     fn run_timed(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<CaoStats, GpuError> {

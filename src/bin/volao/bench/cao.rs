@@ -8,7 +8,13 @@
 //! - `cao`: sparse CAO (issue #15, `volao::ao::sparse`), what rendering runs, whose
 //!   render casts only the rays near the shape's last and new pose and keeps its last
 //!   image's other pixels (`volao::render::reuse`), as the viewer does while a shape is
-//!   dragged.
+//!   dragged;
+//! - `lao-sparse`: LAO every frame over the readable voxels (`cao`'s skipping), every
+//!   pixel cast: the baseline with the same skipping;
+//! - `lao-view` and `cao-view`: the same two with view culling (issue #46,
+//!   `volao::ao::view`): each frame a visibility pass of the image (clipped with the
+//!   frame's maps) first, then step V only in the bricks it marked; `cao-view` renders
+//!   as `cao` does. Their frame time includes the visibility pass.
 //!
 //! Every frame of every method is rendered and compared with `lao-every-frame`'s image
 //! of the same pose: `differing_pixels` must be 0.
@@ -77,37 +83,62 @@ fn paper_speedup(set: RaySet) -> Option<f64> {
     }
 }
 
-/// The three methods, in the order they run each frame.
+/// The methods, in the order they run each frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Method {
     LaoEveryFrame,
     CaoPaper,
     Cao,
+    LaoSparse,
+    LaoView,
+    CaoView,
 }
 
 impl Method {
-    const ALL: [Method; 3] = [Method::LaoEveryFrame, Method::CaoPaper, Method::Cao];
+    /// The paper's three (Table 4 and the memory figures).
+    const PAPER: [Method; 3] = [Method::LaoEveryFrame, Method::CaoPaper, Method::Cao];
+    const ALL: [Method; 6] = [
+        Method::LaoEveryFrame,
+        Method::CaoPaper,
+        Method::Cao,
+        Method::LaoSparse,
+        Method::LaoView,
+        Method::CaoView,
+    ];
 
     fn name(self) -> &'static str {
         match self {
             Method::LaoEveryFrame => "lao-every-frame",
             Method::CaoPaper => "cao-paper",
             Method::Cao => "cao",
+            Method::LaoSparse => "lao-sparse",
+            Method::LaoView => "lao-view",
+            Method::CaoView => "cao-view",
         }
     }
 
     fn mode(self) -> CaoMode {
         match self {
-            Method::LaoEveryFrame => CaoMode::Full,
+            Method::LaoEveryFrame | Method::LaoSparse | Method::LaoView => CaoMode::Full,
             _ => CaoMode::Selective,
         }
     }
 
     fn coverage(self) -> Coverage {
         match self {
-            Method::Cao => Coverage::Readable,
-            _ => Coverage::Dense,
+            Method::LaoEveryFrame | Method::CaoPaper => Coverage::Dense,
+            _ => Coverage::Readable,
         }
+    }
+
+    /// Whether each frame's step V is culled to what the image reads.
+    fn culls_view(self) -> bool {
+        matches!(self, Method::LaoView | Method::CaoView)
+    }
+
+    /// Whether its image reuses the last one's pixels away from the change.
+    fn reuses(self) -> bool {
+        matches!(self, Method::Cao | Method::CaoView)
     }
 }
 
@@ -182,11 +213,17 @@ struct Bench {
     tf: TransferFunction,
     frame: Frame,
     resolution: u32,
+    /// The voxels the transfer function can make visible (what `cao` computes).
+    readable: Vec<bool>,
 }
 
 /// A frame's figures: CAO stats, the render time and the image.
 struct Timed {
     stats: CaoStats,
+    /// The visibility pass, and the fraction of the readable voxels it marked (view
+    /// methods).
+    view_seconds: f64,
+    view_fraction: Option<f64>,
     /// Bytes of CAO's voxel list after the frame.
     list_bytes: u64,
     render_seconds: f64,
@@ -199,11 +236,14 @@ struct Timed {
 struct Shown {
     image: volao::render::Image,
     inputs: ImageInputs,
+    /// The voxels its AO reads weigh (view methods).
+    view: Option<volao::ao::view::ViewMask>,
 }
 
 impl Timed {
     fn total_ms(&self) -> f64 {
-        (self.stats.clip_seconds + self.stats.lao_seconds + self.render_seconds) * 1e3
+        (self.view_seconds + self.stats.clip_seconds + self.stats.lao_seconds + self.render_seconds)
+            * 1e3
     }
 }
 
@@ -230,6 +270,9 @@ impl Bench {
         );
         let vol = RenderVolume::from_texels(&gpu, texels, &tf, settings.step_voxels)?;
         let rc = RayCaster::new(&gpu.device)?;
+        let readable = Coverage::Readable
+            .bricks(&vol.texels, vol.ranges(), &tf)
+            .readable_mask(&vol.texels);
         Ok(Bench {
             gpu,
             rc,
@@ -237,6 +280,7 @@ impl Bench {
             tf,
             frame: super::frame(20.0, settings, size),
             resolution,
+            readable,
         })
     }
 
@@ -264,7 +308,7 @@ impl Bench {
         &mut self,
         cao: &mut CaoGpu,
         shapes: &[ClipShape],
-        mode: CaoMode,
+        method: Method,
         previous: Option<&Shown>,
     ) -> Result<Timed> {
         let reach = cao.reach_mm(&self.vol.texels);
@@ -272,8 +316,43 @@ impl Bench {
             shapes,
             resolution: self.resolution,
             reach_mm: reach,
-            mode,
+            mode: method.mode(),
         };
+        let (mut view_seconds, mut view_fraction, mut kept) = (0.0, None, None);
+        if method.culls_view() {
+            // The visibility pass clips with the maps the frame will.
+            let start = Instant::now();
+            cao.pose_maps(&self.gpu, &self.vol.texels, &pose)?;
+            // As the image reuses the last one's pixels away from the change, so does
+            // its visibility pass (the rays elsewhere read what they read then).
+            let now = ImageInputs::of(Some(&cao.clip), shapes, &self.vol.texels, reach, true);
+            let changed = match (previous, &now) {
+                (Some(old), Some(new)) if reusable(&self.frame, &self.vol.extras) => old
+                    .view
+                    .as_ref()
+                    .map(|v| (v, &old.image, old.inputs.changed(new))),
+                _ => None,
+            };
+            let view = self.rc.mark_view(
+                &self.gpu,
+                &self.vol,
+                &self.frame,
+                Some(&cao.clip),
+                volao::ao::view::Footprint::Trilinear,
+                changed
+                    .as_ref()
+                    .map(|(v, image, c)| (*v, *image, c.as_slice())),
+            )?;
+            cao.set_view(Some(&view));
+            view_seconds = start.elapsed().as_secs_f64();
+            let needed = (0..self.readable.len())
+                .filter(|&i| self.readable[i] && view.contains(i))
+                .count();
+            let readable = self.readable.iter().filter(|r| **r).count();
+            view_fraction = Some(needed as f64 / readable.max(1) as f64);
+            kept = Some(view);
+        }
+        let view = kept;
         let stats = cao.update(&self.gpu, &self.vol.texels, pose)?;
         self.vol.set_ambient_occlusion_view(cao.ao_view());
         let inputs = ImageInputs::of(Some(&cao.clip), shapes, &self.vol.texels, reach, true);
@@ -296,11 +375,14 @@ impl Bench {
         };
         Ok(Timed {
             stats,
+            view_seconds,
+            view_fraction,
             list_bytes: cao.list_bytes(),
             render_seconds: start.elapsed().as_secs_f64(),
             shown: inputs.map(|inputs| Shown {
                 image: image.clone(),
                 inputs,
+                view,
             }),
             pixels: image.pixels,
         })
@@ -371,6 +453,12 @@ impl Run {
     fn stage_ms(&self, f: impl Fn(&Timed) -> f64) -> f64 {
         mean(self.frames.iter().map(|t| f(t) * 1e3))
     }
+
+    /// Mean fraction of the readable voxels the view needed (view methods).
+    fn view_fraction(&self) -> Option<f64> {
+        let f: Vec<f64> = self.frames.iter().filter_map(|t| t.view_fraction).collect();
+        (!f.is_empty()).then(|| mean(f.into_iter()))
+    }
 }
 
 /// The three methods over `frames` poses of `shapes_at`, side by side: per pose,
@@ -390,9 +478,9 @@ fn compare(
         let mut cao = b.cao(set, samples, m.coverage())?;
         // A warm-up frame compiles pipelines and builds the clip maps, at a pose other
         // than the first frame's (every timed frame moves the shape).
-        let t = b.frame(&mut cao, &shapes_at(frames), m.mode(), None)?;
+        let t = b.frame(&mut cao, &shapes_at(frames), m, None)?;
         caos.push(cao);
-        last.push(t.shown.filter(|_| m == Method::Cao));
+        last.push(t.shown.filter(|_| m.reuses()));
     }
     let mut runs: Vec<Run> = methods
         .iter()
@@ -406,8 +494,8 @@ fn compare(
         let shapes = shapes_at(k);
         let mut reference: Option<Vec<[u8; 4]>> = None;
         for ((run, cao), last) in runs.iter_mut().zip(&mut caos).zip(&mut last) {
-            let mut t = b.frame(cao, &shapes, run.method.mode(), last.as_ref())?;
-            if run.method == Method::Cao {
+            let mut t = b.frame(cao, &shapes, run.method, last.as_ref())?;
+            if run.method.reuses() {
                 *last = t.shown.take();
             }
             match &reference {
@@ -530,9 +618,9 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
                 s.samples
             );
             println!(
-                "| rays | method | mean frame (ms) | speedup over lao-every-frame | paper's CAO speedup | clip + mask / ray cast / render (ms) | % visited by clip + mask / ray cast | % ray cast | differing pixels |"
+                "| rays | method | mean frame (ms) | speedup over lao-every-frame | paper's CAO speedup | visibility / clip + mask / ray cast / render (ms) | % visited by clip + mask / ray cast | % ray cast | % of readable voxels the view needed | differing pixels |"
             );
-            println!("|---|---|---|---|---|---|---|---|---|");
+            println!("|---|---|---|---|---|---|---|---|---|---|");
         }
         for &set in rays {
             let runs = compare(&mut b, set, s.samples, &Method::ALL, frames, &|k| {
@@ -546,6 +634,7 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
                     .map(|t| t.list_bytes)
                     .fold(list_bytes, u64::max);
                 let stages = serde_json::json!({
+                    "visibility": run.stage_ms(|t| t.view_seconds),
                     "clip_mask": run.stage_ms(|t| t.stats.clip_seconds),
                     "ray_cast": run.stage_ms(|t| t.stats.lao_seconds),
                     "render": run.stage_ms(|t| t.render_seconds),
@@ -559,6 +648,7 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
                         "percent_recomputed": run.percent(),
                         "percent_visited": {"clip_mask": run.visited()[0], "ray_cast": run.visited()[1]},
                         "speedup_over_lao_every_frame": reference / run.mean_ms(),
+                        "view_fraction": run.view_fraction(),
                         "differing_pixels": run.differing_pixels, "adapter": adapter,
                     }));
                 } else {
@@ -567,12 +657,16 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
                         _ => String::new(),
                     };
                     let [clip, lao] = run.visited();
+                    let needed = run
+                        .view_fraction()
+                        .map_or(String::new(), |f| format!("{:.1}", 100.0 * f));
                     println!(
-                        "| {} | {} | {:.0} | {:.2} | {paper} | {:.0} / {:.0} / {:.0} | {clip:.1} / {lao:.1} | {:.2} | {} |",
+                        "| {} | {} | {:.0} | {:.2} | {paper} | {:.0} / {:.0} / {:.0} / {:.0} | {clip:.1} / {lao:.1} | {:.2} | {needed} | {} |",
                         set.name(),
                         run.method.name(),
                         run.mean_ms(),
                         reference / run.mean_ms(),
+                        run.stage_ms(|t| t.view_seconds),
                         run.stage_ms(|t| t.stats.clip_seconds),
                         run.stage_ms(|t| t.stats.lao_seconds),
                         run.stage_ms(|t| t.render_seconds),
@@ -604,7 +698,7 @@ pub fn cao_bench(args: &CaoBenchArgs) -> Result<()> {
             );
             println!("|---|---|---|---|---|---|");
         }
-        let methods = Method::ALL;
+        let methods = Method::PAPER;
         let one = compare(
             &mut b,
             RaySet::TwentySix,
