@@ -86,21 +86,27 @@ const MODE_ISO: u32 = 4u;
 struct Extras {
     flags: vec4<u32>,  // live positional AO on, shadows on
     light: vec4<f32>,  // unit direction towards the light (volume space), w = guard (voxels)
-    marks: vec4<u32>,  // MARK_AO: x the footprint (ao::view::Footprint::code)
+    marks: vec4<u32>,  // MARK_AO: x the footprint (ao::view::Footprint::code), y the cell edge
 }
 
 @group(2) @binding(5) var<uniform> extras: Extras;
 @group(2) @binding(6) var light_volume: texture_3d<f32>;
 @group(2) @binding(7) var surface_position: texture_2d<f32>;  // nearest surface, w = covered
 @group(2) @binding(8) var surface_color: texture_2d<f32>;     // its shaded straight RGBA
-// One bit per voxel of the AO volume (x fastest): what MARK_AO pipelines mark.
+// One bit per cell of the AO volume (x fastest): what MARK_AO pipelines mark.
 @group(2) @binding(10) var<storage, read_write> ao_marks: array<atomic<u32>>;
 
 // Any texel a sampler's fixed-point weights may weigh (CPU twin: sample::FOOTPRINT_SLACK).
 const FOOTPRINT_SLACK: f32 = 1.0 / 64.0;
 
-// Marks the voxels an AO read at `at` (for the sample at `uvw`) weighs: its trilinear
-// footprint, widened by FOOTPRINT_SLACK (CPU twin: ao::view::ViewMarks::mark).
+// The cells the last AO read of this invocation marked (consecutive samples along a
+// ray mostly read the same ones: marked once).
+var<private> marked_lo: vec3<i32> = vec3<i32>(-1);
+var<private> marked_hi: vec3<i32> = vec3<i32>(-1);
+
+// Marks the cells (of extras.marks.y voxels a side) of the voxels an AO read at `at` (for
+// the sample at `uvw`) weighs: its trilinear footprint, widened by FOOTPRINT_SLACK
+// (CPU twin: ao::view::ViewMarks::mark).
 fn mark_ao(uvw: vec3<f32>, at: vec3<f32>) {
     let dims = vec3<i32>(volume_dims());
     var read = at;
@@ -115,10 +121,19 @@ fn mark_ao(uvw: vec3<f32>, at: vec3<f32>) {
         lo = clamp(vec3<i32>(floor(read * vec3<f32>(dims))), vec3<i32>(0), dims - 1);
         hi = lo;
     }
+    let edge = i32(max(extras.marks.y, 1u));
+    let grid = (dims + edge - 1) / edge;
+    lo = lo / edge;
+    hi = hi / edge;
+    if all(lo == marked_lo) && all(hi == marked_hi) {
+        return;
+    }
+    marked_lo = lo;
+    marked_hi = hi;
     for (var z = lo.z; z <= hi.z; z++) {
         for (var y = lo.y; y <= hi.y; y++) {
             for (var x = lo.x; x <= hi.x; x++) {
-                let i = u32(x + dims.x * (y + dims.y * z));
+                let i = u32(x + grid.x * (y + grid.y * z));
                 atomicOr(&ao_marks[i >> 5u], 1u << (i & 31u));
             }
         }

@@ -38,8 +38,10 @@
 //!    and CAO visit (those the ray caster can read, near a shape) and which 4³ cells
 //!    their rays step over; a CAO frame's step IV marks a voxel only if one of its rays
 //!    passes near a cut, lists the voxels it marked and ray casts only those
-//!    ([`ao::cao`]'s voxel list). [`clip`] turns clip shapes into the depth and dilation maps CAO and the ray
-//!    caster clip with.
+//!    ([`ao::cao`]'s voxel list). [`ao::view`] narrows that to one image: the ray
+//!    caster's visibility pass (`MARK_AO`) marks the voxels its AO reads weigh, and
+//!    `volao render` computes LAO and CAO only there. [`clip`] turns clip shapes into
+//!    the depth and dilation maps CAO and the ray caster clip with.
 //! 6. [`render`] ray-casts the volume into an image in one of its [`render::RenderMode`]s,
 //!    stepping over 4³ blocks that cannot change the pixel
 //!    (compositing with the AO factor on ambient and diffuse light, shadows from

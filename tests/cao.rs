@@ -19,6 +19,7 @@ use volao::ao::cao::{
 use volao::ao::lao::{Rays, lao_lut};
 use volao::ao::rays::RaySet;
 use volao::ao::sparse::{Bricks, Coverage};
+use volao::ao::view::Marking;
 use volao::clip::camera::EMPTY;
 use volao::clip::{ClipMode, ClipShape, Cuts, Shape};
 use volao::gpu::Gpu;
@@ -82,6 +83,9 @@ struct Scene {
     cao: CaoGpu,
     /// Dense: every voxel and sample (`--no-skipping`).
     dense: CaoGpu,
+    /// Sparse and culled to each frame's view (issue #46): one across all poses, so
+    /// bricks a view left out stale are tested too.
+    viewed: CaoGpu,
     tf: TransferFunction,
     rays: Rays,
     /// Samples per LAO ray.
@@ -119,7 +123,8 @@ fn scene_with(v: &Volume, preset: Preset, set: RaySet, samples: u32) -> Scene {
         sparse.occupied.contains(&0) && sparse.readable_mask(&vol.texels).contains(&false),
         "the crop must have voxels and samples to skip"
     );
-    let cao = make(sparse);
+    let cao = make(sparse.clone());
+    let viewed = make(sparse);
     let dense = make(Coverage::Dense.bricks(&vol.texels, vol.ranges(), &tf));
     let rc = RayCaster::new(&gpu.device).unwrap_or_else(|e| panic!("{e}"));
     let frame = common::oblique_frame(settings, 48);
@@ -129,6 +134,7 @@ fn scene_with(v: &Volume, preset: Preset, set: RaySet, samples: u32) -> Scene {
         rc,
         cao,
         dense,
+        viewed,
         tf,
         rays,
         samples,
@@ -170,6 +176,39 @@ impl Scene {
         let Scene { gpu, vol, cao, .. } = self;
         cao.update(gpu, &vol.texels, pose(shapes, reach, CaoMode::Selective))
             .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// The image of a frame of the view-culled CAO: maps posed, a visibility pass of
+    /// the frame with them, step V only where it marked (as `volao bench cao`'s
+    /// `cao-view`).
+    fn frame_viewed(&mut self, shapes: &[ClipShape], reach: f32) -> Vec<[u8; 4]> {
+        let Scene {
+            gpu,
+            vol,
+            rc,
+            viewed,
+            frame,
+            ..
+        } = self;
+        let pose = pose(shapes, reach, CaoMode::Selective);
+        viewed
+            .pose_maps(gpu, &vol.texels, &pose)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let view = rc
+            .mark_view(gpu, vol, frame, Some(&viewed.clip), Marking::BRICKS, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        viewed.set_view(Some(&view));
+        run(
+            gpu,
+            vol,
+            rc,
+            frame,
+            viewed,
+            shapes,
+            CaoMode::Selective,
+            reach,
+        )
+        .1
     }
 
     /// The same with the dense CAO.
@@ -303,6 +342,12 @@ fn assert_exact(s: &mut Scene, shapes: &[ClipShape], reach: f32, what: &str) -> 
         differing(&cao_img, &dense_img),
         0,
         "{what}: {shapes:?}: sparse CAO's image differs from the dense LAO every frame"
+    );
+    let viewed_img = s.frame_viewed(shapes, reach);
+    assert_eq!(
+        differing(&viewed_img, &dense_img),
+        0,
+        "{what}: {shapes:?}: CAO culled to the view differs from the dense LAO every frame"
     );
     pct
 }

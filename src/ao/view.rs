@@ -45,12 +45,43 @@ impl Footprint {
     }
 }
 
-/// One bit per voxel of a volume of `dims` (x fastest): the voxels an image reads the
-/// AO of.
+/// What a visibility pass marks: around each AO read, `footprint`'s voxels, as cells of
+/// `edge` voxels a side (1: voxels; [`crate::ao::sparse::BRICK`]: bricks, all CAO's
+/// frames need, with far fewer atomic writes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Marking {
+    pub footprint: Footprint,
+    pub edge: usize,
+}
+
+impl Marking {
+    /// The voxels themselves.
+    pub const VOXELS: Marking = Marking {
+        footprint: Footprint::Trilinear,
+        edge: 1,
+    };
+    /// The bricks holding them.
+    pub const BRICKS: Marking = Marking {
+        footprint: Footprint::Trilinear,
+        edge: crate::ao::sparse::BRICK,
+    };
+}
+
+impl From<Footprint> for Marking {
+    /// `footprint`'s voxels.
+    fn from(footprint: Footprint) -> Self {
+        Marking { footprint, edge: 1 }
+    }
+}
+
+/// One bit per cell of `edge` voxels a side of a volume of `dims` (x fastest): the
+/// cells holding a voxel whose AO an image reads.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ViewMask {
     pub dims: [usize; 3],
-    /// Bit `i % 32` of word `i / 32` for voxel `i`.
+    /// Cell edge in voxels (1: one bit per voxel).
+    pub edge: usize,
+    /// Bit `i % 32` of word `i / 32` for cell `i`.
     pub words: Vec<u32>,
 }
 
@@ -59,56 +90,88 @@ impl ViewMask {
     pub fn empty(dims: [usize; 3]) -> Self {
         ViewMask {
             dims,
-            words: vec![0; words_for(dims)],
+            edge: 1,
+            words: vec![0; words_for(dims, 1)],
         }
     }
 
     /// The mask read back from the GPU (`words` may be padded).
-    pub fn from_words(dims: [usize; 3], mut words: Vec<u32>) -> Self {
-        words.resize(words_for(dims), 0);
-        ViewMask { dims, words }
+    pub fn from_words(dims: [usize; 3], edge: usize, mut words: Vec<u32>) -> Self {
+        words.resize(words_for(dims, edge), 0);
+        ViewMask { dims, edge, words }
     }
 
-    /// Whether voxel `i` (linear, x fastest) is marked.
+    /// Cells per axis.
+    pub fn grid(&self) -> [usize; 3] {
+        grid_of(self.dims, self.edge)
+    }
+
+    /// Whether voxel `i` (linear, x fastest) lies in a marked cell.
     pub fn contains(&self, i: usize) -> bool {
-        self.words[i / 32] & (1 << (i % 32)) != 0
+        let c = match self.edge {
+            1 => i,
+            e => {
+                let v = crate::volume::voxel_of(i, self.dims).map(|c| c / e);
+                let g = self.grid();
+                v[0] + g[0] * (v[1] + g[1] * v[2])
+            }
+        };
+        self.words[c / 32] & (1 << (c % 32)) != 0
     }
 
-    /// How many voxels are marked.
+    /// How many cells are marked (voxels, for an edge of 1).
     pub fn count(&self) -> usize {
         self.words.iter().map(|w| w.count_ones() as usize).sum()
     }
 
-    /// Marks every voxel `other` marks too.
+    /// Marks every cell `other` marks too.
     pub fn union(&mut self, other: &ViewMask) {
-        assert_eq!(self.dims, other.dims, "view masks of different volumes");
+        assert_eq!(
+            (self.dims, self.edge),
+            (other.dims, other.edge),
+            "view masks of different volumes or cells"
+        );
         for (a, b) in self.words.iter_mut().zip(&other.words) {
             *a |= b;
         }
     }
 
-    /// Per brick of `edge` voxels (x fastest over the bricks): whether it holds a marked
-    /// voxel.
+    /// Per brick of `edge` voxels (x fastest over the bricks; a multiple of the mask's
+    /// cells): whether it holds a marked cell.
     pub fn bricks(&self, edge: usize) -> Vec<bool> {
-        let d = self.dims;
-        let grid = d.map(|n| n.div_ceil(edge).max(1));
+        assert!(
+            edge.is_multiple_of(self.edge),
+            "bricks of {edge} over cells of {}",
+            self.edge
+        );
+        let (grid, cells) = (grid_of(self.dims, edge), self.grid());
         let mut out = vec![false; grid.iter().product()];
+        let k = edge / self.edge;
         for (w, &word) in self.words.iter().enumerate() {
             let mut bits = word;
             while bits != 0 {
                 let i = w * 32 + bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let v = crate::volume::voxel_of(i, d).map(|c| c / edge);
-                out[v[0] + grid[0] * (v[1] + grid[1] * v[2])] = true;
+                let c = crate::volume::voxel_of(i, cells).map(|c| c / k);
+                out[c[0] + grid[0] * (c[1] + grid[1] * c[2])] = true;
             }
         }
         out
     }
 }
 
-/// Words of a mask of a volume of `dims`.
-pub fn words_for(dims: [usize; 3]) -> usize {
-    dims.iter().product::<usize>().div_ceil(32).max(1)
+/// Cells of `edge` voxels per axis of a volume of `dims`.
+pub fn grid_of(dims: [usize; 3], edge: usize) -> [usize; 3] {
+    dims.map(|n| n.div_ceil(edge.max(1)).max(1))
+}
+
+/// Words of a mask of a volume of `dims` in cells of `edge`.
+pub fn words_for(dims: [usize; 3], edge: usize) -> usize {
+    grid_of(dims, edge)
+        .iter()
+        .product::<usize>()
+        .div_ceil(32)
+        .max(1)
 }
 
 /// A [`ViewMask`] being marked by the CPU twin's ray cast (on rayon threads).
@@ -116,7 +179,7 @@ pub fn words_for(dims: [usize; 3]) -> usize {
 pub struct ViewMarks {
     dims: [usize; 3],
     words: Vec<AtomicU32>,
-    footprint: Footprint,
+    marking: Marking,
 }
 
 impl Clone for ViewMarks {
@@ -128,25 +191,27 @@ impl Clone for ViewMarks {
                 .iter()
                 .map(|w| AtomicU32::new(w.load(Ordering::Relaxed)))
                 .collect(),
-            footprint: self.footprint,
+            marking: self.marking,
         }
     }
 }
 
 impl ViewMarks {
-    pub fn new(dims: [usize; 3], footprint: Footprint) -> Self {
+    pub fn new(dims: [usize; 3], marking: Marking) -> Self {
         ViewMarks {
             dims,
-            words: (0..words_for(dims)).map(|_| AtomicU32::new(0)).collect(),
-            footprint,
+            words: (0..words_for(dims, marking.edge))
+                .map(|_| AtomicU32::new(0))
+                .collect(),
+            marking,
         }
     }
 
-    /// Marks the voxels an AO read at `ao_at` for the sample at `sample` weighs (the
-    /// twin of `mark_ao` in `shaders/raycast.wgsl`).
+    /// Marks the cells of the voxels an AO read at `ao_at` for the sample at `sample`
+    /// weighs (the twin of `mark_ao` in `shaders/raycast.wgsl`).
     pub fn mark(&self, sample: Vec3, ao_at: Vec3) {
         let d = self.dims;
-        let [x, y, z] = match self.footprint {
+        let [x, y, z] = match self.marking.footprint {
             Footprint::Trilinear => trilinear_footprint(d, ao_at),
             Footprint::AtSample => trilinear_footprint(d, sample),
             Footprint::Nearest => {
@@ -155,11 +220,13 @@ impl ViewMarks {
                 [[n[0]; 2], [n[1]; 2], [n[2]; 2]]
             }
         };
-        for k in z[0]..=z[1] {
-            for j in y[0]..=y[1] {
-                for i in x[0]..=x[1] {
-                    let v = i + d[0] * (j + d[1] * k);
-                    self.words[v / 32].fetch_or(1 << (v % 32), Ordering::Relaxed);
+        let e = self.marking.edge.max(1);
+        let g = grid_of(d, e);
+        for k in z[0] / e..=z[1] / e {
+            for j in y[0] / e..=y[1] / e {
+                for i in x[0] / e..=x[1] / e {
+                    let c = i + g[0] * (j + g[1] * k);
+                    self.words[c / 32].fetch_or(1 << (c % 32), Ordering::Relaxed);
                 }
             }
         }
@@ -168,6 +235,7 @@ impl ViewMarks {
     pub fn into_mask(self) -> ViewMask {
         ViewMask {
             dims: self.dims,
+            edge: self.marking.edge.max(1),
             words: self.words.into_iter().map(AtomicU32::into_inner).collect(),
         }
     }

@@ -2,7 +2,7 @@
 //! rayon. Tests compare it with the GPU; it is also the fallback without an adapter.
 
 use super::{Frame, Image, OPAQUE, RaycastParams, jitter};
-use crate::ao::view::{Footprint, ViewMarks, ViewMask};
+use crate::ao::view::{Marking, ViewMarks, ViewMask};
 use crate::sample::{SegmentSampler, VolumeSampler, trilinear};
 use crate::texels::{BlockRanges, VolumeTexels};
 use crate::tf::Lut;
@@ -617,20 +617,22 @@ pub fn render_reusing(
 }
 
 /// The twin of [`super::gpu::RayCaster::mark_view`]: ray casts `frame` of `vol` as
-/// [`render`] would once its AO is set, and returns the voxels its AO reads weigh (under
-/// `footprint`). `vol.ao` may be anything meanwhile: AO never changes a sample's opacity.
+/// [`render`] would once its AO is set, and returns the voxels (or cells) its AO reads
+/// weigh, as `marking` says. `vol.ao` may be anything meanwhile: AO never changes a
+/// sample's opacity.
 pub fn mark_view(
     texels: &VolumeTexels,
     vol: &mut CpuVolume,
     lut: &Lut,
     occupancy: &[u8],
     frame: &Frame,
-    footprint: Footprint,
+    marking: impl Into<Marking>,
 ) -> ViewMask {
+    let marking: Marking = marking.into();
     if !frame.settings.mode.uses_ao() {
-        return ViewMask::empty(texels.dims);
+        return ViewMask::from_words(texels.dims, marking.edge.max(1), Vec::new());
     }
-    vol.marks = Some(ViewMarks::new(texels.dims, footprint));
+    vol.marks = Some(ViewMarks::new(texels.dims, marking));
     render(texels, vol, lut, occupancy, frame);
     let marks = vol.marks.take().expect("set above");
     marks.into_mask()

@@ -6,7 +6,7 @@ pub use super::gpu_volume::RenderVolume;
 use super::reuse::Ball;
 pub use super::variant::Variant;
 use super::{Frame, Image, RaycastParams, TileAt};
-use crate::ao::view::{Footprint, ViewMask};
+use crate::ao::view::{Marking, ViewMask};
 use crate::gpu::{
     Gpu, GpuError, bind_group, copy_texture_out, read_buffer, shaders, texture_readback,
     uniform_buffer, unpad, validated,
@@ -59,7 +59,7 @@ struct FrameDraw<'a> {
 #[derive(Debug, Clone, Copy)]
 struct Marks<'a> {
     buffer: &'a wgpu::Buffer,
-    footprint: Footprint,
+    marking: Marking,
 }
 
 /// One tile of one frame to ray cast ([`RayCaster::encode_tile`]).
@@ -267,7 +267,10 @@ impl RayCaster {
         let uniform = |label, bytes: &[u8]| uniform_buffer(device, queue, label, bytes);
         let params = uniform("RayCaster::params", bytemuck::bytes_of(params));
         let mut extras = vol.extras.params();
-        extras.marks[0] = marks.map_or(0, |m| m.footprint.code());
+        if let Some(m) = marks {
+            extras.marks[0] = m.marking.footprint.code();
+            extras.marks[1] = m.marking.edge.max(1) as u32;
+        }
         let extras = uniform("RayCaster::extras", bytemuck::bytes_of(&extras));
         let target_view = tile.target.create_view(&Default::default());
         let group = bind_group(
@@ -339,9 +342,10 @@ impl RayCaster {
     }
 
     /// The visibility pass of view-dependent AO ([`crate::ao::view`]): ray casts `frame`
-    /// as [`Self::render`] would once `vol`'s AO is bound, and returns the voxels whose
-    /// AO its reads weigh (under `footprint`; only [`Footprint::Trilinear`] is exact).
-    /// Nothing is marked for a mode that reads no AO.
+    /// as [`Self::render`] would once `vol`'s AO is bound, and returns the voxels (or
+    /// cells, `marking.edge`) whose AO its reads weigh, under `marking.footprint` (only
+    /// [`crate::ao::view::Footprint::Trilinear`] is exact). Nothing is marked for a
+    /// mode that reads no AO.
     ///
     /// With `previous` (the pass of an image of the same view, that image, and the balls
     /// holding every change since, as [`Self::render_reusing`] takes them), only the rays
@@ -353,15 +357,17 @@ impl RayCaster {
         vol: &RenderVolume,
         frame: &Frame,
         clip: Option<&crate::clip::gpu::ClipMaps>,
-        footprint: Footprint,
+        marking: impl Into<Marking>,
         previous: Option<(&ViewMask, &Image, &[Ball])>,
     ) -> Result<ViewMask, GpuError> {
-        let dims = vol.texels.dims;
+        let marking: Marking = marking.into();
+        let (dims, edge) = (vol.texels.dims, marking.edge.max(1));
         if !frame.settings.mode.uses_ao() {
-            return Ok(ViewMask::empty(dims));
+            return Ok(ViewMask::from_words(dims, edge, Vec::new()));
         }
+        let previous = previous.filter(|(v, _, _)| (v.dims, v.edge) == (dims, edge));
         let device = &gpu.device;
-        let bytes = 4 * crate::ao::view::words_for(dims) as u64;
+        let bytes = 4 * crate::ao::view::words_for(dims, edge) as u64;
         let (buffer, readback) = validated(device, "RayCaster::marks", || {
             let usage = wgpu::BufferUsages::STORAGE
                 | wgpu::BufferUsages::COPY_SRC
@@ -375,7 +381,7 @@ impl RayCaster {
             let readback = crate::gpu::readback_buffer(device, "RayCaster::marks_readback", bytes);
             (buffer, readback)
         })?;
-        if let Some((view, _, _)) = previous.filter(|(v, _, _)| v.dims == dims) {
+        if let Some((view, _, _)) = previous {
             gpu.queue
                 .write_buffer(&buffer, 0, bytemuck::cast_slice(&view.words));
         }
@@ -384,12 +390,10 @@ impl RayCaster {
             frame,
             clip,
             variant: None,
-            previous: previous
-                .filter(|(v, _, _)| v.dims == dims)
-                .map(|(_, image, changed)| (image, changed)),
+            previous: previous.map(|(_, image, changed)| (image, changed)),
             marks: Some(Marks {
                 buffer: &buffer,
-                footprint,
+                marking,
             }),
         };
         self.render_tiles(gpu, draw)?;
@@ -399,6 +403,7 @@ impl RayCaster {
         let words = read_buffer(device, &readback, "RayCaster::marks")?;
         Ok(ViewMask::from_words(
             dims,
+            edge,
             bytemuck::pod_collect_to_vec(&words),
         ))
     }

@@ -8,7 +8,7 @@ use super::shadow::{LightGpu, LightVolume, Lit, light_cpu_reading, light_directi
 use super::{Frame, Image, RenderSettings};
 use crate::ao::cao::CaoStats;
 use crate::ao::vao::PositionalAo;
-use crate::ao::view::{Footprint, ViewMask};
+use crate::ao::view::{Marking, ViewMask};
 use crate::ao::{Ambient, AoEngine, AoInput, AoMethod, AoRequest, AoSettings};
 use crate::clip::ClipShape;
 use crate::clip::gpu::{ClipMaps, MapRequest};
@@ -332,7 +332,12 @@ fn view_gpu(
         }
         (false, maps) => maps,
     };
-    rc.mark_view(g, vol, frame, maps, Footprint::Trilinear, None)
+    // CAO's frame needs bricks only (its V_PAO's dispatch is by brick); LAO lists voxels.
+    let marking = match ao.method.is_clipped() {
+        true => Marking::BRICKS,
+        false => Marking::VOXELS,
+    };
+    rc.mark_view(g, vol, frame, maps, marking, None)
 }
 
 /// What a visibility pass found: the voxels marked against those the transfer function
@@ -390,7 +395,7 @@ fn render_cpu(
             &lut,
             &occ,
             frame,
-            Footprint::Trilinear,
+            Marking::VOXELS,
         ))
     });
     let request = AoRequest {

@@ -338,7 +338,7 @@ impl Bench {
                 &self.vol,
                 &self.frame,
                 Some(&cao.clip),
-                volao::ao::view::Footprint::Trilinear,
+                volao::ao::view::Marking::BRICKS,
                 changed
                     .as_ref()
                     .map(|(v, image, c)| (*v, *image, c.as_slice())),
