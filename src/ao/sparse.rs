@@ -125,6 +125,7 @@ pub fn bricks_holding(voxels: &[bool], dims: [usize; 3]) -> Vec<bool> {
 /// ranges [`BlockRanges::merged`] turns into the bricks'.
 pub const BRICK: usize = 8;
 const _: () = assert!(BRICK.is_multiple_of(BLOCK));
+const _: () = assert!(super::view::Marking::BRICKS.edge == BRICK);
 
 /// Bricks per axis at most (a packed brick index has 10 bits per axis).
 pub const MAX_BRICKS_PER_AXIS: usize = 1 << 10;

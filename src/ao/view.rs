@@ -46,7 +46,7 @@ impl Footprint {
 }
 
 /// What a visibility pass marks: around each AO read, `footprint`'s voxels, as cells of
-/// `edge` voxels a side (1: voxels; [`crate::ao::sparse::BRICK`]: bricks, all CAO's
+/// `edge` voxels a side (1: voxels; [`Marking::BRICKS`]: bricks, all CAO's
 /// frames need, with far fewer atomic writes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Marking {
@@ -60,10 +60,10 @@ impl Marking {
         footprint: Footprint::Trilinear,
         edge: 1,
     };
-    /// The bricks holding them.
+    /// The bricks holding them (`ao::sparse::BRICK` voxels a side; checked there).
     pub const BRICKS: Marking = Marking {
         footprint: Footprint::Trilinear,
-        edge: crate::ao::sparse::BRICK,
+        edge: 8,
     };
 }
 

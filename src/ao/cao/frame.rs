@@ -266,6 +266,23 @@ impl CaoGpu {
         Ok(stats)
     }
 
+    /// Poses the clip maps for `pose` without starting a frame: a visibility pass can
+    /// then clip with the maps the frame will (its [`Self::update`] finds them posed).
+    pub fn pose_maps(
+        &mut self,
+        gpu: &Gpu,
+        texels: &VolumeTexels,
+        pose: &Pose<'_>,
+    ) -> Result<(), GpuError> {
+        let request = MapRequest {
+            shapes: pose.shapes,
+            volume_radius: Vec3::from(texels.extent()).length() * 0.5,
+            reach_mm: pose.reach_mm,
+            resolution: pose.resolution,
+        };
+        self.clip.update(gpu, request).map(|_| ())
+    }
+
     /// Starts one frame: re-poses the clip maps for `shapes` (a new geometry's maps are
     /// rendered and submitted here), picks the bricks steps IV and V visit and writes
     /// their lists. Nothing is waited for.

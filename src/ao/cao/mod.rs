@@ -543,23 +543,6 @@ impl CaoGpu {
         self.view = view.map(|v| v.bricks(super::sparse::BRICK));
     }
 
-    /// Poses the clip maps for `pose` without starting a frame: a visibility pass can
-    /// then clip with the maps the frame will (its [`Self::update`] finds them posed).
-    pub fn pose_maps(
-        &mut self,
-        gpu: &Gpu,
-        texels: &VolumeTexels,
-        pose: &Pose<'_>,
-    ) -> Result<(), GpuError> {
-        let request = MapRequest {
-            shapes: pose.shapes,
-            volume_radius: Vec3::from(texels.extent()).length() * 0.5,
-            reach_mm: pose.reach_mm,
-            resolution: pose.resolution,
-        };
-        self.clip.update(gpu, request).map(|_| ())
-    }
-
     fn run_timed(&self, gpu: &Gpu, lists: &Lists, mode: CaoMode) -> Result<CaoStats, GpuError> {
         let device = &gpu.device;
         let t1 = Instant::now();
