@@ -2,7 +2,7 @@
 //!
 //! How data flows from a file to a pixel (modules in that order):
 //!
-//! 1. [`volume`] loads a file (NIfTI, Analyze, NRRD, DICOM series, PVM/DDS, raw) into a [`volume::Volume`]: voxels in
+//! 1. [`volume`] loads a file (NIfTI, Analyze, NRRD, MGH/MGZ, DICOM series, OME-Zarr, PVM/DDS, raw) into a [`volume::Volume`]: voxels in
 //!    their stored type and units, spacing in mm, orientation in RAS.
 //!    [`labels`] places a segmentation label map on a volume's grid through the two
 //!    affines, with its segments' names and colours and statistics of the volume under

@@ -80,6 +80,13 @@ pub struct VolumeSource {
     pub frame: usize,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub raw: Option<RawLayout>,
+    /// OME-Zarr: the multiscale level read (0 = full resolution).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub level: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 impl VolumeSource {
@@ -90,6 +97,7 @@ impl VolumeSource {
             path,
             frame: options.frame,
             raw: (!options.raw.is_empty()).then(|| RawLayout::from(&options.raw)),
+            level: options.level,
         }
     }
 
@@ -104,6 +112,7 @@ impl VolumeSource {
                 .unwrap_or_default(),
             max_bytes: None,
             series: None,
+            level: self.level,
         }
     }
 }
@@ -405,6 +414,7 @@ mod tests {
             volume: VolumeSource {
                 path: Some("ct.raw".into()),
                 frame: 0,
+                level: 0,
                 raw: Some(RawLayout {
                     dims: Some([4, 4, 4]),
                     ty: Some(VoxelType::I16),
@@ -489,6 +499,7 @@ mod tests {
                 path: Some(volume.clone()),
                 frame: 0,
                 raw: None,
+                level: 0,
             },
             ..scene()
         };

@@ -18,6 +18,7 @@ fn scene(dir: &Path, name: &str, volume: &str, ao: AoMethod, azimuth: f32) -> Pa
         path: Some(path),
         frame: 0,
         raw: None,
+        level: 0,
     };
     let mut s = Scene::default_for(source, &loaded.volume.stats());
     (s.width, s.height) = (40, 32);

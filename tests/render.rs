@@ -351,6 +351,7 @@ fn a_saved_scene_renders_the_same_image() {
             path: Some(path.clone()),
             frame: 0,
             raw: None,
+            level: 0,
         },
         transfer_function: TransferFunction::preset(Preset::MrT1Brain, &v.stats()),
         camera: Camera {

@@ -258,6 +258,7 @@ impl PyScene {
             path: None,
             frame: 0,
             raw: None,
+            level: 0,
         });
         let mut scene = Scene::default_for(source, &v.cached_stats());
         scene.settle().map_err(VolaoError::new_err)?;

@@ -51,20 +51,23 @@ impl PyVolume {
     }
 }
 
-/// Reads a volume file (NIfTI, Analyze, NRRD, MGH, DICOM folder, PVM, raw with a
-/// sidecar) as `volao load` does; the GIL is released while it reads.
+/// Reads a volume file (NIfTI, Analyze, NRRD, MGH, DICOM folder, OME-Zarr store, PVM,
+/// raw with a sidecar) as `volao load` does; the GIL is released while it reads.
+/// `level`: an OME-Zarr store's multiscale level (0 = full resolution).
 #[pyfunction]
-#[pyo3(signature = (path, frame=None, series=None, progress=None))]
+#[pyo3(signature = (path, frame=None, series=None, progress=None, level=None))]
 pub fn load(
     py: Python<'_>,
     path: PathBuf,
     frame: Option<usize>,
     series: Option<String>,
     progress: Option<Py<PyAny>>,
+    level: Option<usize>,
 ) -> PyResult<PyVolume> {
     let options = LoadOptions {
         frame: frame.unwrap_or(0),
         series: series.clone(),
+        level: level.unwrap_or(0),
         ..Default::default()
     };
     let reporter = Progress::new(py, progress)?;

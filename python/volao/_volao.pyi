@@ -109,10 +109,12 @@ def load(
     frame: Optional[int] = None,
     series: Optional[str] = None,
     progress: Optional[Progress] = None,
+    level: Optional[int] = None,
 ) -> Volume:
-    """Reads a volume file (NIfTI, Analyze, NRRD, MGH, DICOM folder, PVM, raw with a
-    sidecar); the GIL is released while it reads. ``FileNotFoundError`` for a missing
-    file, ``VolaoError`` for one volao cannot read."""
+    """Reads a volume file (NIfTI, Analyze, NRRD, MGH, DICOM folder, OME-Zarr store,
+    PVM, raw with a sidecar); the GIL is released while it reads. ``level``: an
+    OME-Zarr store's multiscale level (0 = full resolution). ``FileNotFoundError`` for
+    a missing file, ``VolaoError`` for one volao cannot read."""
 
 def ambient_occlusion(
     volume: Union[Volume, np.ndarray, Any],

@@ -3,7 +3,9 @@
 use super::pvm::{self, DdsVersion, PvmSamples, PvmVersion, PvmVoxels};
 use super::raw::{self, RawOverrides};
 use super::{Reading, Volume, fmt_dims};
-use super::{VolumeError, VoxelData, analyze, dicom, fmt_bytes, memory_budget, mgh, nifti, nrrd};
+use super::{
+    VolumeError, VoxelData, analyze, dicom, fmt_bytes, memory_budget, mgh, nifti, nrrd, zarr,
+};
 use std::fmt;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -42,6 +44,15 @@ pub enum Format {
         files: usize,
         /// Slices (single-frame files or frames of multi-frame files).
         slices: usize,
+    },
+    /// An OME-Zarr store (a folder): one level of its multiscale pyramid.
+    OmeZarr {
+        ngff: zarr::NgffVersion,
+        /// Zarr format, 2 or 3.
+        zarr_format: u8,
+        /// The level read (0 = full resolution) and how many the store has.
+        level: usize,
+        levels: usize,
     },
     Demo,
 }
@@ -111,6 +122,16 @@ impl fmt::Display for Format {
                     write!(f, "DICOM series of {files} files")
                 }
             }
+            Format::OmeZarr {
+                ngff,
+                zarr_format,
+                level,
+                levels,
+            } => write!(
+                f,
+                "OME-Zarr {} (Zarr v{zarr_format}), level {level} of {levels}",
+                ngff.name()
+            ),
             Format::Demo => f.write_str("built-in demo volume"),
         }
     }
@@ -128,6 +149,8 @@ pub struct LoadOptions {
     /// DICOM folder: which series, by its number in `volao info`'s list (from 0) or its
     /// SeriesInstanceUID; `None` = the one with the most slices.
     pub series: Option<String>,
+    /// OME-Zarr: which multiscale level (0 = full resolution, as `volao info` lists them).
+    pub level: usize,
 }
 
 /// A loaded volume with its format and any non-fatal problems found on the way.
@@ -153,11 +176,15 @@ enum Kind {
     Nrrd,
     Mgh,
     Dicom,
+    OmeZarr,
 }
 
 fn detect(path: &Path, opts: &LoadOptions) -> Result<Kind, VolumeError> {
     if !opts.raw.is_empty() {
         return Ok(Kind::Raw);
+    }
+    if zarr::is_zarr_store(path) {
+        return Ok(Kind::OmeZarr);
     }
     if path.is_dir() {
         return Ok(Kind::Dicom);
@@ -250,6 +277,12 @@ pub fn load_with_progress(
             "--series applies to DICOM folders and files only",
         ));
     }
+    if opts.level != 0 && !matches!(kind, Kind::OmeZarr) {
+        return Err(VolumeError::invalid(
+            path,
+            "--level applies to OME-Zarr stores only",
+        ));
+    }
     let mut loaded = load_kind(kind, path, opts, max_bytes, progress)?;
     // Every reader's spacing goes through the same range check (a no-op for readers
     // that already made it with their own field names).
@@ -289,6 +322,20 @@ fn load_kind(
         progress,
     };
     match kind {
+        Kind::OmeZarr => {
+            let z = zarr::load(path, opts.level, opts.frame, reading)?;
+            Ok(Loaded {
+                volume: z.volume,
+                format: Format::OmeZarr {
+                    ngff: z.ngff,
+                    zarr_format: z.zarr_format,
+                    level: z.level,
+                    levels: z.levels,
+                },
+                data_path: path.to_owned(),
+                warnings,
+            })
+        }
         Kind::Dicom => {
             if opts.frame != 0 {
                 return Err(VolumeError::invalid(
@@ -459,7 +506,8 @@ pub fn pvm_to_volume(
 }
 
 /// Writes a volume in the format its extension names: `.nii`/`.nii.gz` (NIfTI),
-/// `.pvm` (uncompressed PVM3) or `.raw` (+ `.dat` sidecar). Returns warnings.
+/// `.nrrd`, `.pvm` (uncompressed PVM3), `.raw` (+ `.dat` sidecar) or `.zarr`/`.ome.zarr`
+/// (an OME-Zarr 0.5 pyramid, a folder). Returns warnings.
 pub fn save(volume: &Volume, path: &Path) -> Result<Vec<String>, VolumeError> {
     let lower = path.to_string_lossy().to_ascii_lowercase();
     let mut warnings = Vec::new();
@@ -471,10 +519,12 @@ pub fn save(volume: &Volume, path: &Path) -> Result<Vec<String>, VolumeError> {
         raw::save(volume, path, &mut warnings)?;
     } else if lower.ends_with(".nrrd") {
         nrrd::save(volume, path, &mut warnings)?;
+    } else if lower.trim_end_matches(['/', '\\']).ends_with(".zarr") {
+        zarr::save(volume, path, &mut warnings)?;
     } else {
         return Err(VolumeError::unsupported(
             path,
-            "cannot tell the output format: use .nii, .nii.gz, .nrrd, .pvm or .raw",
+            "cannot tell the output format: use .nii, .nii.gz, .nrrd, .pvm, .raw or .ome.zarr",
         ));
     }
     Ok(warnings)

@@ -24,6 +24,7 @@ pub mod pvm;
 pub mod raw;
 pub mod stats;
 pub mod voxels;
+pub mod zarr;
 
 use glam::{DMat3, DVec3};
 use std::path::{Path, PathBuf};
@@ -104,7 +105,7 @@ pub enum VolumeError {
         limit: String,
     },
     #[error(
-        "{}: unknown volume format (expected .nii, .nii.gz, .hdr/.img, .nrrd/.nhdr, .mgh/.mgz, DICOM (.dcm or a folder), .pvm, or .raw with a .dat sidecar or --dims/--type)", display_path(.path)
+        "{}: unknown volume format (expected .nii, .nii.gz, .hdr/.img, .nrrd/.nhdr, .mgh/.mgz, DICOM (.dcm or a folder), an OME-Zarr store (.zarr folder), .pvm, or .raw with a .dat sidecar or --dims/--type)", display_path(.path)
     )]
     UnknownFormat { path: PathBuf },
     /// A problem in a file that `path` (the one the user gave) refers to.

@@ -663,6 +663,10 @@ pub struct LoadArgs {
     /// SeriesInstanceUID; default: the one with the most slices.
     #[arg(long, value_name = "N|UID")]
     pub series: Option<String>,
+    /// OME-Zarr store: which multiscale level to read (0 = full resolution; `volao info`
+    /// lists them).
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub level: usize,
 }
 
 pub fn parse_type(s: &str) -> Result<VoxelType, String> {
@@ -692,6 +696,7 @@ impl LoadArgs {
             },
             max_bytes: None,
             series: self.series.clone(),
+            level: self.level,
         }
     }
 }

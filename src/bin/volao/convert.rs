@@ -23,5 +23,24 @@ pub fn run(args: &ConvertArgs) -> Result<()> {
         volume.data.voxel_type(),
         fmt_bytes(volume.data.byte_len() as u64)
     );
+    if volume::zarr::is_zarr_store(output) {
+        let info = volume::zarr::store_info(output)?;
+        eprintln!(
+            "OME-Zarr {} (Zarr v{}), {} level{}:",
+            info.ngff,
+            info.zarr_format,
+            info.levels.len(),
+            if info.levels.len() == 1 { "" } else { "s" }
+        );
+        for l in &info.levels {
+            // f32, as volao holds spacing: 0.957031, not 0.9570310115814209.
+            let [sx, sy, sz] = l.spacing_mm.map(|s| s as f32);
+            eprintln!(
+                "  {:<4} {:<16} {sx} × {sy} × {sz} mm",
+                l.path,
+                fmt_dims(l.dims)
+            );
+        }
+    }
     Ok(())
 }

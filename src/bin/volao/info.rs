@@ -17,6 +17,9 @@ pub fn run(args: &InfoArgs) -> Result<()> {
         Some(path) => {
             let loaded = load_with_bar(path, &args.load.options())?;
             let mut report = describe_loaded(path, &loaded, args.bins);
+            if matches!(loaded.format, volume::Format::OmeZarr { .. }) {
+                report.levels = Some(volume::zarr::store_info(path)?.levels);
+            }
             if let Some(seg) = &args.labels.labels {
                 let name = volume::display_path(path);
                 let table = args.labels.label_table.as_deref();
@@ -54,6 +57,9 @@ struct Report {
     /// With `--labels`: what the user should know about the label map.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     label_warnings: Vec<String>,
+    /// OME-Zarr: the store's multiscale levels (dims and spacing along x, y, z).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    levels: Option<Vec<volume::zarr::LevelInfo>>,
 }
 
 fn describe(file: String, format: String, v: &Volume, warnings: &[String], bins: usize) -> Report {
@@ -75,6 +81,7 @@ fn describe(file: String, format: String, v: &Volume, warnings: &[String], bins:
         warnings: warnings.to_vec(),
         segments: None,
         label_warnings: Vec::new(),
+        levels: None,
     }
 }
 
@@ -166,12 +173,28 @@ fn print_info(r: &Report, json: bool) -> Result<()> {
         let text = text.trim_end().replace('\n', "\n              ");
         println!("{:<13} {text}", format!("{label}:"));
     }
+    if let Some(levels) = &r.levels {
+        print_levels(levels);
+    }
     println!("histogram ({} bins, log scale):", r.histogram.counts.len());
     print!("{}", r.histogram.to_text(48));
     if let Some(segments) = &r.segments {
         print_segments(segments, &r.label_warnings);
     }
     Ok(())
+}
+
+/// An OME-Zarr store's levels, one line each.
+fn print_levels(levels: &[volume::zarr::LevelInfo]) {
+    println!("levels:       {} (--level N reads level N)", levels.len());
+    for (k, l) in levels.iter().enumerate() {
+        let [sx, sy, sz] = l.spacing_mm.map(fmt_value);
+        println!(
+            "  {k:>2}  {:<8} {:<16} {sx} × {sy} × {sz} mm",
+            l.path,
+            fmt_dims(l.dims)
+        );
+    }
 }
 
 /// The `--labels` table: one row per present segment.

@@ -196,6 +196,9 @@ impl RenderArgs {
                 if !flags.raw.is_empty() {
                     options.raw = flags.raw;
                 }
+                if flags.level != 0 {
+                    options.level = flags.level;
+                }
                 VolumeSource::from_load_options(s.volume.path.clone(), &options)
             }
             None => VolumeSource::from_load_options(self.input.clone(), &flags),
