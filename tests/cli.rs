@@ -751,18 +751,27 @@ fn bench_cao_prints_one_json_object_per_method_with_no_differing_pixels() {
         .lines()
         .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
         .collect();
-    assert_eq!(lines.len(), 4, "Table 2, then Table 3's three methods");
+    let methods = [
+        "lao-every-frame",
+        "cao-paper",
+        "cao",
+        "lao-sparse",
+        "lao-view",
+        "cao-view",
+    ];
+    assert_eq!(lines.len(), 7, "Table 2, then Table 3's six methods");
     assert_eq!(lines[0]["table"], 2);
-    for (j, method) in lines[1..]
-        .iter()
-        .zip(["lao-every-frame", "cao-paper", "cao"])
-    {
+    for (j, method) in lines[1..].iter().zip(methods) {
+        // The view-culled methods say how much of the readable volume the view needed.
+        let view = j["view_fraction"].as_f64();
+        assert_eq!(view.is_some(), method.ends_with("-view"), "{j}");
+        assert!(view.is_none_or(|f| f > 0.0 && f <= 1.0), "{j}");
         assert_eq!(j["table"], 3);
         assert_eq!(j["scene"], "engine");
         assert_eq!(j["method"], method);
         assert_eq!(j["rays"], 6);
         assert_eq!(j["differing_pixels"], 0, "{j}");
-        for stage in ["clip_mask", "ray_cast", "render"] {
+        for stage in ["visibility", "clip_mask", "ray_cast", "render"] {
             assert!(j["stages_ms"][stage].as_f64().is_some(), "{j}");
         }
         assert!(j["mean_frame_ms"].as_f64().is_some_and(|t| t > 0.0), "{j}");
