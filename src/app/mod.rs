@@ -751,7 +751,10 @@ impl Viewer {
                         slices::Pane::ThreeD => slot = self.viewport(ui, r),
                         slices::Pane::Slice(axis) => {
                             if let Some(doc) = &mut self.opened.doc {
-                                self.chrome.slices.show(ui, doc, axis, r);
+                                let binding = self.viewport.gpu.binding();
+                                self.chrome
+                                    .slices
+                                    .show(ui, doc, axis, r, &self.gpu, binding);
                             }
                         }
                     }

@@ -247,7 +247,13 @@ impl ViewportGpu {
         Some(PaintImage {
             bind_group: shown.target.bind_group.clone(),
             size: (t.width(), t.height()),
+            nearest: false,
         })
+    }
+
+    /// How images are bound for the paint callback's pipelines (the slice panes' too).
+    pub fn binding(&self) -> &ImageBinding {
+        &self.binding
     }
 
     /// Replaces the volume shown.

@@ -10,8 +10,10 @@
 //! slice is at most a few hundred thousand samples) when what they show changes.
 
 mod draw;
+mod image;
 
 use super::document::Document;
+use super::viewport::ImageBinding;
 use crate::clip::{ClipShape, Shape};
 use crate::labels::style;
 use crate::slice::{
@@ -22,6 +24,7 @@ use crate::texels::segments::ClassLook;
 use draw::{cross_sections, orientation_marker, plane_color, scale_bar};
 use egui::{Color32, Pos2, Rect, Stroke, Vec2, pos2};
 use glam::{DVec3, Vec3};
+use image::SliceTexture;
 
 pub use crate::slice::{Layout, Pane};
 
@@ -51,7 +54,10 @@ pub struct SliceViews {
     /// Orientation marker in the 3-D pane, scale bars in the slices.
     pub show_markers: bool,
     geometry: Option<(usize, Plane, SliceGeometry)>,
-    images: [Option<(Key, egui::TextureHandle)>; 3],
+    images: [Option<(Key, SliceTexture)>; 3],
+    /// The segments' looks as of the UI frame numbered first (one computation a frame
+    /// for all panes).
+    looks: Option<(u64, Option<Vec<ClassLook>>)>,
     sections: [Option<(SectionKey, Vec<[Pos2; 2]>)>; 3],
     drag: Option<Drag>,
     /// Scroll not yet turned into pages.
@@ -88,6 +94,7 @@ impl Default for SliceViews {
             show_markers: true,
             geometry: None,
             images: Default::default(),
+            looks: None,
             sections: Default::default(),
             drag: None,
             wheel: 0.0,
@@ -253,24 +260,39 @@ impl SliceViews {
         self.crosshair = Some(world);
     }
 
+    /// The segments' looks over the slices (`None`: no overlay), computed once a frame.
+    fn looks(&mut self, doc: &Document, frame: u64) -> Option<Vec<ClassLook>> {
+        if let Some((f, looks)) = &self.looks
+            && *f == frame
+        {
+            return looks.clone();
+        }
+        let looks = doc
+            .segmentation
+            .as_ref()
+            .filter(|_| self.show_labels)
+            .map(|s| style::looks(&s.labels, &s.classes, &s.styles, &[]));
+        self.looks = Some((frame, looks.clone()));
+        looks
+    }
+
     /// Draws the slice pane of `axis` in `rect` and handles its input; `true` if it
-    /// changed the clip shapes.
+    /// changed the clip shapes. Its image goes to the GPU (`gpu`, bound with the
+    /// viewport's `binding`) when what it shows changes.
     pub fn show(
         &mut self,
         ui: &mut egui::Ui,
         doc: &mut Document,
         axis: SliceAxis,
         rect: Rect,
+        gpu: &crate::gpu::Gpu,
+        binding: &ImageBinding,
     ) -> bool {
         let geometry = self.geometry(doc);
         let crosshair = self.crosshair.unwrap_or_else(|| geometry.centre());
         let index = geometry.index_at(axis, crosshair);
         let slot = SliceAxis::ALL.iter().position(|a| *a == axis).unwrap_or(0);
-        let looks = doc
-            .segmentation
-            .as_ref()
-            .filter(|_| self.show_labels)
-            .map(|s| style::looks(&s.labels, &s.classes, &s.styles, &[]));
+        let looks = self.looks(doc, ui.ctx().cumulative_frame_nr());
         let key = Key {
             volume: std::sync::Arc::as_ptr(&doc.volume) as usize,
             index,
@@ -303,20 +325,8 @@ impl SliceViews {
             };
             let (window, level) = key.window;
             let rgb = slice.rgb(window, level, overlay.as_ref());
-            let image = egui::ColorImage::from_rgb([w, h], &rgb);
-            let options = match self.sampling {
-                Sampling::Nearest => egui::TextureOptions::NEAREST,
-                Sampling::Linear => egui::TextureOptions::LINEAR,
-            };
-            let texture = match self.images[slot].take() {
-                Some((_, mut t)) => {
-                    t.set(image, options);
-                    t
-                }
-                None => ui
-                    .ctx()
-                    .load_texture(format!("slice-{}", axis.name()), image, options),
-            };
+            let old = self.images[slot].take().map(|(_, t)| t);
+            let texture = SliceTexture::upload(gpu, binding, old, [w, h], &rgb);
             self.images[slot] = Some((key.clone(), texture));
         }
         // The shapes' cross-sections, traced again when the slice or a shape changes.
@@ -341,7 +351,6 @@ impl SliceViews {
             egui::Sense::click_and_drag(),
         );
         let painter = ui.painter_at(rect);
-        painter.rect_filled(rect, 0.0, Color32::BLACK);
         let ([l, t, r, b], scale) = crate::slice::fit(
             [w, h],
             [rect.left(), rect.top(), rect.right(), rect.bottom()],
@@ -350,13 +359,14 @@ impl SliceViews {
             rect: Rect::from_min_max(pos2(l, t), pos2(r, b)),
             scale,
         };
-        if let Some((_, texture)) = &self.images[slot] {
-            painter.image(
-                texture.id(),
-                placed.rect,
-                Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
-                Color32::WHITE,
-            );
+        match &self.images[slot] {
+            Some((_, texture)) => {
+                let nearest = self.sampling == Sampling::Nearest;
+                texture.paint(&painter, rect, placed.rect, nearest);
+            }
+            None => {
+                painter.rect_filled(rect, 0.0, Color32::BLACK);
+            }
         }
         let mut changed = false;
         changed |= self.input(ui, &response, doc, &geometry, axis, index, placed);

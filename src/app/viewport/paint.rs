@@ -103,25 +103,28 @@ impl ViewportPaint {
     }
 
     /// Draws `image` into the callback's viewport: 1:1 when it has the viewport's size,
-    /// else scaled up with bilinear filtering.
+    /// else scaled with bilinear filtering, or with the nearest texel if it asks for it.
     fn paint(
         &self,
         pass: &mut wgpu::RenderPass<'static>,
         image: &PaintImage,
         viewport_px: (u32, u32),
     ) {
-        let exact = image.size == viewport_px;
-        pass.set_pipeline(&self.pipelines[usize::from(!exact)]);
+        let texels = image.size == viewport_px || image.nearest;
+        pass.set_pipeline(&self.pipelines[usize::from(!texels)]);
         pass.set_bind_group(0, &image.bind_group, &[]);
         pass.draw(0..3, 0..1);
     }
 }
 
-/// An image to draw: its bind group ([`ImageBinding::bind`]) and its size in pixels.
+/// An image to draw: its bind group ([`ImageBinding::bind`]), its size in pixels and
+/// whether it is scaled with the nearest texel (a slice's nearest sampling) rather than
+/// bilinear filtering.
 #[derive(Debug, Clone)]
 pub struct PaintImage {
     pub bind_group: wgpu::BindGroup,
     pub size: (u32, u32),
+    pub nearest: bool,
 }
 
 /// The per-frame part of the paint callback: where to draw, and the last complete image
