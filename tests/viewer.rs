@@ -1638,12 +1638,44 @@ fn slice_panes_move_the_crosshair_and_picking_finds_the_surface() {
         },
         egui::Modifiers::SHIFT,
     );
-    h.run_steps(2);
+    // The pick runs on the GPU and comes back on a later frame.
+    for _ in 0..200 {
+        h.step();
+        if !h.state().slices().picking() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    assert!(
+        !h.state().slices().picking(),
+        "the GPU pick never came back"
+    );
     let p = h.state().slices().crosshair.expect("crosshair");
     let expected = glam::DVec3::new(19.5, 31.5, 19.5);
     assert!(
         (p - expected).length() <= 1.0,
         "picked {p}, the surface is at {expected}"
+    );
+    // The CPU twin's pick of the same pixel: the same sample.
+    let frame = h.state().view_frame().expect("frame");
+    let (w, hh) = h.state().viewport_size();
+    let pixel = volao::app::slices::pixel_under(view, view.center(), (w, hh));
+    let doc = h.state().document().expect("doc");
+    let texels = volao::texels::VolumeTexels::new(
+        &doc.volume,
+        volao::texels::UploadLimits {
+            max_dim: 64,
+            max_bytes: 1 << 30,
+        },
+    );
+    let lut = volao::sample::bake_lut(&doc.view_tf(), &texels, frame.settings.step_voxels);
+    let (cv, occupancy) = volao::render::cpu::prepare(&texels, &lut);
+    let twin = volao::render::cpu::pick_pixel(&texels, &cv, &lut, &occupancy, &frame, pixel)
+        .expect("the twin's ray hits the ball");
+    let twin = volao::slice::volume_to_world(&doc.volume, twin);
+    assert!(
+        (p - twin).length() <= 1.0,
+        "picked {p}, the CPU twin picks {twin}"
     );
 }
 

@@ -35,6 +35,8 @@ pub struct Variant {
     pub segment_edges: bool,
     /// Some class's weight is below 1 (`SEGMENT_WEIGHTS`).
     pub segment_weights: bool,
+    /// The ray stops where it first reaches the pick's opacity and says where (`PICK`).
+    pub pick: bool,
 }
 
 impl Variant {
@@ -75,6 +77,7 @@ impl Variant {
             segment_modes: vol.segments.modes,
             segment_edges: vol.segments.edges && (phong || ao_volume || live_vao),
             segment_weights: vol.segments.edges,
+            pick: false,
         }
     }
 
@@ -96,11 +99,12 @@ impl Variant {
             segment_modes: 2,
             segment_edges: true,
             segment_weights: true,
+            pick: false,
         }
     }
 
     /// The values of the shader's `override` constants.
-    pub(super) fn constants(&self) -> [(&'static str, f64); 16] {
+    pub(super) fn constants(&self) -> [(&'static str, f64); 17] {
         let b = |on: bool| f64::from(u8::from(on));
         // Shading that fetches: worth finding a sample with opacity before shading.
         let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
@@ -121,6 +125,7 @@ impl Variant {
             ("SEGMENT_MODES", f64::from(self.segment_modes)),
             ("SEGMENT_EDGES", b(self.segment_edges)),
             ("SEGMENT_WEIGHTS", b(self.segment_weights)),
+            ("PICK", b(self.pick)),
         ]
     }
 }

@@ -21,7 +21,6 @@
 //! voxel index `t = A⁻¹(p − o)`, and outside the volume it has no value.
 
 mod annotate;
-pub mod pick;
 
 pub use annotate::{annotate, draw_text, orientation_marker, scale_bar_length};
 
