@@ -573,6 +573,27 @@ pub struct LabelOverlay<'a> {
     pub outline: bool,
 }
 
+impl<'a> LabelOverlay<'a> {
+    /// The segments' colours' share of the grey unless asked otherwise (`volao slice
+    /// --label-opacity`, the viewer's slider, `volao render --layout`'s slices).
+    pub const DEFAULT_OPACITY: f32 = 0.5;
+
+    /// The overlay of a segmentation prepared for rendering (its classes on the volume's
+    /// grid and their looks; the looks' cuts play no part in a slice).
+    pub fn of(
+        segments: &'a crate::texels::segments::SegmentTexels,
+        opacity: f32,
+        outline: bool,
+    ) -> Self {
+        LabelOverlay {
+            classes: &segments.classes,
+            looks: &segments.table,
+            opacity,
+            outline,
+        }
+    }
+}
+
 impl Slice {
     /// RGB pixels: the window's greys, with `overlay`'s segments blended over them.
     pub fn rgb(&self, window: f64, level: f64, overlay: Option<&LabelOverlay>) -> Vec<u8> {

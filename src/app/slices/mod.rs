@@ -94,7 +94,7 @@ impl Default for SliceViews {
             linked_window: true,
             window: (400.0, 40.0),
             show_labels: true,
-            label_opacity: 0.5,
+            label_opacity: LabelOverlay::DEFAULT_OPACITY,
             outline: false,
             show_crosshair: true,
             show_markers: true,
