@@ -24,7 +24,9 @@ use std::time::Instant;
 
 mod paint;
 mod pump;
-pub use paint::{ImageBinding, PaintImage, ViewportCallback, ViewportPaint, size_in_pixels};
+pub use paint::{
+    BlackCallback, ImageBinding, PaintImage, ViewportCallback, ViewportPaint, size_in_pixels,
+};
 
 /// Set by the thread building a pipeline: `Some(error)` when it failed.
 type Compiled = std::sync::Arc<std::sync::Mutex<Option<Option<String>>>>;

@@ -1,13 +1,15 @@
 //! A slice pane's image on the GPU, drawn through the 3-D viewport's paint pipelines
 //! (`shaders/viewport.wgsl`: one unblended triangle, the nearest texel or bilinear)
-//! rather than as an egui textured mesh. On a CPU rasteriser (lavapipe) egui's blended,
-//! sampled mesh over three pane-sized images and their black backgrounds cost more per
-//! frame than the 3-D view itself (docs/benchmarks.md, slice panes). The image is
-//! uploaded only when what it shows changes; each frame draws the texture kept.
+//! rather than as an egui textured mesh, and the margins around it black with the same
+//! pipelines' `fs_black`. On a CPU rasteriser (lavapipe) egui's fragment shader (sRGB
+//! conversions, dithering, blending) over three pane-sized images and their black
+//! backgrounds cost more per frame than the 3-D view itself, and still a third of the
+//! rasteriser's time for the margins alone (docs/benchmarks.md, slice panes). The
+//! image is uploaded only when what it shows changes; each frame draws the texture kept.
 
-use crate::app::viewport::{ImageBinding, PaintImage, ViewportCallback};
+use crate::app::viewport::{BlackCallback, ImageBinding, PaintImage, ViewportCallback};
 use crate::gpu::Gpu;
-use egui::{Color32, Rect};
+use egui::Rect;
 
 /// A slice image's texture and the bind group that draws it.
 #[derive(Debug)]
@@ -65,7 +67,10 @@ impl SliceTexture {
     /// the rest of `pane` black.
     pub(super) fn paint(&self, painter: &egui::Painter, pane: Rect, placed: Rect, nearest: bool) {
         for margin in margins(pane, placed) {
-            painter.rect_filled(margin, 0.0, Color32::BLACK);
+            painter.add(egui_wgpu::Callback::new_paint_callback(
+                margin,
+                BlackCallback,
+            ));
         }
         let image = PaintImage {
             bind_group: self.bind_group.clone(),
