@@ -46,6 +46,12 @@ override SEGMENT_EDGES: bool = true;
 // Without, every weight is 1: a step needs no look for its opacity, only a sample that
 // shows does for its colour.
 override SEGMENT_WEIGHTS: bool = true;
+// Picking (render::gpu::RayCaster::pick; CPU twin: render::cpu::pick): a composite ray
+// stops at the first sample at which its accumulated opacity reaches PICK_OPACITY and
+// writes where that sample lies (volume-centred mm, w = 1) to `picked`. Off, the code
+// is compiled out and `picked` (a placeholder) is never written.
+override PICK: bool = false;
+const PICK_OPACITY: f32 = 0.5;
 // The visibility pass of view-dependent AO (ao::view): every AO read marks the voxels
 // its trilinear footprint weighs in `ao_marks` (the image itself is not used).
 override MARK_AO: bool = false;
@@ -80,6 +86,7 @@ const MODE_ISO: u32 = 4u;
 // The density's central differences per voxel ÷ M, with a border of one voxel
 // (render::gradient); a single texel when there is none.
 @group(0) @binding(7) var gradient_volume: texture_3d<f32>;
+@group(0) @binding(8) var<storage, read_write> picked: vec4<f32>;
 
 // Group 2 (src/render/shadow.rs): live positional AO (vao_common.wgsl, bindings 0–4)
 // and the light volume for shadows.
@@ -674,6 +681,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     rgba.a = 1.0 - pow(1.0 - rgba.a, len / dt);
                 }
                 acc = vec4<f32>(acc.rgb + (1.0 - acc.a) * rgba.a * rgb, acc.a + (1.0 - acc.a) * rgba.a);
+            }
+            if PICK && acc.a >= PICK_OPACITY {
+                picked = vec4<f32>(origin + dir * t, 1.0);
+                break;
             }
             if acc.a > OPAQUE {
                 break;

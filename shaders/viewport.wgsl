@@ -69,3 +69,9 @@ fn fs_scaled_srgb(in: VsOut) -> @location(0) vec4<f32> {
     let c = scaled(in.uv);
     return vec4<f32>(srgb_to_linear(c.rgb), c.a);
 }
+
+// Opaque black (the slice panes' margins around a letterboxed image).
+@fragment
+fn fs_black() -> @location(0) vec4<f32> {
+    return vec4<f32>(0.0, 0.0, 0.0, 1.0);
+}

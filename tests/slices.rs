@@ -224,3 +224,80 @@ fn render_annotate_draws_only_the_orientation_marker() {
     }
     assert!(changed > 30, "marker drawn: {changed} pixels");
 }
+
+/// `volao render --layout 2x2 --labels SEG`: the slice panes carry the segments'
+/// colours, the axial pane pixel for pixel `volao slice --labels`'s image scaled to fit;
+/// without `--labels` they are grey.
+#[test]
+fn render_layout_slices_show_the_segmentation() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ct = data("labels/totalsegmentator/example_ct.nii.gz");
+    let seg = data("labels/totalsegmentator/example_seg_fast_force_split.nii.gz");
+    // Every segment red, so any pixel the overlay touches shows it.
+    let red = ["--labels", path(&seg), "--segment", "*:color=#ff0000"];
+    let (plain, labelled) = (
+        dir.path().join("plain.png"),
+        dir.path().join("labelled.png"),
+    );
+    for (out, extra) in [(&plain, &[][..]), (&labelled, &red[..])] {
+        let mut args = vec![
+            "render",
+            path(&ct),
+            "--layout",
+            "2x2",
+            "--width",
+            "200",
+            "--height",
+            "160",
+            "--ao",
+            "none",
+            "-o",
+            path(out),
+        ];
+        args.extend(extra);
+        let o = volao(&args);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+    }
+    let slice = dir.path().join("axial.png");
+    let mut args = vec!["slice", path(&ct), "-o", path(&slice)];
+    args.extend(red);
+    let o = volao(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let (plain, labelled) = (grey_png(&plain).to_rgb8(), grey_png(&labelled).to_rgb8());
+    let slice = grey_png(&slice).to_rgb8();
+    // The slice panes: the axial pane (top left, 0..99 × 0..79) and the bottom row.
+    let in_slices = |x: u32, y: u32| (x < 99 && y < 79) || y >= 81;
+    let coloured = |img: &image::RgbImage| {
+        img.enumerate_pixels()
+            .filter(|(x, y, p)| in_slices(*x, *y) && (p[0] != p[1] || p[1] != p[2]))
+            .count()
+    };
+    assert_eq!(coloured(&plain), 0);
+    let red_pixels = coloured(&labelled);
+    assert!(
+        red_pixels > 200,
+        "segments coloured in the slice panes: {red_pixels}"
+    );
+    let (w, h) = slice.dimensions();
+    let ([l, t, _, _], s) = volao::slice::fit([w as usize, h as usize], [0.0, 0.0, 99.0, 79.0]);
+    let mut compared = 0;
+    for y in 0..79u32 {
+        for x in 0..99u32 {
+            let u = ((x as f32 + 0.5 - l) / s).floor();
+            let v = ((y as f32 + 0.5 - t) / s).floor();
+            if u < 0.0 || v < 0.0 || u >= w as f32 || v >= h as f32 {
+                continue;
+            }
+            assert_eq!(
+                labelled.get_pixel(x, y),
+                slice.get_pixel(u as u32, v as u32),
+                "axial pane at {x},{y}"
+            );
+            compared += 1;
+        }
+    }
+    assert!(
+        compared > 3000,
+        "{compared} pixels of the axial pane compared"
+    );
+}

@@ -1638,12 +1638,44 @@ fn slice_panes_move_the_crosshair_and_picking_finds_the_surface() {
         },
         egui::Modifiers::SHIFT,
     );
-    h.run_steps(2);
+    // The pick runs on the GPU and comes back on a later frame.
+    for _ in 0..200 {
+        h.step();
+        if !h.state().slices().picking() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    assert!(
+        !h.state().slices().picking(),
+        "the GPU pick never came back"
+    );
     let p = h.state().slices().crosshair.expect("crosshair");
     let expected = glam::DVec3::new(19.5, 31.5, 19.5);
     assert!(
         (p - expected).length() <= 1.0,
         "picked {p}, the surface is at {expected}"
+    );
+    // The CPU twin's pick of the same pixel: the same sample.
+    let frame = h.state().view_frame().expect("frame");
+    let (w, hh) = h.state().viewport_size();
+    let pixel = volao::app::slices::pixel_under(view, view.center(), (w, hh));
+    let doc = h.state().document().expect("doc");
+    let texels = volao::texels::VolumeTexels::new(
+        &doc.volume,
+        volao::texels::UploadLimits {
+            max_dim: 64,
+            max_bytes: 1 << 30,
+        },
+    );
+    let lut = volao::sample::bake_lut(&doc.view_tf(), &texels, frame.settings.step_voxels);
+    let (cv, occupancy) = volao::render::cpu::prepare(&texels, &lut);
+    let twin = volao::render::cpu::pick_pixel(&texels, &cv, &lut, &occupancy, &frame, pixel)
+        .expect("the twin's ray hits the ball");
+    let twin = volao::slice::volume_to_world(&doc.volume, twin);
+    assert!(
+        (p - twin).length() <= 1.0,
+        "picked {p}, the CPU twin picks {twin}"
     );
 }
 
@@ -1778,4 +1810,133 @@ fn shapes_placed_and_resized_in_the_slices() {
         after > scale_before * 1.1,
         "resized {scale_before} → {after}"
     );
+}
+
+/// The grey of the window's pixel at `p` (points, 1 point = 1 pixel here).
+fn grey_at(img: &image::RgbaImage, p: egui::Pos2) -> u8 {
+    img.get_pixel(p.x as u32, p.y as u32).0[0]
+}
+
+/// Where the axial slice's voxel-grid pixel `[column, row]` of the ball shows.
+fn axial_pixel(h: &Harness<'static, Viewer>, px: [f32; 2]) -> egui::Pos2 {
+    use volao::slice::SliceAxis;
+    let axial = pane(h, volao::app::slices::Pane::Slice(SliceAxis::Axial));
+    let grid = h.state().slices().grid().expect("grid");
+    let [w, ht] = grid.image_size(SliceAxis::Axial);
+    let ([l, t, _, _], s) = volao::slice::fit(
+        [w, ht],
+        [axial.left(), axial.top(), axial.right(), axial.bottom()],
+    );
+    egui::pos2(l + (px[0] + 0.5) * s, t + (px[1] + 0.5) * s)
+}
+
+/// Unticking "Window/level of the transfer function" gives the slices their own
+/// window: the ball (100) and the air (0) of the axial slice show the greys of that
+/// window's ramp, and ticking it again brings back the transfer function's (0..60: the
+/// ball white, the air black).
+#[test]
+fn slices_show_their_own_window_level_when_unlinked() {
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = open_ball(dir.path());
+    // Inside the ball (3 voxels off the crosshair, clear of its lines) and in the air
+    // (a corner of the 40² slice, 20 mm from the ball's centre).
+    let (ball, air) = (axial_pixel(&h, [23.0, 23.0]), axial_pixel(&h, [5.0, 34.0]));
+    let shown = |h: &mut Harness<'static, Viewer>| {
+        let img = h.render().unwrap_or_else(|e| panic!("render: {e}"));
+        (grey_at(&img, ball), grey_at(&img, air))
+    };
+    assert_eq!(shown(&mut h), (255, 0), "the TF's window 0..60");
+
+    click(&mut h, "Layout and slices");
+    h.run_steps(2);
+    click(&mut h, "Window/level of the transfer function");
+    h.run_steps(2);
+    assert!(!h.state().slices().linked_window);
+    // Its own window: 400 wide around 100, so 0 → 64 and 100 → 128 (±1 of rounding).
+    h.state_mut().slices_mut().window = (400.0, 100.0);
+    h.run_steps(2);
+    let (b, a) = shown(&mut h);
+    assert!(
+        b.abs_diff(128) <= 1 && a.abs_diff(64) <= 1,
+        "ball {b}, air {a}"
+    );
+
+    click(&mut h, "Window/level of the transfer function");
+    h.run_steps(2);
+    assert!(h.state().slices().linked_window);
+    assert_eq!(shown(&mut h), (255, 0), "linked again");
+}
+
+/// Ctrl+L cycles the layouts (2×2 → 3-D only → 1 + 3 → 2×2); in 1 + 3 the 3-D view is
+/// the large pane and the three slices stack beside it; Ctrl+M maximises the pane under
+/// the pointer to the whole view and restores the layout.
+#[test]
+fn ctrl_l_cycles_the_layouts_and_ctrl_m_maximises_the_pane_under_the_pointer() {
+    use volao::app::slices::{Layout, Pane};
+    use volao::slice::SliceAxis;
+    let _gpu = one_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut h = open_ball(dir.path());
+    let panes = |h: &Harness<'static, Viewer>| h.state().slices().panes().to_vec();
+    let quad = panes(&h);
+    assert_eq!(h.state().slices().layout, Layout::Quad);
+    assert_eq!(quad.len(), 4);
+    let whole = quad
+        .iter()
+        .fold(egui::Rect::NOTHING, |r, (_, p)| r.union(*p));
+    // The pointer over the viewer (not over a text field): keys go to the panes.
+    h.hover_at(whole.center());
+    let ctrl = |h: &mut Harness<'static, Viewer>, key| {
+        h.key_press_modifiers(egui::Modifiers::COMMAND, key);
+        h.run_steps(2);
+    };
+
+    ctrl(&mut h, egui::Key::L);
+    assert_eq!(h.state().slices().layout, Layout::ThreeD);
+    let alone = panes(&h);
+    assert_eq!(alone.len(), 1);
+    assert_eq!(alone[0].0, Pane::ThreeD);
+    assert!((alone[0].1.area() - whole.area()).abs() < 1.0);
+
+    ctrl(&mut h, egui::Key::L);
+    assert_eq!(h.state().slices().layout, Layout::OnePlusThree);
+    let one_three = panes(&h);
+    assert_eq!(one_three.len(), 4, "{one_three:?}");
+    let view = pane(&h, Pane::ThreeD);
+    let slices: Vec<egui::Rect> = SliceAxis::ALL
+        .iter()
+        .map(|a| pane(&h, Pane::Slice(*a)))
+        .collect();
+    for s in &slices {
+        assert!(view.area() > 2.0 * s.area(), "3-D {view:?}, slice {s:?}");
+        assert!(
+            (s.left() - slices[0].left()).abs() < 0.5,
+            "not stacked: {slices:?}"
+        );
+        assert!(s.left() >= view.right(), "beside the 3-D view: {slices:?}");
+    }
+    assert!(slices[0].top() < slices[1].top() && slices[1].top() < slices[2].top());
+    // The 3-D view draws into its pane.
+    assert_eq!(h.state().viewport_rect(), view);
+
+    ctrl(&mut h, egui::Key::L);
+    assert_eq!(h.state().slices().layout, Layout::Quad);
+    assert_eq!(panes(&h), quad);
+
+    // Ctrl+M over the coronal pane: it fills the view; again: the layout is back.
+    let coronal = pane(&h, Pane::Slice(SliceAxis::Coronal));
+    h.hover_at(coronal.center());
+    ctrl(&mut h, egui::Key::M);
+    assert_eq!(
+        h.state().slices().maximised,
+        Some(Pane::Slice(SliceAxis::Coronal))
+    );
+    let max = panes(&h);
+    assert_eq!(max.len(), 1);
+    assert_eq!(max[0].0, Pane::Slice(SliceAxis::Coronal));
+    assert!((max[0].1.area() - whole.area()).abs() < 1.0, "{max:?}");
+    ctrl(&mut h, egui::Key::M);
+    assert_eq!(h.state().slices().maximised, None);
+    assert_eq!(panes(&h), quad);
 }

@@ -740,6 +740,15 @@ impl Viewer {
     /// and shapes as this frame's input left them) its GPU work pumped and painted.
     fn central_viewport(&mut self, ui: &mut egui::Ui) {
         let bench = self.options.bench_clip_drag.is_some();
+        if let Some(doc) = &self.opened.doc {
+            let polled = self.chrome.slices.poll_pick(&self.gpu, doc);
+            if let Err(e) = polled {
+                self.toast(format!("Picking failed: {e}"), true);
+            }
+            if self.chrome.slices.picking() {
+                ui.ctx().request_repaint();
+            }
+        }
         let slot = egui::CentralPanel::no_frame()
             .show(ui, |ui| {
                 let rect = ui.available_rect_before_wrap();
@@ -751,7 +760,10 @@ impl Viewer {
                         slices::Pane::ThreeD => slot = self.viewport(ui, r),
                         slices::Pane::Slice(axis) => {
                             if let Some(doc) = &mut self.opened.doc {
-                                self.chrome.slices.show(ui, doc, axis, r);
+                                let binding = self.viewport.gpu.binding();
+                                self.chrome
+                                    .slices
+                                    .show(ui, doc, axis, r, &self.gpu, binding);
                             }
                         }
                     }

@@ -524,9 +524,32 @@ impl Viewer {
         // Shift-click or double-click: the crosshair to the surface under the pointer.
         let pick =
             response.double_clicked() || (response.clicked() && ui.input(|i| i.modifiers.shift));
+        let mut pick_error = None;
         if pick && let Some(p) = response.interact_pointer_pos() {
-            if let Some(world) = super::slices::pick_surface(doc, rect, p) {
-                self.chrome.slices.set_crosshair(world);
+            // The pixel of the full-quality image under the pointer, cast on the GPU as
+            // that image casts it; a later frame reads where it stopped.
+            let (w, h) = (self.viewport.px.0.max(1), self.viewport.px.1.max(1));
+            let pixel = super::slices::pixel_under(rect, p, (w, h));
+            let frame = crate::render::Frame {
+                camera: doc.camera,
+                settings: doc.view_settings(),
+                width: w,
+                height: h,
+            };
+            let v = &self.viewport.gpu;
+            if let Some(volume) = &v.volume {
+                let draw = crate::render::gpu::PickDraw {
+                    volume,
+                    frame: &frame,
+                    clip: v.clip_maps(),
+                    pixel,
+                };
+                let id = Arc::as_ptr(&doc.volume) as usize;
+                let started = self
+                    .chrome
+                    .slices
+                    .start_pick(&self.gpu, &v.ray_caster, draw, id);
+                pick_error = started.err();
             }
         } else if !used {
             camera_input::handle(ui, &response, &mut doc.camera, doc.radius);
@@ -554,6 +577,9 @@ impl Viewer {
                 &self.chrome.slices,
                 doc,
             );
+        }
+        if let Some(e) = pick_error {
+            self.toast(format!("Picking failed: {e}"), true);
         }
         if hovering_files {
             ui.painter()

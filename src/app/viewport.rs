@@ -24,7 +24,9 @@ use std::time::Instant;
 
 mod paint;
 mod pump;
-pub use paint::{ImageBinding, PaintImage, ViewportCallback, ViewportPaint, size_in_pixels};
+pub use paint::{
+    BlackCallback, ImageBinding, PaintImage, ViewportCallback, ViewportPaint, size_in_pixels,
+};
 
 /// Set by the thread building a pipeline: `Some(error)` when it failed.
 type Compiled = std::sync::Arc<std::sync::Mutex<Option<Option<String>>>>;
@@ -247,7 +249,13 @@ impl ViewportGpu {
         Some(PaintImage {
             bind_group: shown.target.bind_group.clone(),
             size: (t.width(), t.height()),
+            nearest: false,
         })
+    }
+
+    /// How images are bound for the paint callback's pipelines (the slice panes' too).
+    pub fn binding(&self) -> &ImageBinding {
+        &self.binding
     }
 
     /// Replaces the volume shown.

@@ -154,7 +154,17 @@ impl ClipShape {
     /// Whether point `p` (volume-centred mm) lies inside the shape; `None` for a mesh
     /// (its inside is only known to the depth maps).
     pub fn contains(&self, p: Vec3) -> Option<bool> {
-        let local = self.rotation().inverse() * (p - Vec3::from(self.translation));
+        self.contains_local(self.to_local(p))
+    }
+
+    /// Point `p` (volume-centred mm) in the shape's own frame: translated and rotated
+    /// back, not scaled (an affine map, so callers testing many points can interpolate).
+    pub fn to_local(&self, p: Vec3) -> Vec3 {
+        self.rotation().inverse() * (p - Vec3::from(self.translation))
+    }
+
+    /// [`Self::contains`] for a point already in the shape's frame ([`Self::to_local`]).
+    pub fn contains_local(&self, local: Vec3) -> Option<bool> {
         let s = Vec3::from(self.scale).max(Vec3::splat(1e-6));
         let q = local / s;
         Some(match &self.shape {

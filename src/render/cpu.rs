@@ -416,6 +416,9 @@ pub fn ray(p: &RaycastParams, px: u32, py: u32) -> (Vec3, Vec3, f32, f32) {
     (origin, dir, t0.max(0.0), t1)
 }
 
+/// Accumulated opacity at which a pick stops (`PICK_OPACITY` of raycast.wgsl).
+pub const PICK_OPACITY: f32 = 0.5;
+
 /// One pixel, exactly as `main` in raycast.wgsl computes it (before 8-bit quantisation);
 /// `None` where it would leave the target's pixel as it is (its ray meets none of the
 /// balls of [`super::reuse`]).
@@ -427,6 +430,34 @@ pub fn pixel(
     px: u32,
     py: u32,
 ) -> Option<Vec4> {
+    cast(p, vol, volume, occupancy, (px, py), false).map(|(rgba, _)| rgba)
+}
+
+/// Where the composite ray of pixel `(px, py)` first reaches [`PICK_OPACITY`] (its
+/// sample's position, volume-centred mm), as a `PICK` pipeline of raycast.wgsl finds it:
+/// the same steps, jitter, clipping, segment weights and modulation as the image.
+pub fn pick(
+    p: &RaycastParams,
+    vol: &CpuVolume,
+    volume: &Reader,
+    occupancy: &[u8],
+    px: u32,
+    py: u32,
+) -> Option<Vec3> {
+    cast(p, vol, volume, occupancy, (px, py), true).and_then(|(_, picked)| picked)
+}
+
+/// `main` of raycast.wgsl for one pixel; with `pick`, as its `PICK` variant (the ray
+/// stops where the opacity reaches [`PICK_OPACITY`], and says where).
+fn cast(
+    p: &RaycastParams,
+    vol: &CpuVolume,
+    volume: &Reader,
+    occupancy: &[u8],
+    (px, py): (u32, u32),
+    pick: bool,
+) -> Option<(Vec4, Option<Vec3>)> {
+    let mut picked = None;
     let (origin, dir, t_enter, t_exit) = ray(p, px, py);
     let half = Vec3::new(p.box_half[0], p.box_half[1], p.box_half[2]);
     if p.reuse[0] > 0 && !super::reuse::meets_change(p, origin, dir, t_enter, t_exit) {
@@ -550,6 +581,10 @@ pub fn pixel(
                     acc = (acc.truncate() + (1.0 - acc.w) * rgba.w * rgb)
                         .extend(acc.w + (1.0 - acc.w) * rgba.w);
                 }
+                if pick && acc.w >= PICK_OPACITY {
+                    picked = Some(origin + dir * t);
+                    break;
+                }
                 if acc.w > OPAQUE {
                     break;
                 }
@@ -566,7 +601,7 @@ pub fn pixel(
     if alpha > 0.0 {
         rgb /= alpha;
     }
-    Some(rgb.clamp(Vec3::ZERO, Vec3::ONE).extend(alpha))
+    Some((rgb.clamp(Vec3::ZERO, Vec3::ONE).extend(alpha), picked))
 }
 
 /// Renders a whole frame on the CPU. `occupancy` comes from [`BlockRanges::occupancy`].
@@ -578,6 +613,22 @@ pub fn render(
     frame: &Frame,
 ) -> Image {
     render_reusing(texels, vol, lut, occupancy, frame, None)
+}
+
+/// Where the ray of pixel `(px, py)` of `frame` first reaches [`PICK_OPACITY`]
+/// (volume-centred mm), as `RayCaster::pick` finds it for the same inputs as [`render`].
+pub fn pick_pixel(
+    texels: &VolumeTexels,
+    vol: &CpuVolume,
+    lut: &Lut,
+    occupancy: &[u8],
+    frame: &Frame,
+    (px, py): (u32, u32),
+) -> Option<Vec3> {
+    let p = frame.params(texels, lut, 0, 0);
+    let volume =
+        VolumeSampler::density(&vol.norm, texels, lut).with_segments(vol.segments.as_ref());
+    pick(&p, vol, &volume, occupancy, px, py)
 }
 
 /// [`render`] over `previous`, an image of the same view whose inputs differ from this

@@ -38,6 +38,8 @@ pub struct RayCaster {
     volume_layout: wgpu::BindGroupLayout,
     placeholders: super::extras::Placeholders,
     surfaces: super::surface::SurfaceRenderer,
+    /// Binding 8 of pipelines that do not pick (they never write it).
+    no_pick: wgpu::Buffer,
 }
 
 /// One frame to ray cast and read back ([`RayCaster::render`] and its variants).
@@ -53,6 +55,25 @@ struct FrameDraw<'a> {
     previous: Option<(&'a Image, &'a [Ball])>,
     /// A visibility pass ([`RayCaster::mark_view`]): where its AO reads mark voxels.
     marks: Option<Marks<'a>>,
+}
+
+/// What a tile's dispatch writes or reads besides its image: the frame's rasterised
+/// surfaces, a visibility pass's marks, a pick's output.
+#[derive(Debug, Clone, Copy, Default)]
+struct Outputs<'a> {
+    layer: Option<&'a super::surface::SurfaceLayer>,
+    marks: Option<Marks<'a>>,
+    picked: Option<&'a wgpu::Buffer>,
+}
+
+impl<'a> Outputs<'a> {
+    /// The surfaces alone (an image).
+    fn layer(layer: Option<&'a super::surface::SurfaceLayer>) -> Self {
+        Outputs {
+            layer,
+            ..Default::default()
+        }
+    }
 }
 
 /// Where a visibility pass marks the voxels its AO reads weigh, and how.
@@ -98,6 +119,7 @@ impl RayCaster {
                     entry::texture(5, c, D3, Some(true)),
                     entry::texture(6, c, D3, Some(false)),
                     entry::texture(7, c, D3, Some(true)),
+                    entry::storage(8, c, false),
                 ],
             });
             let clip_layout = crate::clip::gpu::bind_group_layout(device);
@@ -130,6 +152,7 @@ impl RayCaster {
                 volume_layout,
                 placeholders: super::extras::Placeholders::new(device),
                 surfaces,
+                no_pick: PickTarget::storage(device, "RayCaster::no_pick"),
             }
         })
     }
@@ -156,7 +179,67 @@ impl RayCaster {
             )?),
         };
         let variant = Variant::of(vol, tile.frame, tile.clip, layer.is_some());
-        self.encode(gpu, tile, variant, (layer.as_ref(), None), encoder)
+        self.encode(gpu, tile, variant, Outputs::layer(layer.as_ref()), encoder)
+    }
+
+    /// Encodes the pick of pixel `pixel` of `frame` into `target`: the ray of that pixel,
+    /// cast as the image casts it, stops where its opacity first reaches
+    /// [`super::cpu::PICK_OPACITY`] ([`PickTarget::read`] says where). Composite frames
+    /// only: other modes pick nothing.
+    pub fn encode_pick(
+        &self,
+        gpu: &Gpu,
+        draw: PickDraw<'_>,
+        target: &PickTarget,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<(), GpuError> {
+        let vol = draw.volume;
+        let layer = match vol.extras.surfaces.is_empty() {
+            true => None,
+            false => Some(self.surfaces.rasterise(
+                (&gpu.device, &gpu.queue),
+                &vol.extras.surfaces,
+                draw.frame,
+                &vol.texels,
+            )?),
+        };
+        let variant = Variant {
+            pick: true,
+            ..Variant::of(vol, draw.frame, draw.clip, layer.is_some())
+        };
+        let (x, y) = draw.pixel;
+        let (w, h) = (draw.frame.width.max(1), draw.frame.height.max(1));
+        let tile = TileDraw {
+            volume: vol,
+            frame: draw.frame,
+            clip: draw.clip,
+            target: &target.pixel,
+            origin: (x.min(w - 1), y.min(h - 1)),
+            changed: &[],
+        };
+        encoder.clear_buffer(&target.picked, 0, None);
+        let outputs = Outputs {
+            picked: Some(&target.picked),
+            ..Outputs::layer(layer.as_ref())
+        };
+        self.encode(gpu, tile, variant, outputs, encoder)?;
+        encoder.copy_buffer_to_buffer(&target.picked, 0, &target.readback, 0, PICK_BYTES);
+        Ok(())
+    }
+
+    /// [`Self::encode_pick`], submitted and waited for (tests, the CLI): where the pixel's
+    /// ray first reaches the opacity, volume-centred mm, or `None`.
+    pub fn pick(&self, gpu: &Gpu, draw: PickDraw<'_>) -> Result<Option<glam::Vec3>, GpuError> {
+        let target = PickTarget::new(&gpu.device);
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("RayCaster::pick"),
+            });
+        self.encode_pick(gpu, draw, &target, &mut encoder)?;
+        gpu.queue.submit([encoder.finish()]);
+        let bytes = read_buffer(&gpu.device, &target.readback, "RayCaster::pick")?;
+        Ok(PickTarget::decode(&bytes))
     }
 
     /// The pipeline of `variant`, built on first use (shader compilation: ~30 ms on
@@ -221,7 +304,7 @@ impl RayCaster {
         gpu: &Gpu,
         tile: TileDraw<'_>,
         variant: Variant,
-        (layer, marks): (Option<&super::surface::SurfaceLayer>, Option<Marks<'_>>),
+        outputs: Outputs<'_>,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
         let device = &gpu.device;
@@ -237,7 +320,8 @@ impl RayCaster {
         let clip_group = clip_group.as_ref().unwrap_or(&self.no_clip);
         let (tw, th) = (tile.target.width(), tile.target.height());
         validated(device, "RayCaster::encode_tile", || {
-            let [group, group_2, group_3] = self.bind_groups(gpu, &tile, &params, (layer, marks));
+            let picked = outputs.picked.unwrap_or(&self.no_pick);
+            let [group, group_2, group_3] = self.bind_groups(gpu, &tile, &params, outputs, picked);
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("RayCaster::encode_tile"),
                 timestamp_writes: None,
@@ -252,15 +336,17 @@ impl RayCaster {
     }
 
     /// `tile`'s bind groups 0 (its uniforms `params`, AO, occupancy, target, modulation,
-    /// block ranges, gradient), 2 (extras) and 3 (the volume and the table for the
-    /// frame's step, `volume.wgsl`).
+    /// block ranges, gradient, the pick's output), 2 (extras) and 3 (the volume and the
+    /// table for the frame's step, `volume.wgsl`).
     fn bind_groups(
         &self,
         gpu: &Gpu,
         tile: &TileDraw<'_>,
         params: &RaycastParams,
-        (layer, marks): (Option<&super::surface::SurfaceLayer>, Option<Marks<'_>>),
+        outputs: Outputs<'_>,
+        picked: &wgpu::Buffer,
     ) -> [wgpu::BindGroup; 3] {
+        let Outputs { layer, marks, .. } = outputs;
         let (device, queue) = (&gpu.device, &gpu.queue);
         let vol = tile.volume;
         let lut = vol.lut_buffer_for(tile.frame.settings.step_voxels);
@@ -289,6 +375,7 @@ impl RayCaster {
                     vol.gradient_volume()
                         .map_or(&self.placeholders.texture, |g| &g.view),
                 ),
+                picked.as_entire_binding(),
             ],
         );
         let group_2 = super::extras::bind_group_2(
@@ -511,7 +598,11 @@ impl RayCaster {
                     origin: (x0, y0),
                     changed,
                 };
-                self.encode(gpu, tile, variant, (layer.as_ref(), marks), &mut encoder)?;
+                let outputs = Outputs {
+                    marks,
+                    ..Outputs::layer(layer.as_ref())
+                };
+                self.encode(gpu, tile, variant, outputs, &mut encoder)?;
                 copy_texture_out(&mut encoder, &target, &readback, row, [tw, th, 1]);
                 gpu.queue.submit([encoder.finish()]);
                 let bytes = read_buffer(device, &readback, "RayCaster::readback")?;
@@ -527,6 +618,61 @@ impl RayCaster {
             y0 += TILE;
         }
         Ok(image)
+    }
+}
+
+/// One pick to cast ([`RayCaster::encode_pick`]): the pixel `pixel` of `frame`.
+#[derive(Debug, Clone, Copy)]
+pub struct PickDraw<'a> {
+    pub volume: &'a RenderVolume,
+    pub frame: &'a Frame,
+    pub clip: Option<&'a crate::clip::gpu::ClipMaps>,
+    pub pixel: (u32, u32),
+}
+
+/// Bytes of the pick's output: `picked` of raycast.wgsl, a `vec4<f32>`.
+const PICK_BYTES: u64 = 16;
+
+/// Where a pick is written: the shader's `picked` (position, w = 1 when found), a
+/// mappable copy of it, and the one-pixel tile the pick's dispatch draws into.
+#[derive(Debug)]
+pub struct PickTarget {
+    picked: wgpu::Buffer,
+    pub readback: wgpu::Buffer,
+    pixel: wgpu::Texture,
+}
+
+impl PickTarget {
+    pub fn new(device: &wgpu::Device) -> Self {
+        PickTarget {
+            picked: Self::storage(device, "RayCaster::picked"),
+            readback: crate::gpu::readback_buffer(device, "RayCaster::pick_readback", PICK_BYTES),
+            pixel: crate::gpu::image_texture(
+                device,
+                "RayCaster::pick_pixel",
+                (1, 1),
+                wgpu::TextureFormat::Rgba8Unorm,
+                wgpu::TextureUsages::STORAGE_BINDING,
+            ),
+        }
+    }
+
+    fn storage(device: &wgpu::Device, label: &str) -> wgpu::Buffer {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: PICK_BYTES,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// The picked position (volume-centred mm) in `bytes` read from
+    /// [`Self::readback`], or `None` when the ray never reached the opacity.
+    pub fn decode(bytes: &[u8]) -> Option<glam::Vec3> {
+        let v: [f32; 4] = bytemuck::pod_read_unaligned(bytes.get(..PICK_BYTES as usize)?);
+        (v[3] > 0.0).then(|| glam::Vec3::new(v[0], v[1], v[2]))
     }
 }
 

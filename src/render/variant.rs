@@ -35,6 +35,8 @@ pub struct Variant {
     pub segment_edges: bool,
     /// Some class's weight is below 1 (`SEGMENT_WEIGHTS`).
     pub segment_weights: bool,
+    /// The ray stops where it first reaches the pick's opacity and says where (`PICK`).
+    pub pick: bool,
     /// A visibility pass (`MARK_AO`, [`crate::ao::view`]): AO reads mark voxels.
     pub mark_ao: bool,
 }
@@ -77,6 +79,7 @@ impl Variant {
             segment_modes: vol.segments.modes,
             segment_edges: vol.segments.edges && (phong || ao_volume || live_vao),
             segment_weights: vol.segments.edges,
+            pick: false,
             mark_ao: false,
         }
     }
@@ -121,12 +124,13 @@ impl Variant {
             segment_modes: 2,
             segment_edges: true,
             segment_weights: true,
+            pick: false,
             mark_ao: false,
         }
     }
 
     /// The values of the shader's `override` constants.
-    pub(super) fn constants(&self) -> [(&'static str, f64); 17] {
+    pub(super) fn constants(&self) -> [(&'static str, f64); 18] {
         let b = |on: bool| f64::from(u8::from(on));
         // Shading that fetches: worth finding a sample with opacity before shading.
         let find = self.phong || self.ao_volume || self.live_vao || self.shadows || self.modulation;
@@ -147,6 +151,7 @@ impl Variant {
             ("SEGMENT_MODES", f64::from(self.segment_modes)),
             ("SEGMENT_EDGES", b(self.segment_edges)),
             ("SEGMENT_WEIGHTS", b(self.segment_weights)),
+            ("PICK", b(self.pick)),
             ("MARK_AO", b(self.mark_ao)),
         ]
     }

@@ -21,7 +21,6 @@
 //! voxel index `t = A⁻¹(p − o)`, and outside the volume it has no value.
 
 mod annotate;
-pub mod pick;
 
 pub use annotate::{annotate, draw_text, orientation_marker, scale_bar_length};
 
@@ -572,6 +571,27 @@ pub struct LabelOverlay<'a> {
     pub opacity: f32,
     /// Only the segments' borders in the slice, drawn opaque.
     pub outline: bool,
+}
+
+impl<'a> LabelOverlay<'a> {
+    /// The segments' colours' share of the grey unless asked otherwise (`volao slice
+    /// --label-opacity`, the viewer's slider, `volao render --layout`'s slices).
+    pub const DEFAULT_OPACITY: f32 = 0.5;
+
+    /// The overlay of a segmentation prepared for rendering (its classes on the volume's
+    /// grid and their looks; the looks' cuts play no part in a slice).
+    pub fn of(
+        segments: &'a crate::texels::segments::SegmentTexels,
+        opacity: f32,
+        outline: bool,
+    ) -> Self {
+        LabelOverlay {
+            classes: &segments.classes,
+            looks: &segments.table,
+            opacity,
+            outline,
+        }
+    }
 }
 
 impl Slice {

@@ -35,13 +35,20 @@ pub(super) fn cross_sections(
         if s.contains(Vec3::ZERO).is_none() {
             continue;
         }
-        // Inside-ness at the grid's corners (pixel coordinates − ½: pixel edges).
-        let corner = |c: usize, r: usize| [(c * step) as f64 - 0.5, (r * step) as f64 - 0.5];
+        // Inside-ness at the grid's corners (pixel coordinates − ½: pixel edges). Pixel
+        // to world to the shape's frame is affine: three points give every corner.
+        let local = |c: usize, r: usize| {
+            let pixel = [(c * step) as f64 - 0.5, (r * step) as f64 - 0.5];
+            let world = geometry.pixel_to_world(axis, conv, index, pixel);
+            s.to_local(world_to_volume(volume, world))
+        };
+        let origin = local(0, 0);
+        let (across, down) = (local(1, 0) - origin, local(0, 1) - origin);
         let inside: Vec<bool> = (0..rows)
             .flat_map(|r| (0..cols).map(move |c| (c, r)))
             .map(|(c, r)| {
-                let world = geometry.pixel_to_world(axis, conv, index, corner(c, r));
-                s.contains(world_to_volume(volume, world)).unwrap_or(false)
+                let at = origin + across * c as f32 + down * r as f32;
+                s.contains_local(at).unwrap_or(false)
             })
             .collect();
         let at = |c: usize, r: usize| inside[r * cols + c];

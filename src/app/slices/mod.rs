@@ -10,8 +10,12 @@
 //! slice is at most a few hundred thousand samples) when what they show changes.
 
 mod draw;
+mod image;
+mod panel;
+mod pick;
 
 use super::document::Document;
+use super::viewport::ImageBinding;
 use crate::clip::{ClipShape, Shape};
 use crate::labels::style;
 use crate::slice::{
@@ -22,8 +26,11 @@ use crate::texels::segments::ClassLook;
 use draw::{cross_sections, orientation_marker, plane_color, scale_bar};
 use egui::{Color32, Pos2, Rect, Stroke, Vec2, pos2};
 use glam::{DVec3, Vec3};
+use image::SliceTexture;
+use pick::PendingPick;
 
 pub use crate::slice::{Layout, Pane};
+pub use pick::pixel_under;
 
 /// Scroll (points) that pages one slice: one wheel notch.
 const WHEEL_NOTCH: f32 = 40.0;
@@ -51,13 +58,18 @@ pub struct SliceViews {
     /// Orientation marker in the 3-D pane, scale bars in the slices.
     pub show_markers: bool,
     geometry: Option<(usize, Plane, SliceGeometry)>,
-    images: [Option<(Key, egui::TextureHandle)>; 3],
+    images: [Option<(Key, SliceTexture)>; 3],
+    /// The segments' looks as of the UI frame numbered first (one computation a frame
+    /// for all panes).
+    looks: Option<(u64, Option<Vec<ClassLook>>)>,
     sections: [Option<(SectionKey, Vec<[Pos2; 2]>)>; 3],
     drag: Option<Drag>,
     /// Scroll not yet turned into pages.
     wheel: f32,
     /// The pane rectangles of the last frame (for the maximise key).
     last_rects: Vec<(Pane, Rect)>,
+    /// A pick in the 3-D view submitted to the GPU, not read yet.
+    pick: Option<PendingPick>,
 }
 
 impl std::fmt::Debug for SliceViews {
@@ -82,16 +94,18 @@ impl Default for SliceViews {
             linked_window: true,
             window: (400.0, 40.0),
             show_labels: true,
-            label_opacity: 0.5,
+            label_opacity: LabelOverlay::DEFAULT_OPACITY,
             outline: false,
             show_crosshair: true,
             show_markers: true,
             geometry: None,
             images: Default::default(),
+            looks: None,
             sections: Default::default(),
             drag: None,
             wheel: 0.0,
             last_rects: Vec::new(),
+            pick: None,
         }
     }
 }
@@ -253,24 +267,39 @@ impl SliceViews {
         self.crosshair = Some(world);
     }
 
+    /// The segments' looks over the slices (`None`: no overlay), computed once a frame.
+    fn looks(&mut self, doc: &Document, frame: u64) -> Option<Vec<ClassLook>> {
+        if let Some((f, looks)) = &self.looks
+            && *f == frame
+        {
+            return looks.clone();
+        }
+        let looks = doc
+            .segmentation
+            .as_ref()
+            .filter(|_| self.show_labels)
+            .map(|s| style::looks(&s.labels, &s.classes, &s.styles, &[]));
+        self.looks = Some((frame, looks.clone()));
+        looks
+    }
+
     /// Draws the slice pane of `axis` in `rect` and handles its input; `true` if it
-    /// changed the clip shapes.
+    /// changed the clip shapes. Its image goes to the GPU (`gpu`, bound with the
+    /// viewport's `binding`) when what it shows changes.
     pub fn show(
         &mut self,
         ui: &mut egui::Ui,
         doc: &mut Document,
         axis: SliceAxis,
         rect: Rect,
+        gpu: &crate::gpu::Gpu,
+        binding: &ImageBinding,
     ) -> bool {
         let geometry = self.geometry(doc);
         let crosshair = self.crosshair.unwrap_or_else(|| geometry.centre());
         let index = geometry.index_at(axis, crosshair);
         let slot = SliceAxis::ALL.iter().position(|a| *a == axis).unwrap_or(0);
-        let looks = doc
-            .segmentation
-            .as_ref()
-            .filter(|_| self.show_labels)
-            .map(|s| style::looks(&s.labels, &s.classes, &s.styles, &[]));
+        let looks = self.looks(doc, ui.ctx().cumulative_frame_nr());
         let key = Key {
             volume: std::sync::Arc::as_ptr(&doc.volume) as usize,
             index,
@@ -303,20 +332,8 @@ impl SliceViews {
             };
             let (window, level) = key.window;
             let rgb = slice.rgb(window, level, overlay.as_ref());
-            let image = egui::ColorImage::from_rgb([w, h], &rgb);
-            let options = match self.sampling {
-                Sampling::Nearest => egui::TextureOptions::NEAREST,
-                Sampling::Linear => egui::TextureOptions::LINEAR,
-            };
-            let texture = match self.images[slot].take() {
-                Some((_, mut t)) => {
-                    t.set(image, options);
-                    t
-                }
-                None => ui
-                    .ctx()
-                    .load_texture(format!("slice-{}", axis.name()), image, options),
-            };
+            let old = self.images[slot].take().map(|(_, t)| t);
+            let texture = SliceTexture::upload(gpu, binding, old, [w, h], &rgb);
             self.images[slot] = Some((key.clone(), texture));
         }
         // The shapes' cross-sections, traced again when the slice or a shape changes.
@@ -341,7 +358,6 @@ impl SliceViews {
             egui::Sense::click_and_drag(),
         );
         let painter = ui.painter_at(rect);
-        painter.rect_filled(rect, 0.0, Color32::BLACK);
         let ([l, t, r, b], scale) = crate::slice::fit(
             [w, h],
             [rect.left(), rect.top(), rect.right(), rect.bottom()],
@@ -350,13 +366,14 @@ impl SliceViews {
             rect: Rect::from_min_max(pos2(l, t), pos2(r, b)),
             scale,
         };
-        if let Some((_, texture)) = &self.images[slot] {
-            painter.image(
-                texture.id(),
-                placed.rect,
-                Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
-                Color32::WHITE,
-            );
+        match &self.images[slot] {
+            Some((_, texture)) => {
+                let nearest = self.sampling == Sampling::Nearest;
+                texture.paint(&painter, rect, placed.rect, nearest);
+            }
+            None => {
+                painter.rect_filled(rect, 0.0, Color32::BLACK);
+            }
         }
         let mut changed = false;
         changed |= self.input(ui, &response, doc, &geometry, axis, index, placed);
@@ -636,75 +653,6 @@ impl SliceViews {
     }
 }
 
-impl SliceViews {
-    /// The "Layout and slices" section of the control panel.
-    pub fn panel(&mut self, ui: &mut egui::Ui, has_labels: bool) {
-        egui::ComboBox::from_label("Layout")
-            .selected_text(self.layout.name())
-            .show_ui(ui, |ui| {
-                for l in Layout::ALL {
-                    if ui.selectable_value(&mut self.layout, l, l.name()).clicked() {
-                        self.maximised = None;
-                    }
-                }
-            });
-        ui.horizontal(|ui| {
-            ui.radio_value(
-                &mut self.convention,
-                Convention::Radiological,
-                "Radiological",
-            )
-            .on_hover_text("The patient's right on the screen's left (PACS, Slicer)");
-            ui.radio_value(
-                &mut self.convention,
-                Convention::Neurological,
-                "Neurological",
-            )
-            .on_hover_text("The patient's left on the screen's left");
-        });
-        ui.horizontal(|ui| {
-            ui.radio_value(&mut self.sampling, Sampling::Nearest, "Nearest");
-            ui.radio_value(&mut self.sampling, Sampling::Linear, "Linear");
-        });
-        ui.horizontal(|ui| {
-            ui.radio_value(&mut self.plane, Plane::Patient, "Patient axes")
-                .on_hover_text(
-                    "Oblique acquisitions resampled onto the patient's axes (as Slicer)",
-                );
-            ui.radio_value(&mut self.plane, Plane::Acquisition, "Acquisition plane")
-                .on_hover_text("An oblique acquisition in its own planes, not resampled");
-        });
-        ui.checkbox(
-            &mut self.linked_window,
-            "Window/level of the transfer function",
-        );
-        if !self.linked_window {
-            ui.horizontal(|ui| {
-                ui.add(
-                    egui::DragValue::new(&mut self.window.0)
-                        .prefix("W ")
-                        .range(1e-6..=1e9),
-                );
-                ui.add(egui::DragValue::new(&mut self.window.1).prefix("L "));
-            });
-        }
-        if has_labels {
-            ui.checkbox(&mut self.show_labels, "Segments over the slices");
-            if self.show_labels {
-                ui.add(egui::Slider::new(&mut self.label_opacity, 0.0..=1.0).text("Opacity"));
-                ui.checkbox(&mut self.outline, "Outlines only");
-            }
-        }
-        ui.checkbox(&mut self.show_crosshair, "Crosshair");
-        ui.checkbox(&mut self.show_markers, "Orientation marker and scale bars");
-        ui.weak(
-            "Click or drag in a slice: crosshair · wheel: page · shift-click or double-click \
-             the 3-D view: crosshair to the surface · drag inside a shape's outline: move it, \
-             on it: resize · right-click a slice: new shape at the crosshair, cut here",
-        );
-    }
-}
-
 fn capitalised(s: &str) -> String {
     let mut c = s.chars();
     c.next()
@@ -837,38 +785,43 @@ pub fn paint_3d(painter: &egui::Painter, rect: Rect, views: &SliceViews, doc: &D
     }
 }
 
-/// The first visible surface under point `p` of the 3-D view in `rect`, in patient mm
-/// ([`crate::slice::pick`]: the transfer function, clip shapes and segments as drawn).
-pub(super) fn pick_surface(doc: &Document, rect: egui::Rect, p: egui::Pos2) -> Option<glam::DVec3> {
-    use crate::slice::pick::{PickScene, SURFACE_OPACITY, first_surface};
-    let looks = doc
-        .segmentation
-        .as_ref()
-        .map(|s| crate::labels::style::looks(&s.labels, &s.classes, &s.styles, &doc.clip_shapes));
-    let segments = doc
-        .segmentation
-        .as_ref()
-        .zip(looks.as_deref())
-        .map(|(s, l)| (&s.classes.of_voxel[..], l));
-    let tf = doc.view_tf();
-    let scene = PickScene {
-        volume: &doc.volume,
-        tf: &tf,
-        shapes: &doc.clip_shapes,
-        segments,
-    };
-    let ndc = [
-        (p.x - rect.left()) / rect.width() * 2.0 - 1.0,
-        1.0 - (p.y - rect.top()) / rect.height() * 2.0,
-    ];
-    let aspect = rect.width() / rect.height().max(1.0);
-    let hit = first_surface(
-        &scene,
-        &doc.camera,
-        doc.radius,
-        aspect,
-        ndc,
-        SURFACE_OPACITY,
-    )?;
-    Some(crate::slice::volume_to_world(&doc.volume, hit))
+impl SliceViews {
+    /// Picks the first visible surface under pixel `draw.pixel` of the 3-D view on the
+    /// GPU: the ray caster's ray of that pixel stops where its opacity first passes ½
+    /// ([`RayCaster::encode_pick`]); [`Self::poll_pick`] moves the crosshair there once
+    /// the answer is back. `volume` names the document's volume.
+    pub fn start_pick(
+        &mut self,
+        gpu: &crate::gpu::Gpu,
+        ray_caster: &crate::render::gpu::RayCaster,
+        draw: crate::render::gpu::PickDraw<'_>,
+        volume: usize,
+    ) -> Result<(), String> {
+        self.pick = Some(PendingPick::submit(gpu, ray_caster, draw, volume)?);
+        Ok(())
+    }
+
+    /// Whether a pick is waiting for the GPU.
+    pub fn picking(&self) -> bool {
+        self.pick.is_some()
+    }
+
+    /// Reads the pick if the GPU has answered (never waits): the crosshair moves to the
+    /// surface found; a ray that met none leaves it. An error is returned to be shown.
+    pub fn poll_pick(&mut self, gpu: &crate::gpu::Gpu, doc: &Document) -> Result<(), String> {
+        let Some(pending) = &self.pick else {
+            return Ok(());
+        };
+        let Some(result) = pending.poll(gpu) else {
+            return Ok(());
+        };
+        let same_volume = pending.volume == std::sync::Arc::as_ptr(&doc.volume) as usize;
+        self.pick = None;
+        if let Some(hit) = result?
+            && same_volume
+        {
+            self.crosshair = Some(volume_to_world(&doc.volume, hit));
+        }
+        Ok(())
+    }
 }

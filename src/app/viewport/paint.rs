@@ -11,6 +11,9 @@ use crate::gpu::{GpuError, shaders, validated};
 pub struct ViewportPaint {
     /// Draws an image 1:1 (exact) or scaled up (interactive quality).
     pipelines: [wgpu::RenderPipeline; 2],
+    /// Fills the callback's rectangle with opaque black (the slice panes' margins:
+    /// cheaper on a CPU rasteriser than an egui rectangle, whose shader dithers).
+    black: wgpu::RenderPipeline,
 }
 
 /// How an image is bound for drawing: the draw pipelines' bind-group layout and their
@@ -62,11 +65,16 @@ impl ViewportPaint {
                 bind_group_layouts: &[Some(&layout)],
                 immediate_size: 0,
             });
+            let no_bindings = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("Viewport::no_bindings"),
+                bind_group_layouts: &[],
+                immediate_size: 0,
+            });
             let srgb = target_format.is_srgb();
-            let pipeline = |fragment: &str| {
+            let pipeline_in = |layout: &wgpu::PipelineLayout, fragment: &str| {
                 device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                     label: Some("Viewport::pipeline"),
-                    layout: Some(&pipeline_layout),
+                    layout: Some(layout),
                     vertex: wgpu::VertexState {
                         module: &module,
                         entry_point: Some("vs_main"),
@@ -90,6 +98,7 @@ impl ViewportPaint {
                     cache: None,
                 })
             };
+            let pipeline = |fragment: &str| pipeline_in(&pipeline_layout, fragment);
             let pipelines = match srgb {
                 true => [pipeline("fs_srgb"), pipeline("fs_scaled_srgb")],
                 false => [pipeline("fs_main"), pipeline("fs_scaled")],
@@ -98,30 +107,34 @@ impl ViewportPaint {
                 layout,
                 sampler: crate::gpu::linear_sampler(device, "Viewport::sampler"),
             };
-            (ViewportPaint { pipelines }, binding)
+            let black = pipeline_in(&no_bindings, "fs_black");
+            (ViewportPaint { pipelines, black }, binding)
         })
     }
 
     /// Draws `image` into the callback's viewport: 1:1 when it has the viewport's size,
-    /// else scaled up with bilinear filtering.
+    /// else scaled with bilinear filtering, or with the nearest texel if it asks for it.
     fn paint(
         &self,
         pass: &mut wgpu::RenderPass<'static>,
         image: &PaintImage,
         viewport_px: (u32, u32),
     ) {
-        let exact = image.size == viewport_px;
-        pass.set_pipeline(&self.pipelines[usize::from(!exact)]);
+        let texels = image.size == viewport_px || image.nearest;
+        pass.set_pipeline(&self.pipelines[usize::from(!texels)]);
         pass.set_bind_group(0, &image.bind_group, &[]);
         pass.draw(0..3, 0..1);
     }
 }
 
-/// An image to draw: its bind group ([`ImageBinding::bind`]) and its size in pixels.
+/// An image to draw: its bind group ([`ImageBinding::bind`]), its size in pixels and
+/// whether it is scaled with the nearest texel (a slice's nearest sampling) rather than
+/// bilinear filtering.
 #[derive(Debug, Clone)]
 pub struct PaintImage {
     pub bind_group: wgpu::BindGroup,
     pub size: (u32, u32),
+    pub nearest: bool,
 }
 
 /// The per-frame part of the paint callback: where to draw, and the last complete image
@@ -150,6 +163,24 @@ impl egui_wgpu::CallbackTrait for ViewportCallback {
         let size = (v.width_px.max(0) as u32, v.height_px.max(0) as u32);
         if let (Some(paint), Some(image)) = (resources.get::<ViewportPaint>(), &self.image) {
             paint.paint(pass, image, size);
+        }
+    }
+}
+
+/// Fills its rectangle with opaque black ([`ViewportPaint`]'s `fs_black`).
+#[derive(Debug, Clone, Copy)]
+pub struct BlackCallback;
+
+impl egui_wgpu::CallbackTrait for BlackCallback {
+    fn paint(
+        &self,
+        _info: egui::PaintCallbackInfo,
+        pass: &mut wgpu::RenderPass<'static>,
+        resources: &egui_wgpu::CallbackResources,
+    ) {
+        if let Some(paint) = resources.get::<ViewportPaint>() {
+            pass.set_pipeline(&paint.black);
+            pass.draw(0..3, 0..1);
         }
     }
 }

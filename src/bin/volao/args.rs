@@ -147,7 +147,7 @@ pub struct SliceArgs {
     #[arg(long, value_name = "SPEC")]
     pub segment: Vec<String>,
     /// Opacity of the segments' colours over the grey, 0 to 1.
-    #[arg(long, default_value_t = 0.5, value_parser = parse_unit)]
+    #[arg(long, default_value_t = volao::slice::LabelOverlay::DEFAULT_OPACITY, value_parser = parse_unit)]
     pub label_opacity: f32,
     /// Draw only the segments' outlines.
     #[arg(long)]

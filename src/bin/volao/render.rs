@@ -47,7 +47,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         out.image = with_slices(
             layout,
             &scene,
-            &prepared.volume,
+            &prepared,
             args.at,
             args.annotate,
             &out.image,
@@ -96,16 +96,22 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 
 /// `image` (the 3-D view) with the three slices through `at` (default: the volume's
 /// centre) in `layout`'s panes of the scene's size, greys in the transfer function's
-/// window.
+/// window, with the segmentation's colours over them when there is one (as `volao slice
+/// --labels`).
 fn with_slices(
     layout: volao::slice::Layout,
     scene: &Scene,
-    volume: &Volume,
+    prepared: &Prepared,
     at: Option<[f64; 3]>,
     annotate: bool,
     image: &volao::render::Image,
 ) -> volao::render::Image {
-    use volao::slice::{Convention, Plane, Sampling, SliceAxis, SliceGeometry};
+    use volao::slice::{Convention, LabelOverlay, Plane, Sampling, SliceAxis, SliceGeometry};
+    let volume = &prepared.volume;
+    let overlay = prepared
+        .segments
+        .as_ref()
+        .map(|s| LabelOverlay::of(s, LabelOverlay::DEFAULT_OPACITY, false));
     let geometry = SliceGeometry::new(volume, Plane::Patient);
     let at = at.map_or_else(|| geometry.centre(), glam::DVec3::from_array);
     let (window, level) = scene.transfer_function.window_level();
@@ -120,7 +126,7 @@ fn with_slices(
                 index,
                 Sampling::Nearest,
             );
-            let mut rgb = s.rgb(window, level, None);
+            let mut rgb = s.rgb(window, level, overlay.as_ref());
             if annotate {
                 let letters = geometry.edge_letters(axis, Convention::Radiological);
                 volao::slice::annotate(&mut rgb, s.width, letters, geometry.pixel_mm(axis));
