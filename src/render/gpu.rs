@@ -169,17 +169,29 @@ impl RayCaster {
         let vol = tile.volume;
         // The surfaces, rasterised for the whole frame (submitted before the caller's
         // encoder, so they are ready when the ray cast reads them).
-        let layer = match vol.extras.surfaces.is_empty() {
-            true => None,
-            false => Some(self.surfaces.rasterise(
-                (&gpu.device, &gpu.queue),
-                &vol.extras.surfaces,
-                tile.frame,
-                &vol.texels,
-            )?),
-        };
+        let layer = self.surface_layer(gpu, vol, tile.frame)?;
         let variant = Variant::of(vol, tile.frame, tile.clip, layer.is_some());
         self.encode(gpu, tile, variant, Outputs::layer(layer.as_ref()), encoder)
+    }
+
+    /// `vol`'s surfaces rasterised for `frame` (submitted now, so they are ready when a
+    /// ray cast encoded after reads them); `None` without surfaces.
+    fn surface_layer(
+        &self,
+        gpu: &Gpu,
+        vol: &RenderVolume,
+        frame: &Frame,
+    ) -> Result<Option<super::surface::SurfaceLayer>, GpuError> {
+        if vol.extras.surfaces.is_empty() {
+            return Ok(None);
+        }
+        let layer = self.surfaces.rasterise(
+            (&gpu.device, &gpu.queue),
+            &vol.extras.surfaces,
+            frame,
+            &vol.texels,
+        )?;
+        Ok(Some(layer))
     }
 
     /// Encodes the pick of pixel `pixel` of `frame` into `target`: the ray of that pixel,
@@ -194,15 +206,7 @@ impl RayCaster {
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
         let vol = draw.volume;
-        let layer = match vol.extras.surfaces.is_empty() {
-            true => None,
-            false => Some(self.surfaces.rasterise(
-                (&gpu.device, &gpu.queue),
-                &vol.extras.surfaces,
-                draw.frame,
-                &vol.texels,
-            )?),
-        };
+        let layer = self.surface_layer(gpu, vol, draw.frame)?;
         let variant = Variant {
             pick: true,
             ..Variant::of(vol, draw.frame, draw.clip, layer.is_some())
@@ -549,15 +553,7 @@ impl RayCaster {
         let Some((rx0, ry0, rx1, ry1)) = rect else {
             return Ok(image);
         };
-        let layer = match vol.extras.surfaces.is_empty() {
-            true => None,
-            false => Some(self.surfaces.rasterise(
-                (device, &gpu.queue),
-                &vol.extras.surfaces,
-                frame,
-                &vol.texels,
-            )?),
-        };
+        let layer = self.surface_layer(gpu, vol, frame)?;
         // Tile textures by size, for this frame.
         let mut targets = TileTargets::new("RayCaster::tile");
         let mut y0 = ry0;
